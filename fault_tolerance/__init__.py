@@ -1,0 +1,68 @@
+"""fault_tolerance: minimum joint-velocity-jump redundancy resolution for locked-joint failures.
+
+Zhao & Li, *An Analytical Algorithm with Minimum Joint Velocity Jump for Redundant Robots in the
+Presence of Locked-Joint Failures*, on Pinocchio. Importing this package imports neither meshcat
+nor matplotlib.
+"""
+
+__version__ = "0.1.0"
+
+from .arm import Arm, load_arm, parse_task  # noqa: E402
+from .failures import Scenarios, scenarios  # noqa: E402
+from .indices import (  # noqa: E402
+    fault_tolerance_measure,
+    jump_reduction,
+    jvj,
+    rcn,
+    rcn_gradient,
+    reduced_manipulability,
+    square_sum_rcn,
+)
+from .linalg import nullspace_projector, pinv, projection, reduced_rates  # noqa: E402
+from .planner import RESOLVERS, jvja, jvja_explicit, lnva, mda, resolve  # noqa: E402
+from .errors import (  # noqa: E402
+    FaultToleranceError,
+    FrameNotFound,
+    IntolerableFailure,
+    InvalidInput,
+    InvalidScenario,
+    InvalidTask,
+    JointNotFound,
+    RobotNotFound,
+    URDFError,
+)
+
+__all__ = [
+    "__version__",
+    "Arm",
+    "load_arm",
+    "parse_task",
+    "Scenarios",
+    "scenarios",
+    "fault_tolerance_measure",
+    "jump_reduction",
+    "jvj",
+    "rcn",
+    "rcn_gradient",
+    "reduced_manipulability",
+    "square_sum_rcn",
+    "nullspace_projector",
+    "pinv",
+    "projection",
+    "reduced_rates",
+    "RESOLVERS",
+    "jvja",
+    "jvja_explicit",
+    "lnva",
+    "mda",
+    "resolve",
+    "FaultToleranceError",
+    "FrameNotFound",
+    "IntolerableFailure",
+    "InvalidInput",
+    "InvalidScenario",
+    "InvalidTask",
+    "JointNotFound",
+    "RobotNotFound",
+    "URDFError",
+]

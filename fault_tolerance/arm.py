@@ -1,0 +1,404 @@
+"""One arm: a Pinocchio model reduced to its active joints, a tip frame and a task.
+
+The task coordinates are rows of the tip frame's placement and the task Jacobian the same rows of
+Pinocchio's frame Jacobian in ``LOCAL_WORLD_ALIGNED`` (linear velocity of the frame origin and
+angular velocity, both in world axes), ordered ``x y z rx ry rz``. No kinematics is written by
+hand: forward kinematics and Jacobians come from Pinocchio.
+"""
+
+from __future__ import annotations
+
+import json
+import warnings
+from collections.abc import Sequence
+from functools import cached_property
+from importlib import resources
+from pathlib import Path
+
+import numpy as np
+import pinocchio as pin
+
+from .errors import (
+    FrameNotFound,
+    InvalidInput,
+    InvalidTask,
+    JointNotFound,
+    RobotNotFound,
+    URDFError,
+)
+
+TASK_ROWS = ("x", "y", "z", "rx", "ry", "rz")
+TASKS = {
+    "planar": ("x", "y"),
+    "position": ("x", "y", "z"),
+    "pose": TASK_ROWS,
+}
+
+#: Arms of example-robot-data with the defaults we give them: tip frame, task, active joints.
+EXAMPLE_ROBOTS: dict[str, dict] = {
+    "panda": {
+        "tip": "panda_hand_tcp",
+        "task": "pose",
+        "joints": [f"panda_joint{i}" for i in range(1, 8)],
+        "description": "Franka Panda (example-robot-data), fingers fixed",
+    },
+    "ur5": {
+        "tip": "tool0",
+        "task": "position",
+        "joints": None,
+        "description": "Universal Robots UR5 (example-robot-data)",
+    },
+    "xarm7": {
+        "tip": "link_eef",
+        "task": "pose",
+        "joints": None,
+        "description": "UFactory xArm7 (example-robot-data)",
+    },
+}
+
+
+def parse_task(task: str | Sequence[str]) -> tuple[str, ...]:
+    """Task rows from ``"planar"``, ``"position"``, ``"pose"`` or a list of row names.
+
+    Rows are returned in the canonical order ``x y z rx ry rz``; a comma-separated string
+    (``"x,y,rz"``) is accepted too.
+    """
+    if isinstance(task, str):
+        if task in TASKS:
+            return TASKS[task]
+        names = [t.strip() for t in task.split(",") if t.strip()]
+    else:
+        names = [str(t) for t in task]
+    bad = [t for t in names if t not in TASK_ROWS]
+    if not names or bad:
+        raise InvalidTask(
+            f"task {task!r} is not allowed; use one of {sorted(TASKS)} or a list of rows among "
+            f"{list(TASK_ROWS)}"
+        )
+    if len(set(names)) != len(names):
+        raise InvalidTask(f"task {task!r} repeats a row; rows must be distinct")
+    return tuple(r for r in TASK_ROWS if r in names)
+
+
+def catalog() -> dict[str, dict]:
+    """The shipped robots (``robots/catalog.json``): URDF file, tip, task, lockable joints."""
+    text = resources.files("fault_tolerance.robots").joinpath("catalog.json").read_text()
+    return json.loads(text)
+
+
+def robot_path(filename: str) -> Path:
+    """Path of a file shipped in ``robots/`` (works from a checkout and from a wheel)."""
+    return Path(str(resources.files("fault_tolerance.robots").joinpath(filename)))
+
+
+class Arm:
+    """A Pinocchio model of the active joints, one tip frame and one task.
+
+    Build it with :func:`load_arm`. The model holds only the active joints (the others are fixed
+    with ``pin.buildReducedModel``), so ``q`` has one entry per active joint, in the column order
+    of :meth:`jacobian`.
+    """
+
+    def __init__(
+        self,
+        model: pin.Model,
+        tip: str,
+        task: str | Sequence[str] = "position",
+        *,
+        name: str = "",
+        visual_model: pin.GeometryModel | None = None,
+        default_lockable: Sequence[str] | None = None,
+        source: str = "",
+    ) -> None:
+        if model.nq != model.nv:
+            raise URDFError(
+                f"{name or 'model'}: joints with nq != nv (floating, spherical, planar or "
+                "continuous joints) are not supported; use revolute or prismatic joints"
+            )
+        if model.nv == 0:
+            raise URDFError(f"{name or 'model'}: the model has no moving joint")
+        if not model.existFrame(tip):
+            raise FrameNotFound(tip, [f.name for f in model.frames])
+        self.model = model
+        self.data = model.createData()
+        self.name = name or model.name
+        self.tip = tip
+        self.frame_id = model.getFrameId(tip)
+        self.task = parse_task(task)
+        self.rows = np.array([TASK_ROWS.index(r) for r in self.task], dtype=int)
+        self.visual_model = visual_model
+        self.source = source
+        self.joint_names: list[str] = [
+            model.names[j] for j in range(1, model.njoints) if model.joints[j].nv > 0
+        ]
+        self.default_lockable = list(default_lockable) if default_lockable else list(self.joint_names)
+
+    # -- sizes and limits -------------------------------------------------------------------
+    @property
+    def n(self) -> int:
+        """Number of active joints (columns of J)."""
+        return self.model.nv
+
+    @property
+    def m(self) -> int:
+        """Number of task rows."""
+        return len(self.rows)
+
+    @property
+    def redundancy(self) -> int:
+        """Degree of redundancy ``r = n - m``."""
+        return self.n - self.m
+
+    @property
+    def lower(self) -> np.ndarray:
+        """Lower position limits [rad or m], shape (n,)."""
+        return np.asarray(self.model.lowerPositionLimit, dtype=float).copy()
+
+    @property
+    def upper(self) -> np.ndarray:
+        """Upper position limits [rad or m], shape (n,)."""
+        return np.asarray(self.model.upperPositionLimit, dtype=float).copy()
+
+    @property
+    def velocity_limit(self) -> np.ndarray:
+        """Velocity limits [rad/s or m/s], shape (n,)."""
+        return np.asarray(self.model.velocityLimit, dtype=float).copy()
+
+    def neutral(self) -> np.ndarray:
+        """Pinocchio's neutral configuration, shape (n,)."""
+        return np.asarray(pin.neutral(self.model), dtype=float).copy()
+
+    def random_q(self, rng: np.random.Generator) -> np.ndarray:
+        """A configuration drawn uniformly within the limits (±π where a limit is infinite)."""
+        lo = np.where(np.isfinite(self.lower), self.lower, -np.pi)
+        hi = np.where(np.isfinite(self.upper), self.upper, np.pi)
+        return rng.uniform(lo, hi)
+
+    def joint_index(self, joint: str | int) -> int:
+        """Column index of an active joint given by name or index."""
+        if isinstance(joint, (int, np.integer)) and not isinstance(joint, bool):
+            if 0 <= int(joint) < self.n:
+                return int(joint)
+            raise JointNotFound(str(joint), self.joint_names)
+        if joint in self.joint_names:
+            return self.joint_names.index(joint)
+        raise JointNotFound(str(joint), self.joint_names)
+
+    def check_q(self, q: np.ndarray | Sequence[float]) -> np.ndarray:
+        """``q`` as a float array of shape (n,), or :class:`InvalidInput` saying what is wrong."""
+        q = np.asarray(q, dtype=float)
+        if q.shape != (self.n,):
+            raise InvalidInput(
+                f"q has shape {q.shape}; {self.name} needs shape ({self.n},) for joints "
+                f"{self.joint_names}"
+            )
+        if not np.all(np.isfinite(q)):
+            raise InvalidInput(f"q must be finite, got {q.tolist()}")
+        return q
+
+    # -- kinematics (all from Pinocchio) ----------------------------------------------------
+    def placement(self, q: np.ndarray) -> pin.SE3:
+        """Placement of the tip frame in the world."""
+        pin.framesForwardKinematics(self.model, self.data, self.check_q(q))
+        return self.data.oMf[self.frame_id].copy()
+
+    def fk(self, q: np.ndarray) -> np.ndarray:
+        """Task coordinates of the tip, shape (m,).
+
+        Linear rows are the frame origin [m]; angular rows the rotation vector ``log3(R)`` [rad].
+        """
+        M = self.placement(q)
+        x6 = np.concatenate([M.translation, pin.log3(M.rotation)])
+        return x6[self.rows]
+
+    def jacobian(self, q: np.ndarray) -> np.ndarray:
+        """Task Jacobian ``J(q)``, shape (m, n), ``LOCAL_WORLD_ALIGNED`` rows ``x y z rx ry rz``."""
+        J6 = pin.computeFrameJacobian(
+            self.model, self.data, self.check_q(q), self.frame_id, pin.LOCAL_WORLD_ALIGNED
+        )
+        return J6[self.rows]
+
+    def jacobian_unchecked(self, q: np.ndarray) -> np.ndarray:
+        """As :meth:`jacobian` without input validation (for control loops), a view of 6 rows."""
+        return pin.computeFrameJacobian(
+            self.model, self.data, q, self.frame_id, pin.LOCAL_WORLD_ALIGNED
+        )[self.rows]
+
+    def jacobian_derivatives(self, q: np.ndarray) -> np.ndarray:
+        r"""Partial derivatives of the task Jacobian, ``dJ[j] = ∂J/∂q_j``, shape (n, m, n).
+
+        Pinocchio's kinematic Hessian in closed form: in the WORLD convention the column of joint
+        ``k`` moves with every joint ``j`` before it on the chain as the Lie bracket
+        :math:`\partial J_k/\partial q_j = J_j \times J_k` (``j < k``; zero otherwise). The
+        ``LOCAL_WORLD_ALIGNED`` rows follow from :math:`J_v = J^W_v + J^W_\omega \times p`.
+        Checked against central differences of :meth:`jacobian` in the tests.
+        """
+        q = self.check_q(q)
+        model, data = self.model, self.data
+        pin.computeJointJacobians(model, data, q)
+        p = pin.updateFramePlacement(model, data, self.frame_id).translation.copy()
+        Jw = pin.getFrameJacobian(model, data, self.frame_id, pin.WORLD)
+        Jl = pin.getFrameJacobian(model, data, self.frame_id, pin.LOCAL_WORLD_ALIGNED)
+        n = self.n
+        vw, ww = Jw[:3], Jw[3:]
+        dJw = np.zeros((n, 6, n))
+        for j in range(n):
+            k = np.arange(j + 1, n)
+            # spatial cross product [v1; w1] x [v2; w2] = [w1 x v2 + v1 x w2; w1 x w2]
+            dJw[j, :3, k] = (np.cross(ww[:, j], vw[:, k].T) + np.cross(vw[:, j], ww[:, k].T))
+            dJw[j, 3:, k] = np.cross(ww[:, j], ww[:, k].T)
+        dJ = dJw.copy()
+        for j in range(n):
+            dp = Jl[:3, j]
+            dJ[j, :3, :] += np.cross(dJw[j, 3:, :].T, p).T + np.cross(ww.T, dp).T
+        return dJ[:, self.rows, :]
+
+    # -- description ------------------------------------------------------------------------
+    @cached_property
+    def frame_names(self) -> list[str]:
+        """All frame names of the model (candidate tip frames)."""
+        return [f.name for f in self.model.frames]
+
+    def __repr__(self) -> str:
+        return (
+            f"Arm({self.name!r}, tip={self.tip!r}, task={'/'.join(self.task)}, n={self.n}, "
+            f"m={self.m}, r={self.redundancy})"
+        )
+
+
+# -- loading --------------------------------------------------------------------------------
+
+
+def _supporting_joints(model: pin.Model, frame_id: int) -> list[int]:
+    """Ids of the moving joints on the chain from the root to a frame, base outwards."""
+    joint = model.frames[frame_id].parentJoint
+    return [j for j in model.supports[joint] if j > 0 and model.joints[j].nv > 0]
+
+
+def reduce_model(
+    model: pin.Model,
+    tip: str,
+    joints: Sequence[str] | None,
+    q_reference: np.ndarray | None = None,
+    visual_model: pin.GeometryModel | None = None,
+) -> tuple[pin.Model, pin.GeometryModel | None]:
+    """Keep ``joints`` (default: the chain to ``tip``) and fix every other joint at ``q_reference``."""
+    if not model.existFrame(tip):
+        raise FrameNotFound(tip, [f.name for f in model.frames])
+    names = [model.names[j] for j in range(1, model.njoints)]
+    if joints is None:
+        keep = _supporting_joints(model, model.getFrameId(tip))
+    else:
+        keep = []
+        for name in joints:
+            if name not in names:
+                raise JointNotFound(name, names)
+            keep.append(model.getJointId(name))
+    lock = [j for j in range(1, model.njoints) if j not in keep]
+    if not lock:
+        return model, visual_model
+    q_ref = pin.neutral(model) if q_reference is None else np.asarray(q_reference, dtype=float)
+    if visual_model is None:
+        return pin.buildReducedModel(model, lock, q_ref), None
+    reduced, geoms = pin.buildReducedModel(model, [visual_model], lock, q_ref)
+    return reduced, geoms[0]
+
+
+def _load_urdf(path: Path, package_dirs: Sequence[str] | None) -> tuple[pin.Model, pin.GeometryModel | None]:
+    """Model and visual geometry of a URDF file; geometry is dropped with a warning if unreadable."""
+    from .urdf import check_urdf_file
+
+    check_urdf_file(path)
+    try:
+        model = pin.buildModelFromUrdf(str(path))
+    except Exception as err:  # Pinocchio raises RuntimeError / ValueError with C++ messages
+        raise URDFError(f"{path}: Pinocchio could not build a model from it: {err}") from err
+    dirs = [str(d) for d in (package_dirs or [])] + [str(path.parent)]
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", UserWarning)  # Pinocchio's notice about package dirs
+            visual = pin.buildGeomFromUrdf(model, str(path), pin.GeometryType.VISUAL, dirs)
+    except Exception as err:
+        warnings.warn(
+            f"{path}: visual geometry not loaded ({err}); the arm works without it, the replay "
+            "shows no meshes. Pass package_dirs (--package-dir) where package:// meshes live.",
+            stacklevel=3,
+        )
+        visual = None
+    return model, visual
+
+
+def load_arm(
+    robot: str | Path,
+    *,
+    tip: str | None = None,
+    task: str | Sequence[str] | None = None,
+    joints: Sequence[str] | None = None,
+    package_dirs: Sequence[str] | None = None,
+) -> Arm:
+    """Load an arm by catalog name, example-robot-data name or URDF path.
+
+    Args:
+        robot: ``"planar_3r"``, ``"spatial_4r"``, ``"powercube_3r"``, an example-robot-data name
+            (``"panda"``, ``"ur5"``, ``"xarm7"``, ...) or the path of a URDF file.
+        tip: Tip frame (default: the catalog's, else the last frame of the model).
+        task: ``"planar"``, ``"position"``, ``"pose"`` or a list of rows among ``x y z rx ry rz``.
+        joints: Active joint names; the others are fixed (default: the chain to the tip).
+        package_dirs: Folders where ``package://`` meshes of a URDF file are found.
+
+    Example:
+        >>> arm = load_arm("planar_3r")
+        >>> arm.joint_names
+        ['joint1', 'joint2', 'joint3']
+    """
+    name = str(robot)
+    shipped = catalog()
+    if name in shipped:
+        entry = shipped[name]
+        path = robot_path(entry["urdf"])
+        model, visual = _load_urdf(path, package_dirs)
+        tip = tip or entry["tip"]
+        model, visual = reduce_model(model, tip, joints, visual_model=visual)
+        return Arm(
+            model, tip, task or entry["task"], name=name, visual_model=visual,
+            default_lockable=entry.get("lockable"), source=str(path),
+        )
+    path = Path(name).expanduser()
+    if path.suffix.lower() in (".urdf", ".xml") or path.exists():
+        if not path.is_file():
+            raise URDFError(f"{path}: no such URDF file")
+        model, visual = _load_urdf(path, package_dirs)
+        tip = tip or model.frames[len(model.frames) - 1].name
+        model, visual = reduce_model(model, tip, joints, visual_model=visual)
+        return Arm(model, tip, task or "position", name=path.stem, visual_model=visual,
+                   source=str(path))
+    return _load_example_robot(name, tip, task, joints, shipped)
+
+
+def example_robot_names() -> list[str]:
+    """Names example-robot-data can load (empty if its loaders are missing)."""
+    try:
+        from example_robot_data.robots_loader import ROBOTS
+    except ImportError:
+        return []
+    return sorted(ROBOTS)
+
+
+def _load_example_robot(
+    name: str, tip: str | None, task, joints, shipped: dict
+) -> Arm:
+    known = list(shipped) + example_robot_names()
+    if name not in example_robot_names():
+        raise RobotNotFound(name, known)
+    import example_robot_data
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        robot = example_robot_data.load(name)
+    preset = EXAMPLE_ROBOTS.get(name, {})
+    tip = tip or preset.get("tip") or robot.model.frames[len(robot.model.frames) - 1].name
+    joints = joints if joints is not None else preset.get("joints")
+    q_ref = getattr(robot, "q0", None)
+    model, visual = reduce_model(robot.model, tip, joints, q_ref, robot.visual_model)
+    return Arm(model, tip, task or preset.get("task", "position"), name=name,
+               visual_model=visual, source=f"example-robot-data:{name}")

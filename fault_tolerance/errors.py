@@ -1,0 +1,63 @@
+"""The toolkit's exceptions: one base class, data in the message, no bare asserts."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+
+class FaultToleranceError(Exception):
+    """Base class of the toolkit's errors (the CLI turns these into exit code 2)."""
+
+
+class RobotNotFound(FaultToleranceError):
+    """A robot name is neither a catalog entry, an example-robot-data name nor a file."""
+
+    def __init__(self, name: str, known: Sequence[str]) -> None:
+        super().__init__(
+            f"robot '{name}' is not a shipped robot, an example-robot-data arm or an existing "
+            f"URDF file; known robots are {sorted(known)}"
+        )
+
+
+class JointNotFound(FaultToleranceError):
+    """A joint name is not among the joints it may be chosen from."""
+
+    def __init__(self, name: str, joints: Sequence[str]) -> None:
+        super().__init__(f"joint '{name}' is not in the model; its joints are {list(joints)}")
+
+
+class FrameNotFound(FaultToleranceError):
+    """A frame name is not in the model."""
+
+    def __init__(self, name: str, frames: Sequence[str]) -> None:
+        super().__init__(f"frame '{name}' is not in the model; its frames are {list(frames)}")
+
+
+class URDFError(FaultToleranceError):
+    """A URDF file cannot be read or turned into an arm."""
+
+
+class InvalidTask(FaultToleranceError):
+    """A task specification is not one of the allowed ones."""
+
+
+class InvalidScenario(FaultToleranceError):
+    """A lockable set or failure scenario is empty, duplicated, out of range or too large."""
+
+
+class IntolerableFailure(FaultToleranceError):
+    """Locking these joints loses the task: the reduced Jacobian drops rank (N[S, S] singular)."""
+
+    def __init__(self, joints: Sequence[str], pivot: float) -> None:
+        self.joints = list(joints)
+        self.pivot = pivot
+        names = ", ".join(self.joints)
+        super().__init__(
+            f"locking {names} loses the task (N[S, S] is singular, smallest pivot {pivot:.2e}): "
+            f"the remaining joints cannot keep the tool on its path; remove {names} from the "
+            "lockable joints"
+        )
+
+
+class InvalidInput(FaultToleranceError):
+    """A numeric input (configuration, rate, time step, path) has the wrong shape or value."""

@@ -1,0 +1,186 @@
+"""Indices of the paper: joint velocity jump (1, 9, 10), reduced condition number (15), δ (14).
+
+Also the fault-tolerance measure ``k_f = min_S σ_min(J_S)`` (Roberts & Maciejewski) and the
+reduced manipulability ``w_S = √det(J_S J_Sᵀ)``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import NamedTuple
+
+import numpy as np
+
+from .failures import Scenarios, scenarios
+from .linalg import projection, reduced_rates
+
+#: Reduced condition numbers are capped here, so a rank-deficient reduced Jacobian gives a large
+#: finite number instead of inf/NaN.
+RCN_MAX = 1e8
+
+RESPONSES = ("least_norm", "continuation")
+
+
+def _scenarios(J: np.ndarray, lockable, weights=None, joint_names=()) -> Scenarios:
+    m, n = J.shape
+    return scenarios(lockable, n, r=n - m, weights=weights, joint_names=joint_names)
+
+
+def post_failure_rates(
+    a: np.ndarray, N: np.ndarray, sc: Scenarios, qd: np.ndarray | None = None,
+    response: str = "least_norm",
+) -> np.ndarray:
+    """Rates of the reduced robot for every scenario, shape (f, n).
+
+    ``response="least_norm"``: eq. (2) ``E_S J_S⁺ ẋ`` in closed form (G1), from ``a = J⁺ẋ``.
+    ``response="continuation"``: (G3) the solution nearest to the planned rates ``qd``.
+    """
+    if response not in RESPONSES:
+        raise ValueError(f"response {response!r} is not one of {RESPONSES}")
+    base = a if response == "least_norm" else qd
+    if base is None:
+        raise ValueError("the continuation response needs the planned rates qd")
+    return np.array([reduced_rates(base, N, S) for S in sc.sets])
+
+
+# Eqn. (1)
+def joint_jumps(post: np.ndarray, qd: np.ndarray) -> np.ndarray:
+    r"""Per-joint velocity jumps :math:`{}^S\lambda_j = |{}^S\dot q'_j - \dot q_j|`, shape (f, n)."""
+    return np.abs(post - qd)
+
+
+# Eqn. (9), (10)
+def square_sum_jump(post: np.ndarray, qd: np.ndarray, weights: np.ndarray) -> float:
+    r"""Square-sum jump :math:`\lambda = \sum_S w_S \|{}^S\dot q' - \dot q\|^2` [(rad/s)²]."""
+    d = post - qd
+    return float(weights @ np.einsum("fn,fn->f", d, d))
+
+
+def jvj(
+    J: np.ndarray,
+    xdot: np.ndarray,
+    qd: np.ndarray,
+    lockable=None,
+    *,
+    weights: Sequence[float] | None = None,
+    response: str = "least_norm",
+    per_joint: bool = False,
+    joint_names: Sequence[str] = (),
+):
+    """Square-sum joint velocity jump of rates ``qd``, eq. (9)/(10) [(rad/s)²].
+
+    With ``per_joint=True`` returns the (f, n) array of eq. (1) instead.
+
+    Example:
+        >>> import numpy as np, fault_tolerance as ft
+        >>> J = np.array([[1.0, 0.5, 0.2], [0.0, 1.0, 0.4]])
+        >>> xd = np.array([0.1, 0.0])
+        >>> ft.jvj(J, xd, ft.resolve("jvja", J, xd)) <= ft.jvj(J, xd, ft.resolve("lnva", J, xd))
+        True
+    """
+    J = np.asarray(J, dtype=float)
+    sc = _scenarios(J, lockable, weights, joint_names)
+    proj = projection(J)
+    sc.check_tolerable(proj.N)
+    a = proj.Jpinv @ np.asarray(xdot, dtype=float)
+    qd = np.asarray(qd, dtype=float)
+    post = post_failure_rates(a, proj.N, sc, qd, response)
+    if per_joint:
+        return joint_jumps(post, qd)
+    return square_sum_jump(post, qd, sc.weights)
+
+
+# Eqn. (15)
+def reduced_singular_values(J: np.ndarray, sc: Scenarios) -> np.ndarray:
+    """Singular values of every reduced Jacobian ``J_S``, ascending, shape (f, m).
+
+    ``J_S J_Sᵀ = J Jᵀ - J[:, S] J[:, S]ᵀ``: the f small ``m x m`` matrices go to one batched
+    ``eigvalsh`` call.
+    """
+    G = J @ J.T
+    if sc.singletons:
+        cols = J[:, sc.columns].T  # (f, m)
+        stack = G[None, :, :] - cols[:, :, None] * cols[:, None, :]
+    else:
+        stack = np.array([G - J[:, list(S)] @ J[:, list(S)].T for S in sc.sets])
+    lam = np.linalg.eigvalsh(stack)
+    return np.sqrt(np.maximum(lam, 0.0))
+
+
+def condition_numbers(sigma: np.ndarray) -> np.ndarray:
+    """``σ_max / σ_min`` of each row of ascending singular values, capped at :data:`RCN_MAX`."""
+    smax = sigma[..., -1]
+    smin = np.maximum(sigma[..., 0], smax / RCN_MAX)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        k = np.where(smax > 0, smax / np.where(smin > 0, smin, 1.0), RCN_MAX)
+    return np.minimum(k, RCN_MAX)
+
+
+def rcn(J: np.ndarray, lockable=None, *, joint_names: Sequence[str] = ()) -> np.ndarray:
+    """Reduced condition numbers ``k_S = σ_max(J_S)/σ_min(J_S) >= 1``, eq. (15), shape (f,)."""
+    J = np.asarray(J, dtype=float)
+    return condition_numbers(reduced_singular_values(J, _scenarios(J, lockable, None, joint_names)))
+
+
+def square_sum_rcn(J: np.ndarray, lockable=None) -> float:
+    """Square-sum RCN ``K = Σ_S k_S²``, the index the paper plots."""
+    k = rcn(J, lockable)
+    return float(k @ k)
+
+
+def rcn_gradient(J: np.ndarray, dJ: np.ndarray, lockable=None) -> np.ndarray:
+    r"""Gradient of ``K = Σ_S k_S²`` with respect to ``q``, shape (n,).
+
+    Singular values move as :math:`\partial\sigma/\partial q_j = u^T (\partial J_S/\partial q_j) v`
+    (u, v its singular vectors), so
+    :math:`\partial k/\partial q_j = (\sigma_{max}' \sigma_{min} - \sigma_{max}\sigma_{min}')/\sigma_{min}^2`.
+    ``dJ`` is ``Arm.jacobian_derivatives(q)``, shape (n, m, n).
+    """
+    J = np.asarray(J, dtype=float)
+    m, n = J.shape
+    sc = _scenarios(J, lockable)
+    grad = np.zeros(n)
+    for S in sc.sets:
+        keep = [j for j in range(n) if j not in S]
+        U, s, Vt = np.linalg.svd(J[:, keep], full_matrices=False)
+        smax, smin = s[0], max(s[-1], s[0] / RCN_MAX)
+        dS = dJ[:, :, keep]  # (n, m, n_keep)
+        dmax = np.einsum("i,jik,k->j", U[:, 0], dS, Vt[0])
+        dmin = np.einsum("i,jik,k->j", U[:, -1], dS, Vt[-1])
+        k = smax / smin
+        grad += 2.0 * k * (dmax * smin - smax * dmin) / smin**2
+    return grad
+
+
+class JumpReduction(NamedTuple):
+    """Eq. (14) at one configuration: measured and predicted reduction of the jump."""
+
+    delta: float  # λ(q̇_LN) - λ(q̇_OPT)
+    predicted: float  # (Σ w_S) ‖q̇_H‖²
+    qd_h: np.ndarray  # null-space part q̇_OPT - q̇_LN
+
+
+# Eqn. (11)-(14)
+def jump_reduction(J: np.ndarray, xdot: np.ndarray, lockable=None, *, weights=None) -> JumpReduction:
+    r"""δ = λ(q̇_LN) − λ(q̇_OPT) and its closed form :math:`f\,\|\dot q_H\|^2`, eq. (14)."""
+    from .planner import jvja, lnva
+
+    J = np.asarray(J, dtype=float)
+    ln = lnva(J, xdot)
+    opt = jvja(J, xdot, lockable, weights=weights)
+    sc = _scenarios(J, lockable, weights)
+    delta = jvj(J, xdot, ln, sc) - jvj(J, xdot, opt, sc)
+    qd_h = opt - ln
+    return JumpReduction(delta, float(sc.weights.sum() * qd_h @ qd_h), qd_h)
+
+
+def fault_tolerance_measure(J: np.ndarray, lockable=None) -> float:
+    """``k_f = min_S σ_min(J_S)`` (Roberts & Maciejewski): worst-case reduced dexterity."""
+    J = np.asarray(J, dtype=float)
+    return float(reduced_singular_values(J, _scenarios(J, lockable))[:, 0].min())
+
+
+def reduced_manipulability(J: np.ndarray, lockable=None) -> np.ndarray:
+    """``w_S = √det(J_S J_Sᵀ)`` per scenario, shape (f,)."""
+    J = np.asarray(J, dtype=float)
+    return np.prod(reduced_singular_values(J, _scenarios(J, lockable)), axis=1)

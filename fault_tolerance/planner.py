@@ -1,0 +1,150 @@
+"""Redundancy resolution: LNVA, JVJA and MDA, one small function each, and a registry by name.
+
+Every resolver maps a task Jacobian ``J`` (m, n) and task velocity ``ẋ`` (m,) to joint rates
+``q̇`` (n,) with ``J q̇ = ẋ`` (up to damping near singularities, see :mod:`.linalg`). Resolvers hold
+no state.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+
+import numpy as np
+
+from .errors import InvalidInput
+from .failures import Scenarios, scenarios
+from .indices import RESPONSES, rcn_gradient
+from .linalg import projection
+
+#: Default MDA gain α [rad² per unit of K per s]: q̇ = J⁺ẋ − α N ∇K.
+MDA_GAIN = 1e-3
+
+
+def _scenarios(J: np.ndarray, lockable, weights, joint_names) -> Scenarios:
+    m, n = J.shape
+    return scenarios(lockable, n, r=n - m, weights=weights, joint_names=joint_names)
+
+
+def lnva(J: np.ndarray, xdot: np.ndarray, lockable=None, **_: object) -> np.ndarray:
+    """LNVA, least-norm rates ``q̇ = J⁺ẋ`` (``lockable`` is accepted and ignored)."""
+    return projection(J).Jpinv @ xdot
+
+
+# Eqn. (5), in closed form (G2); (G3) for the continuation response.
+def jvja(
+    J: np.ndarray,
+    xdot: np.ndarray,
+    lockable=None,
+    *,
+    weights: Sequence[float] | None = None,
+    response: str = "least_norm",
+    joint_names: Sequence[str] = (),
+    **_: object,
+) -> np.ndarray:
+    r"""JVJA, minimum square-sum joint velocity jump, eq. (5).
+
+    Least-norm response (the paper's): :math:`\dot q = a - \frac{1}{W}\sum_S w_S N_{:,S}
+    N_{S,S}^{-1} a_S`, :math:`a = J^+\dot x`, :math:`W = \sum_S w_S`; for single-joint scenarios
+    (G2) :math:`\dot q = a - N c / W`, :math:`c_i = w_i a_i / N_{ii}`. One pseudo-inverse per step.
+
+    Continuation response (G3): :math:`\dot q = a + N z`, :math:`z = -(N W N)^+ N W a` with
+    :math:`W = \sum_S w_S E_S N_{S,S}^{-1} E_S^T`.
+
+    Raises:
+        IntolerableFailure: a scenario's ``N[S, S]`` is singular (locking it loses the task).
+    """
+    sc = _scenarios(J, lockable, weights, joint_names)
+    proj = projection(J)
+    N = proj.N
+    a = proj.Jpinv @ xdot
+    pivots = sc.check_tolerable(N)
+    if response == "least_norm":
+        if sc.singletons:
+            c = np.zeros_like(a)
+            c[sc.columns] = sc.weights * a[sc.columns] / pivots
+            return a - N @ c / sc.weights.sum()
+        shift = sum(
+            w * N[:, list(S)] @ np.linalg.solve(N[np.ix_(S, S)], a[list(S)])
+            for S, w in zip(sc.sets, sc.weights)
+        )
+        return a - shift / sc.weights.sum()
+    if response == "continuation":
+        W = np.zeros_like(N)
+        for S, w in zip(sc.sets, sc.weights):
+            W[np.ix_(S, S)] += w * np.linalg.inv(N[np.ix_(S, S)])
+        z = -np.linalg.pinv(N @ W @ N, rcond=1e-10, hermitian=True) @ (N @ W @ a)
+        return a + N @ z
+    raise ValueError(f"response {response!r} is not one of {RESPONSES}")
+
+
+# Eqn. (5) the explicit way: one pseudo-inverse per scenario (reference, slow).
+def jvja_explicit(J: np.ndarray, xdot: np.ndarray, lockable=None, *, weights=None) -> np.ndarray:
+    """Eq. (5) with ``ˢq̇' = E_S J_S⁺ ẋ`` from NumPy's SVD pseudo-inverse for every scenario."""
+    from .linalg import reduced_rates_explicit
+
+    sc = _scenarios(J, lockable, weights, ())
+    Jp = np.linalg.pinv(J)
+    N = np.eye(J.shape[1]) - Jp @ J
+    post = np.array([reduced_rates_explicit(J, xdot, S) for S in sc.sets])
+    mean = sc.weights @ post / sc.weights.sum()
+    return Jp @ xdot + N @ mean
+
+
+def mda(
+    J: np.ndarray,
+    xdot: np.ndarray,
+    lockable=None,
+    *,
+    arm=None,
+    q: np.ndarray | None = None,
+    gain: float = MDA_GAIN,
+    dJ: np.ndarray | None = None,
+    **_: object,
+) -> np.ndarray:
+    r"""MDA, maximum dexterity: :math:`\dot q = J^+\dot x - \alpha N \nabla_q K(q)`.
+
+    ``K = Σ_S k_S²`` is the square-sum reduced condition number (15); its gradient uses the
+    Jacobian derivatives of ``arm`` at ``q`` (or ``dJ`` given directly, shape (n, m, n)).
+    Default gain :data:`MDA_GAIN`.
+    """
+    if dJ is None:
+        if arm is None or q is None:
+            raise InvalidInput("mda needs the configuration: pass arm=... and q=... (or dJ=...)")
+        dJ = arm.jacobian_derivatives(q)
+    if not np.isfinite(gain) or gain < 0:
+        raise InvalidInput(f"mda gain must be finite and >= 0, got {gain}")
+    proj = projection(J)
+    return proj.Jpinv @ xdot - gain * proj.N @ rcn_gradient(J, dJ, lockable)
+
+
+RESOLVERS: dict[str, Callable[..., np.ndarray]] = {"lnva": lnva, "jvja": jvja, "mda": mda}
+
+
+def resolve(name: str, J: np.ndarray, xdot: np.ndarray, lockable=None, **options) -> np.ndarray:
+    """Joint rates from the resolver ``name`` (``"lnva"``, ``"jvja"`` or ``"mda"``).
+
+    Args:
+        name: Resolver name.
+        J: Task Jacobian, shape (m, n).
+        xdot: Task velocity, shape (m,).
+        lockable: Joints that may lock: column indices, names (with ``joint_names=``), tuples for
+            multi-joint scenarios, ``None``/``"all"`` for every joint, or a :class:`Scenarios`.
+        **options: ``weights``, ``response`` (jvja); ``arm``, ``q``, ``gain`` (mda).
+
+    Example:
+        >>> import numpy as np, fault_tolerance as ft
+        >>> arm = ft.load_arm("planar_3r")
+        >>> q = np.array([0.3, 1.2, 1.0]); J = arm.jacobian(q); xd = np.array([0.1, 0.0])
+        >>> qd = ft.resolve("jvja", J, xd, lockable=[1, 2])
+        >>> bool(np.allclose(J @ qd, xd))
+        True
+    """
+    if name not in RESOLVERS:
+        raise InvalidInput(f"resolver '{name}' is not one of {sorted(RESOLVERS)}")
+    J = np.asarray(J, dtype=float)
+    xdot = np.asarray(xdot, dtype=float)
+    if J.ndim != 2 or xdot.shape != (J.shape[0],):
+        raise InvalidInput(f"J must be (m, n) and xdot (m,); got {J.shape} and {xdot.shape}")
+    if not (np.all(np.isfinite(J)) and np.all(np.isfinite(xdot))):
+        raise InvalidInput("J and xdot must be finite")
+    return RESOLVERS[name](J, xdot, lockable, **options)

@@ -1,0 +1,1 @@
+"""URDF descriptions shipped with fault_tolerance (data only)."""
