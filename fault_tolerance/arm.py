@@ -211,6 +211,28 @@ class Arm:
         x6 = np.concatenate([M.translation, pin.log3(M.rotation)])
         return x6[self.rows]
 
+    def task_error(self, x_des: np.ndarray, q: np.ndarray) -> np.ndarray:
+        """Task-space error ``x_des − x(q)``, shape (m,), in the velocity coordinates of J.
+
+        Linear rows subtract. With all three angular rows the orientation error is the world-frame
+        rotation vector ``log3(R_des R(q)ᵀ)`` (``R_des = exp3`` of the desired rotation vector);
+        with only some angular rows their rotation-vector components subtract.
+        """
+        x_des = np.asarray(x_des, dtype=float)
+        if x_des.shape != (self.m,):
+            raise InvalidInput(f"x_des has shape {x_des.shape}; the task needs ({self.m},)")
+        M = self.placement(q)
+        full = np.zeros(6)
+        full[self.rows] = x_des
+        err = np.zeros(6)
+        err[:3] = full[:3] - M.translation
+        ang = [r for r in self.rows if r >= 3]
+        if len(ang) == 3:
+            err[3:] = pin.log3(pin.exp3(full[3:]) @ M.rotation.T)
+        elif ang:
+            err[3:] = full[3:] - pin.log3(M.rotation)
+        return err[self.rows]
+
     def jacobian(self, q: np.ndarray) -> np.ndarray:
         """Task Jacobian ``J(q)``, shape (m, n), ``LOCAL_WORLD_ALIGNED`` rows ``x y z rx ry rz``."""
         J6 = pin.computeFrameJacobian(

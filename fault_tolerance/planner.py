@@ -17,7 +17,7 @@ from .indices import RESPONSES, rcn_gradient
 from .linalg import projection
 
 #: Default MDA gain α [rad² per unit of K per s]: q̇ = J⁺ẋ − α N ∇K.
-MDA_GAIN = 1e-3
+MDA_GAIN = 1e-2
 
 
 def _scenarios(J: np.ndarray, lockable, weights, joint_names) -> Scenarios:

@@ -1,0 +1,299 @@
+"""Initial posture and the planning loop of the paper's Sec. III.D.
+
+Step (i): at the start point ``x0`` with zero task velocity, move through the self-motion
+(null space) to the configuration of minimum square-sum RCN ``K = Σ k_S²``. For one degree of
+redundancy the self-motion manifold is a set of closed curves; :func:`self_motion_curve` traces
+each one (predictor along the null vector, Newton corrector back onto ``x(q) = x0``) and
+:func:`initial_posture` takes the global minimum over all of them. For ``r > 1`` it runs projected
+gradient descent on ``K`` from several inverse-kinematics seeds (local, with restarts).
+
+Steps (ii)-(iii): :func:`plan` runs the path from the best start, compares the largest reduced
+condition number met with a threshold, and tries the next-best start configurations (the other
+local minima of ``K``) until one holds.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .arm import Arm
+from .errors import InvalidInput
+from .failures import Scenarios, scenarios
+from .indices import condition_numbers, reduced_singular_values, rcn_gradient
+from .linalg import projection
+
+#: Largest reduced condition number k_S accepted along a planned run (step iii).
+RCN_THRESHOLD = 100.0
+
+
+def _wrappable(arm: Arm) -> np.ndarray:
+    """Joints whose limits span a full turn (revolute): their angles may wrap modulo 2π."""
+    span = arm.upper - arm.lower
+    return np.isfinite(span) & (span >= 2 * np.pi - 1e-3)
+
+
+def wrap(arm: Arm, q: np.ndarray) -> np.ndarray:
+    """Angles of full-turn joints wrapped into ``[-π, π)``; other joints unchanged."""
+    q = np.array(q, dtype=float)
+    w = _wrappable(arm)
+    q[w] = (q[w] + np.pi) % (2 * np.pi) - np.pi
+    return q
+
+
+def joint_distance(arm: Arm, a: np.ndarray, b: np.ndarray):
+    """Distance between configurations (rows), full-turn joints compared modulo 2π."""
+    d = np.asarray(a, dtype=float) - np.asarray(b, dtype=float)
+    w = _wrappable(arm)
+    d[..., w] = (d[..., w] + np.pi) % (2 * np.pi) - np.pi
+    return np.linalg.norm(d, axis=-1)
+
+
+def inverse_kinematics(
+    arm: Arm, x_des: np.ndarray, q_seed: np.ndarray, *, tol: float = 1e-10, max_iter: int = 200
+) -> np.ndarray | None:
+    """Damped Newton on the task rows from ``q_seed``; ``None`` if it does not converge."""
+    q = arm.check_q(q_seed).copy()
+    for _ in range(max_iter):
+        err = arm.task_error(x_des, q)
+        if np.linalg.norm(err) < tol:
+            return q
+        step = projection(arm.jacobian(q)).Jpinv @ err
+        norm = np.linalg.norm(step)
+        q = q + (step if norm < 0.5 else step * 0.5 / norm)
+    return None
+
+
+def _correct(arm: Arm, x0: np.ndarray, q: np.ndarray, iters: int = 8) -> np.ndarray:
+    for _ in range(iters):
+        err = arm.task_error(x0, q)
+        if np.linalg.norm(err) < 1e-12:
+            break
+        q = q + projection(arm.jacobian(q)).Jpinv @ err
+    return q
+
+
+def square_sum_rcn_at(arm: Arm, q: np.ndarray, sc: Scenarios) -> float:
+    """``K(q) = Σ_S k_S²`` for the arm at ``q``."""
+    k = condition_numbers(reduced_singular_values(arm.jacobian(q), sc))
+    return float(k @ k)
+
+
+def self_motion_curve(
+    arm: Arm, x0: np.ndarray, q_start: np.ndarray, *, step: float = 0.01, max_steps: int = 20000
+) -> tuple[np.ndarray, bool]:
+    """Trace the self-motion curve through ``q_start`` at ``x(q) = x0`` (one degree of redundancy).
+
+    Returns the points (shape (L, n), full-turn joints unwrapped) and whether the curve closed.
+    An open curve (it runs into a joint limit of a joint that cannot wrap) is traced both ways.
+    """
+    if arm.redundancy != 1:
+        raise InvalidInput(f"self-motion curves need r = 1; {arm.name} has r = {arm.redundancy}")
+    q_start = _correct(arm, x0, arm.check_q(q_start))
+    hard = ~_wrappable(arm)
+
+    def walk(direction: float) -> tuple[list[np.ndarray], bool]:
+        pts = [q_start]
+        q = q_start
+        prev = None
+        for i in range(max_steps):
+            N = projection(arm.jacobian(q)).N
+            nvec = N[:, int(np.argmax(np.diag(N)))]
+            nvec = nvec / np.linalg.norm(nvec)
+            if prev is None:
+                nvec = nvec * direction * (1 if nvec[np.argmax(np.abs(nvec))] > 0 else -1)
+            elif nvec @ prev < 0:
+                nvec = -nvec
+            prev = nvec
+            q = _correct(arm, x0, q + step * nvec)
+            if np.any(hard & ((q < arm.lower) | (q > arm.upper))):
+                return pts, False
+            pts.append(q)
+            if i > 10 and joint_distance(arm, q, q_start) < 1.5 * step:
+                return pts, True
+        return pts, False
+
+    fwd, closed = walk(1.0)
+    if closed:
+        return np.array(fwd), True
+    back, _ = walk(-1.0)
+    return np.array(back[::-1] + fwd[1:]), False
+
+
+@dataclass
+class Posture:
+    """Result of the initial-posture search."""
+
+    q: np.ndarray  # best configuration, shape (n,)
+    K: float  # its square-sum RCN
+    candidates: list[tuple[float, np.ndarray]] = field(default_factory=list)  # local minima, best first
+    curves: list[np.ndarray] = field(default_factory=list)  # traced self-motion curves (r = 1)
+    method: str = ""
+
+
+def _local_minima(values: np.ndarray, closed: bool) -> list[int]:
+    n = len(values)
+    idx = []
+    for i in range(n):
+        left = values[i - 1] if (i > 0 or closed) else np.inf
+        right = values[(i + 1) % n] if (i < n - 1 or closed) else np.inf
+        if values[i] <= left and values[i] <= right:
+            idx.append(i)
+    return idx
+
+
+def initial_posture(
+    arm: Arm,
+    x0: np.ndarray,
+    lockable=None,
+    *,
+    seeds: int = 24,
+    rng: np.random.Generator | None = None,
+    step: float = 0.01,
+) -> Posture:
+    """Configuration of minimum square-sum RCN at ``x0`` (paper Sec. III.D, step i).
+
+    ``r = 1``: global, over every self-motion curve found from ``seeds`` inverse-kinematics seeds.
+    ``r > 1``: projected gradient descent on ``K`` from each seed (local minima, best kept).
+
+    Raises:
+        InvalidInput: ``x0`` has the wrong size or no seed reaches it (out of reach).
+    """
+    x0 = np.asarray(x0, dtype=float)
+    if x0.shape != (arm.m,) or not np.all(np.isfinite(x0)):
+        raise InvalidInput(f"x0 must be {arm.m} finite numbers for task {'/'.join(arm.task)}, got {x0.tolist()}")
+    rng = rng or np.random.default_rng(0)
+    sc = scenarios(arm.default_lockable if lockable is None else lockable, arm.n,
+                   r=arm.redundancy, joint_names=arm.joint_names)
+    starts = [arm.neutral()] + [arm.random_q(rng) for _ in range(seeds)]
+    sols = [s for s in (inverse_kinematics(arm, x0, q) for q in starts) if s is not None]
+    sols = [s for s in sols if np.all(_wrappable(arm) | ((s >= arm.lower) & (s <= arm.upper)))]
+    if not sols:
+        raise InvalidInput(
+            f"x0 = {x0.tolist()} is out of reach of {arm.name} (no inverse-kinematics solution "
+            f"from {len(starts)} seeds within the joint limits)"
+        )
+    if arm.redundancy == 1:
+        return _posture_on_curves(arm, x0, sols, sc, step)
+    return _posture_by_descent(arm, x0, sols, sc)
+
+
+def _posture_on_curves(arm, x0, sols, sc, step) -> Posture:
+    curves: list[np.ndarray] = []
+    cands: list[tuple[float, np.ndarray]] = []
+    for s in sols:
+        if any(np.min(joint_distance(arm, c, s)) < 5 * step for c in curves):
+            continue
+        pts, closed = self_motion_curve(arm, x0, s, step=step)
+        curves.append(pts)
+        K = np.array([square_sum_rcn_at(arm, p, sc) for p in pts])
+        for i in _local_minima(K, closed):
+            cands.append((float(K[i]), wrap(arm, pts[i])))
+    cands.sort(key=lambda c: c[0])
+    best = _refine_on_curve(arm, x0, cands[0][1], sc, step)
+    cands[0] = (square_sum_rcn_at(arm, best, sc), best)
+    return Posture(best, cands[0][0], cands, curves, "global search over self-motion curves")
+
+
+def _refine_on_curve(arm, x0, q, sc, step) -> np.ndarray:
+    """Golden-section search along the curve within ±step of a sampled minimum."""
+    N = projection(arm.jacobian(q)).N
+    nvec = N[:, int(np.argmax(np.diag(N)))]
+    nvec /= np.linalg.norm(nvec)
+
+    def at(s):
+        return _correct(arm, x0, q + s * nvec)
+
+    a, b = -step, step
+    g = (np.sqrt(5) - 1) / 2
+    c, d = b - g * (b - a), a + g * (b - a)
+    fc, fd = square_sum_rcn_at(arm, at(c), sc), square_sum_rcn_at(arm, at(d), sc)
+    for _ in range(30):
+        if fc < fd:
+            b, d, fd = d, c, fc
+            c = b - g * (b - a)
+            fc = square_sum_rcn_at(arm, at(c), sc)
+        else:
+            a, c, fc = c, d, fd
+            d = a + g * (b - a)
+            fd = square_sum_rcn_at(arm, at(d), sc)
+    best = wrap(arm, at((a + b) / 2))
+    return best if square_sum_rcn_at(arm, best, sc) <= square_sum_rcn_at(arm, q, sc) else q
+
+
+def _posture_by_descent(arm, x0, sols, sc, iters: int = 300) -> Posture:
+    cands = []
+    for q in sols:
+        K = square_sum_rcn_at(arm, q, sc)
+        alpha = 1e-3
+        for _ in range(iters):
+            J = arm.jacobian(q)
+            g = projection(J).N @ rcn_gradient(J, arm.jacobian_derivatives(q), sc)
+            if np.linalg.norm(g) < 1e-9:
+                break
+            trial = _correct(arm, x0, q - alpha * g / max(1.0, np.linalg.norm(g)))
+            Kt = square_sum_rcn_at(arm, trial, sc)
+            if Kt < K:
+                q, K, alpha = trial, Kt, alpha * 1.5
+            else:
+                alpha *= 0.5
+                if alpha < 1e-8:
+                    break
+        cands.append((K, wrap(arm, q)))
+    cands.sort(key=lambda c: c[0])
+    return Posture(cands[0][1], cands[0][0], cands, [], "projected gradient descent with restarts")
+
+
+@dataclass
+class PlanAttempt:
+    """One start configuration tried by :func:`plan`."""
+
+    q0: np.ndarray
+    K0: float
+    rcn_max: float
+    accepted: bool
+    reason: str
+
+
+def plan(
+    arm: Arm,
+    path,
+    algorithm: str = "jvja",
+    *,
+    lockable=None,
+    threshold: float = RCN_THRESHOLD,
+    max_attempts: int = 5,
+    posture: Posture | None = None,
+    **sim_options,
+):
+    """Steps (i)-(iii) of Sec. III.D: best start, run, accept if ``max k_S <= threshold``.
+
+    Returns ``(run, attempts)``: the accepted run (or, if none holds, the one with the smallest
+    largest RCN) and the list of :class:`PlanAttempt` saying which start was chosen and why.
+    """
+    from .simulation import simulate
+
+    posture = posture or initial_posture(arm, path.x0, lockable)
+    tried: list[tuple[PlanAttempt, object]] = []
+    for K0, q0 in posture.candidates[:max_attempts]:
+        run = simulate(arm, path, algorithm, q0=q0, lockable=lockable, **sim_options)
+        worst = float(np.max(run.rcn))
+        ok = worst <= threshold
+        reason = (f"largest RCN {worst:.3g} <= threshold {threshold:g}" if ok else
+                  f"largest RCN {worst:.3g} > threshold {threshold:g}; trying the next start")
+        tried.append((PlanAttempt(q0, K0, worst, ok, reason), run))
+        if ok:
+            break
+    if not any(a.accepted for a, _ in tried):
+        best = min(range(len(tried)), key=lambda i: tried[i][0].rcn_max)
+        tried[best][0].reason += "; no start met the threshold, keeping the one with the smallest"
+        return tried[best][1], [a for a, _ in tried]
+    return tried[-1][1], [a for a, _ in tried]
+
+
+def lockable_scenarios(arm: Arm, lockable: Sequence | None) -> Scenarios:
+    """The arm's scenarios for ``lockable`` (default: its default lockable joints)."""
+    return scenarios(arm.default_lockable if lockable is None else lockable, arm.n,
+                     r=arm.redundancy, joint_names=arm.joint_names)

@@ -1,0 +1,171 @@
+"""Shared fixtures: the shipped arms, the Panda, seeded RNGs and well-conditioned configurations.
+
+Every robot fixture is a :class:`RobotCase`: the arm and the lockable set the tests use for it.
+
+* ``planar_3r``, ``powercube_3r``: every joint lockable (paper §IV.A, §V), r = 1.
+* ``spatial_4r``: joints 0, 1, 2 lockable; joint index 3 (``joint4``) is intolerable (paper §IV.B).
+* ``panda_pose``: 6-row task, r = 1. The elbow (``panda_joint4``, index 3) sets the shoulder-wrist
+  distance almost alone, so its pivot ``N[3, 3]`` is typically ~3e-3 and near-intolerable; the
+  lockable set is the other six joints.
+* ``panda_position``: 3-row task, r = 4, every joint lockable.
+"""
+
+from __future__ import annotations
+
+import zlib
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import fault_tolerance as ft
+from fault_tolerance.linalg import min_pivot
+
+#: Base seed of every RNG in the suite.
+SEED = 20240521
+#: Repository root (for ``robots/*.urdf``).
+ROOT = Path(__file__).resolve().parents[1]
+
+SHIPPED = ("planar_3r", "spatial_4r", "powercube_3r")
+ALL_ROBOTS = SHIPPED + ("panda_pose", "panda_position")
+R1_ROBOTS = SHIPPED + ("panda_pose",)
+
+
+@dataclass(frozen=True)
+class RobotCase:
+    """One arm and the lockable set (column indices, or tuples for multi-joint scenarios)."""
+
+    id: str
+    arm: ft.Arm
+    lockable: tuple
+
+    @property
+    def n(self) -> int:
+        """Number of joints."""
+        return self.arm.n
+
+    @property
+    def m(self) -> int:
+        """Number of task rows."""
+        return self.arm.m
+
+    @property
+    def r(self) -> int:
+        """Degree of redundancy."""
+        return self.arm.redundancy
+
+    def __repr__(self) -> str:
+        return f"RobotCase({self.id})"
+
+
+def well_conditioned(
+    arm: ft.Arm,
+    q: np.ndarray,
+    lockable: Sequence,
+    *,
+    max_cond: float = 100.0,
+    min_sigma: float = 1e-2,
+    min_pivot_value: float = 1e-2,
+) -> bool:
+    """True when J(q) is far from singular (no damping) and every scenario is far from intolerable."""
+    J = arm.jacobian(q)
+    s = np.linalg.svd(J, compute_uv=False)
+    if s[-1] < min_sigma or s[0] / s[-1] > max_cond:
+        return False
+    N = ft.nullspace_projector(J)
+    sc = ft.scenarios(list(lockable), arm.n, r=arm.redundancy)
+    return min(min_pivot(N, S) for S in sc.sets) >= min_pivot_value
+
+
+def random_well_conditioned_q(
+    arm: ft.Arm, rng: np.random.Generator, lockable: Sequence, *, tries: int = 2000, **criteria
+) -> np.ndarray:
+    """A configuration drawn uniformly within the limits, rejected until :func:`well_conditioned`."""
+    for _ in range(tries):
+        q = arm.random_q(rng)
+        if well_conditioned(arm, q, lockable, **criteria):
+            return q
+    raise RuntimeError(f"no well-conditioned configuration of {arm.name} in {tries} draws")
+
+
+def random_xdot(rng: np.random.Generator, m: int) -> np.ndarray:
+    """A task velocity of unit norm, shape (m,)."""
+    v = rng.standard_normal(m)
+    return v / np.linalg.norm(v)
+
+
+def _case(id_: str, robot: str, lockable: tuple, **kw) -> RobotCase:
+    return RobotCase(id_, ft.load_arm(robot, **kw), lockable)
+
+
+@pytest.fixture(scope="session")
+def planar_3r() -> RobotCase:
+    """Planar 3R, links 0.5 m, task (x, y), every joint lockable."""
+    return _case("planar_3r", "planar_3r", (0, 1, 2))
+
+
+@pytest.fixture(scope="session")
+def spatial_4r() -> RobotCase:
+    """Spatial 4R, position task, joints 0, 1, 2 lockable (joint index 3 is intolerable)."""
+    return _case("spatial_4r", "spatial_4r", (0, 1, 2))
+
+
+@pytest.fixture(scope="session")
+def powercube_3r() -> RobotCase:
+    """Power-Cube planar 3R, task (x, y), every joint lockable."""
+    return _case("powercube_3r", "powercube_3r", (0, 1, 2))
+
+
+@pytest.fixture(scope="session")
+def panda_pose() -> RobotCase:
+    """example-robot-data Panda, full pose (r = 1), every joint but the elbow lockable."""
+    return _case("panda_pose", "panda", (0, 1, 2, 4, 5, 6), task="pose")
+
+
+@pytest.fixture(scope="session")
+def panda_position() -> RobotCase:
+    """example-robot-data Panda, position task (r = 4), every joint lockable."""
+    return _case("panda_position", "panda", tuple(range(7)), task="position")
+
+
+@pytest.fixture(scope="session", params=ALL_ROBOTS)
+def robot(request) -> RobotCase:
+    """Each of the three shipped arms and the Panda's pose and position tasks."""
+    return request.getfixturevalue(request.param)
+
+
+@pytest.fixture(scope="session", params=R1_ROBOTS)
+def r1_robot(request) -> RobotCase:
+    """Each arm with one degree of redundancy (the shipped arms and the Panda's pose task)."""
+    return request.getfixturevalue(request.param)
+
+
+@pytest.fixture(scope="session", params=SHIPPED)
+def shipped_robot(request) -> RobotCase:
+    """Each of the three shipped arms."""
+    return request.getfixturevalue(request.param)
+
+
+@pytest.fixture
+def rng(request) -> np.random.Generator:
+    """A generator seeded from SEED and the test's id: reproducible, different per test."""
+    return np.random.default_rng([SEED, zlib.crc32(request.node.nodeid.encode())])
+
+
+@pytest.fixture(scope="session")
+def draw_q() -> Callable[..., np.ndarray]:
+    """``draw_q(case, rng, lockable=None, **criteria)``: a random well-conditioned configuration."""
+
+    def draw(case: RobotCase, rng: np.random.Generator, lockable=None, **criteria) -> np.ndarray:
+        lock = case.lockable if lockable is None else lockable
+        return random_well_conditioned_q(case.arm, rng, lock, **criteria)
+
+    return draw
+
+
+@pytest.fixture(scope="session")
+def draw_xdot() -> Callable[[np.random.Generator, int], np.ndarray]:
+    """``draw_xdot(rng, m)``: a random task velocity of unit norm."""
+    return random_xdot
