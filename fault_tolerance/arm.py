@@ -109,6 +109,7 @@ class Arm:
         visual_model: pin.GeometryModel | None = None,
         default_lockable: Sequence[str] | None = None,
         source: str = "",
+        package_dirs: Sequence[str] = (),
     ) -> None:
         if model.nq != model.nv:
             raise URDFError(
@@ -128,6 +129,7 @@ class Arm:
         self.rows = np.array([TASK_ROWS.index(r) for r in self.task], dtype=int)
         self.visual_model = visual_model
         self.source = source
+        self.package_dirs = [str(d) for d in package_dirs]
         self.joint_names: list[str] = [
             model.names[j] for j in range(1, model.njoints) if model.joints[j].nv > 0
         ]
@@ -383,7 +385,7 @@ def load_arm(
         model, visual = reduce_model(model, tip, joints, visual_model=visual)
         return Arm(
             model, tip, task or entry["task"], name=name, visual_model=visual,
-            default_lockable=entry.get("lockable"), source=str(path),
+            default_lockable=entry.get("lockable"), source=name,
         )
     path = Path(name).expanduser()
     if path.suffix.lower() in (".urdf", ".xml") or path.exists():
@@ -393,7 +395,7 @@ def load_arm(
         tip = tip or model.frames[len(model.frames) - 1].name
         model, visual = reduce_model(model, tip, joints, visual_model=visual)
         return Arm(model, tip, task or "position", name=path.stem, visual_model=visual,
-                   source=str(path))
+                   source=str(path.resolve()), package_dirs=package_dirs or ())
     return _load_example_robot(name, tip, task, joints, shipped)
 
 
@@ -423,4 +425,12 @@ def _load_example_robot(
     q_ref = getattr(robot, "q0", None)
     model, visual = reduce_model(robot.model, tip, joints, q_ref, robot.visual_model)
     return Arm(model, tip, task or preset.get("task", "position"), name=name,
-               visual_model=visual, source=f"example-robot-data:{name}")
+               visual_model=visual, source=name)
+
+
+def arm_from_meta(meta: dict) -> Arm:
+    """Rebuild the arm a saved run was made with (its ``meta``: source, tip, task, joints)."""
+    return load_arm(
+        meta.get("source") or meta["robot"], tip=meta.get("tip"), task=meta.get("task"),
+        joints=meta.get("joint_names"), package_dirs=meta.get("package_dirs") or None,
+    )

@@ -363,7 +363,8 @@ def simulate(
         q = q + qd * dt
         _tick(progress, k, K1)
     meta = {
-        "robot": arm.name, "source": arm.source, "tip": arm.tip, "task": list(arm.task),
+        "robot": arm.name, "source": arm.source, "package_dirs": arm.package_dirs,
+        "tip": arm.tip, "task": list(arm.task),
         "joint_names": arm.joint_names, "algorithm": algorithm,
         "lockable": [[arm.joint_names[i] for i in S] for S in sc.sets],
         "weights": sc.weights.tolist(), "response": response, "dt": dt, "duration": duration,
