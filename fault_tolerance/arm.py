@@ -381,10 +381,10 @@ def load_arm(
         entry = shipped[name]
         path = robot_path(entry["urdf"])
         model, visual = _load_urdf(path, package_dirs)
-        tip = tip or entry["tip"]
+        tip = entry["tip"] if tip is None else tip
         model, visual = reduce_model(model, tip, joints, visual_model=visual)
         return Arm(
-            model, tip, task or entry["task"], name=name, visual_model=visual,
+            model, tip, entry["task"] if task is None else task, name=name, visual_model=visual,
             default_lockable=entry.get("lockable"), source=name,
         )
     path = Path(name).expanduser()
@@ -392,9 +392,10 @@ def load_arm(
         if not path.is_file():
             raise URDFError(f"{path}: no such URDF file")
         model, visual = _load_urdf(path, package_dirs)
-        tip = tip or model.frames[len(model.frames) - 1].name
+        tip = model.frames[len(model.frames) - 1].name if tip is None else tip
         model, visual = reduce_model(model, tip, joints, visual_model=visual)
-        return Arm(model, tip, task or "position", name=path.stem, visual_model=visual,
+        task = "position" if task is None else task
+        return Arm(model, tip, task, name=path.stem, visual_model=visual,
                    source=str(path.resolve()), package_dirs=package_dirs or ())
     return _load_example_robot(name, tip, task, joints, shipped)
 
@@ -420,11 +421,13 @@ def _load_example_robot(
         warnings.simplefilter("ignore")
         robot = example_robot_data.load(name)
     preset = EXAMPLE_ROBOTS.get(name, {})
-    tip = tip or preset.get("tip") or robot.model.frames[len(robot.model.frames) - 1].name
+    if tip is None:
+        tip = preset.get("tip") or robot.model.frames[len(robot.model.frames) - 1].name
     joints = joints if joints is not None else preset.get("joints")
     q_ref = getattr(robot, "q0", None)
     model, visual = reduce_model(robot.model, tip, joints, q_ref, robot.visual_model)
-    return Arm(model, tip, task or preset.get("task", "position"), name=name,
+    task = preset.get("task", "position") if task is None else task
+    return Arm(model, tip, task, name=name,
                visual_model=visual, source=name)
 
 
