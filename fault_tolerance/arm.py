@@ -110,6 +110,7 @@ class Arm:
         default_lockable: Sequence[str] | None = None,
         source: str = "",
         package_dirs: Sequence[str] = (),
+        q_reference: np.ndarray | None = None,
     ) -> None:
         if model.nq != model.nv:
             raise URDFError(
@@ -134,6 +135,9 @@ class Arm:
             model.names[j] for j in range(1, model.njoints) if model.joints[j].nv > 0
         ]
         self.default_lockable = list(default_lockable) if default_lockable else list(self.joint_names)
+        self.q_reference = (
+            self.neutral() if q_reference is None else np.asarray(q_reference, dtype=float).copy()
+        )
 
     # -- sizes and limits -------------------------------------------------------------------
     @property
@@ -426,9 +430,14 @@ def _load_example_robot(
     joints = joints if joints is not None else preset.get("joints")
     q_ref = getattr(robot, "q0", None)
     model, visual = reduce_model(robot.model, tip, joints, q_ref, robot.visual_model)
+    q_active = None
+    if q_ref is not None:
+        full = robot.model
+        q_active = np.array([q_ref[full.joints[full.getJointId(model.names[j])].idx_q]
+                             for j in range(1, model.njoints) if model.joints[j].nv > 0])
     task = preset.get("task", "position") if task is None else task
-    return Arm(model, tip, task, name=name,
-               visual_model=visual, source=name)
+    return Arm(model, tip, task, name=name, visual_model=visual, source=name,
+               q_reference=q_active)
 
 
 def arm_from_meta(meta: dict) -> Arm:

@@ -161,14 +161,16 @@ class JumpReduction(NamedTuple):
 
 
 # Eqn. (11)-(14)
-def jump_reduction(J: np.ndarray, xdot: np.ndarray, lockable=None, *, weights=None) -> JumpReduction:
+def jump_reduction(
+    J: np.ndarray, xdot: np.ndarray, lockable=None, *, weights=None, joint_names: Sequence[str] = ()
+) -> JumpReduction:
     r"""δ = λ(q̇_LN) − λ(q̇_OPT) and its closed form :math:`f\,\|\dot q_H\|^2`, eq. (14)."""
     from .planner import jvja, lnva
 
     J = np.asarray(J, dtype=float)
+    sc = _scenarios(J, lockable, weights, joint_names)
     ln = lnva(J, xdot)
-    opt = jvja(J, xdot, lockable, weights=weights)
-    sc = _scenarios(J, lockable, weights)
+    opt = jvja(J, xdot, sc)
     delta = jvj(J, xdot, ln, sc) - jvj(J, xdot, opt, sc)
     qd_h = opt - ln
     return JumpReduction(delta, float(sc.weights.sum() * qd_h @ qd_h), qd_h)
