@@ -167,7 +167,7 @@ def initial_posture(
     rng = rng or np.random.default_rng(0)
     sc = scenarios(arm.default_lockable if lockable is None else lockable, arm.n,
                    r=arm.redundancy, joint_names=arm.joint_names)
-    starts = [arm.neutral()] + [arm.random_q(rng) for _ in range(seeds)]
+    starts = [arm.q_reference, arm.neutral()] + [arm.random_q(rng) for _ in range(seeds)]
     sols = [s for s in (inverse_kinematics(arm, x0, q) for q in starts) if s is not None]
     sols = [s for s in sols if np.all(_wrappable(arm) | ((s >= arm.lower) & (s <= arm.upper)))]
     if not sols:

@@ -142,10 +142,7 @@ class Run:
             before = ~after
             s["path_error_peak_after_lock"] = float(np.max(self.error[after])) if after.any() else 0.0
             s["path_error_max_before_lock"] = float(np.max(self.error[before])) if before.any() else 0.0
-            k = int(np.searchsorted(self.t, lock["time"] - 1e-12))
-            cmd = self.qd_cmd if self.qd_cmd is not None else self.qd
-            if 0 < k < len(self.t):
-                s["jump_at_lock"] = float(np.sum((cmd[k] - cmd[k - 1]) ** 2))
+            s["jump_at_lock"] = lock.get("jump")
         return s
 
     # -- files -------------------------------------------------------------------------------
@@ -315,6 +312,7 @@ def simulate(
     qd = np.zeros(n)
     keep = np.arange(n)
     locked = False
+    lock_jump = None
     for k in range(K1):
         t = k * dt
         if lock_col is not None and not locked and t >= lock_time - 1e-12:
@@ -332,6 +330,9 @@ def simulate(
             qd_cmd = np.zeros(n)
             qd_cmd[keep] = projection(J[:, keep]).Jpinv @ xd_cmd
             flag |= FLAG_LOCKED
+            if lock_jump is None:  # the jump the lock causes: reduced rates minus planned rates
+                planned = resolve(algorithm, J, xd_cmd, sc, response=response, arm=arm, q=q, gain=gain)
+                lock_jump = float(np.sum((qd_cmd - planned) ** 2))
         else:
             qd_cmd = resolve(algorithm, J, xd_cmd, sc, weights=None, response=response,
                              arm=arm, q=q, gain=gain)
@@ -373,7 +374,8 @@ def simulate(
         "servo": servo.describe() if (lock_col is not None or servo.tau > 0) else "perfect rate tracking",
     }
     if lock_col is not None:
-        meta["lock"] = {"joint": arm.joint_names[lock_col], "index": lock_col, "time": float(lock_time)}
+        meta["lock"] = {"joint": arm.joint_names[lock_col], "index": lock_col,
+                        "time": float(lock_time), "jump": lock_jump}
     qd_cmd_arr = rec.pop("qd_cmd") if (lock_col is not None or servo.tau > 0) else None
     rec.pop("qd_cmd", None)
     return Run(meta=meta, qd_cmd=qd_cmd_arr, **rec)
