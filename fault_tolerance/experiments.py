@@ -106,6 +106,12 @@ class _Progress:
         if self.bar is not None:
             self.bar.update(k)
 
+    def grow(self, k: int) -> None:
+        """Add ``k`` steps to the total once the work is known exactly."""
+        if self.bar is not None:
+            self.bar.total += k
+            self.bar.refresh()
+
     def describe(self, text: str) -> None:
         if self.bar is not None:
             self.bar.set_description(text)
@@ -163,6 +169,8 @@ def run_experiment(exp: LockExperiment = EXPERIMENT, *, duration: float | None =
     t_min = float(planned.t[int(np.argmin(planned.jvj))])
     runs = {}
     horizon = max(T, max(t_max, t_min) + exp.after_lock)
+    if hasattr(progress, "grow"):  # the estimate assumed T + after_lock; correct it
+        progress.grow(3 * (int(round(horizon / 1e-3)) - int(round((T + exp.after_lock) / 1e-3))))
     baseline = simulate(arm, exp.path(horizon), "lnva", q0=posture.q, lockable=[exp.joint],
                         servo=exp.servo, feedback_gain=exp.feedback_gain, progress=progress)
     for label, t_lock in (("largest jump", t_max), ("smallest jump", t_min)):
@@ -267,7 +275,7 @@ def reproduce(
     total = sum(3 * int(round((case_T or CASES[k].duration) / 1e-3)) + 3 for k in keys if k in CASES)
     if "experiment" in keys:
         T = exp_T or EXPERIMENT.duration
-        total += int(T / 1e-3) + 3 * int((T + EXPERIMENT.after_lock) / 1e-3)
+        total += int(round(T / 1e-3)) + 1 + 3 * (int(round((T + EXPERIMENT.after_lock) / 1e-3)) + 1)
     bar = _Progress(total, progress)
     summary: dict = {"cases": {}, "experiment": {}, "details": {}}
     done: list[str] = []
