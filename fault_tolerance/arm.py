@@ -367,8 +367,9 @@ def load_arm(
     """Load an arm by catalog name, example-robot-data name or URDF path.
 
     Args:
-        robot: ``"planar_3r"``, ``"spatial_4r"``, ``"powercube_3r"``, an example-robot-data name
-            (``"panda"``, ``"ur5"``, ``"xarm7"``, ...) or the path of a URDF file.
+        robot: ``"planar_3r"``, ``"spatial_4r"``, ``"powercube_3r"``, ``"iiwa"``, an
+            example-robot-data name (``"panda"``, ``"ur5"``, ``"xarm7"``, ...) or the path of a
+            URDF file.
         tip: Tip frame (default: the catalog's, else the last frame of the model).
         task: ``"planar"``, ``"position"``, ``"pose"`` or a list of rows among ``x y z rx ry rz``.
         joints: Active joint names; the others are fixed (default: the chain to the tip).
@@ -386,10 +387,18 @@ def load_arm(
         path = robot_path(entry["urdf"])
         model, visual = _load_urdf(path, package_dirs)
         tip = entry["tip"] if tip is None else tip
-        model, visual = reduce_model(model, tip, joints, visual_model=visual)
+        # optional reference posture of the full model (catalog "q_reference"): joints left out
+        # of ``joints`` are fixed there, the active ones give Arm.q_reference
+        q_full = entry.get("q_reference")
+        q_full = None if q_full is None else np.asarray(q_full, dtype=float)
+        full = model
+        model, visual = reduce_model(model, tip, joints, q_full, visual_model=visual)
+        q_ref = None if q_full is None else np.array(
+            [q_full[full.joints[full.getJointId(model.names[j])].idx_q]
+             for j in range(1, model.njoints) if model.joints[j].nv > 0])
         return Arm(
             model, tip, entry["task"] if task is None else task, name=name, visual_model=visual,
-            default_lockable=entry.get("lockable"), source=name,
+            default_lockable=entry.get("lockable"), source=name, q_reference=q_ref,
         )
     path = Path(name).expanduser()
     if path.suffix.lower() in (".urdf", ".xml") or path.exists():

@@ -37,12 +37,12 @@ def test_catalog_arms_load_with_their_presets(name, n, m):
     assert arm.default_lockable == ["joint1", "joint2", "joint3"]
 
 
-def test_catalog_lists_the_three_shipped_robots():
-    """robots/catalog.json names exactly the three shipped arms, each with an existing URDF."""
+def test_catalog_lists_the_shipped_robots():
+    """robots/catalog.json names exactly the three paper arms and the iiwa, each with its URDF."""
     from fault_tolerance.arm import catalog, robot_path
 
     cat = catalog()
-    assert set(cat) == set(SHIPPED)
+    assert set(cat) == set(SHIPPED) | {"iiwa"}
     for entry in cat.values():
         assert robot_path(entry["urdf"]).is_file()
 
