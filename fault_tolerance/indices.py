@@ -11,6 +11,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from .errors import InvalidInput
 from .failures import Scenarios, scenarios
 from .linalg import projection, reduced_rates
 
@@ -28,19 +29,21 @@ def _scenarios(J: np.ndarray, lockable, weights=None, joint_names=()) -> Scenari
 
 def post_failure_rates(
     a: np.ndarray, N: np.ndarray, sc: Scenarios, qd: np.ndarray | None = None,
-    response: str = "least_norm",
+    response: str = "least_norm", *, damp: bool = False,
 ) -> np.ndarray:
     """Rates of the reduced robot for every scenario, shape (f, n).
 
     ``response="least_norm"``: eq. (2) ``E_S J_S⁺ ẋ`` in closed form (G1), from ``a = J⁺ẋ``.
     ``response="continuation"``: (G3) the solution nearest to the planned rates ``qd``.
+    ``damp``: pivots of ``N[S, S]`` below ``linalg.PIVOT_EPS`` are damped (finite at a reduced
+    singularity, where the exact rates are unbounded).
     """
     if response not in RESPONSES:
-        raise ValueError(f"response {response!r} is not one of {RESPONSES}")
+        raise InvalidInput(f"response {response!r} is not one of {RESPONSES}")
     base = a if response == "least_norm" else qd
     if base is None:
-        raise ValueError("the continuation response needs the planned rates qd")
-    return np.array([reduced_rates(base, N, S) for S in sc.sets])
+        raise InvalidInput("the continuation response needs the planned rates qd")
+    return np.array([reduced_rates(base, N, S, damp) for S in sc.sets])
 
 
 # Eqn. (1)
@@ -128,7 +131,9 @@ def square_sum_rcn(J: np.ndarray, lockable=None) -> float:
     return float(k @ k)
 
 
-def rcn_gradient(J: np.ndarray, dJ: np.ndarray, lockable=None) -> np.ndarray:
+def rcn_gradient(
+    J: np.ndarray, dJ: np.ndarray, lockable=None, *, joint_names: Sequence[str] = ()
+) -> np.ndarray:
     r"""Gradient of ``K = Σ_S k_S²`` with respect to ``q``, shape (n,).
 
     Singular values move as :math:`\partial\sigma/\partial q_j = u^T (\partial J_S/\partial q_j) v`
@@ -138,7 +143,7 @@ def rcn_gradient(J: np.ndarray, dJ: np.ndarray, lockable=None) -> np.ndarray:
     """
     J = np.asarray(J, dtype=float)
     m, n = J.shape
-    sc = _scenarios(J, lockable)
+    sc = _scenarios(J, lockable, None, joint_names)
     grad = np.zeros(n)
     for S in sc.sets:
         keep = [j for j in range(n) if j not in S]

@@ -14,7 +14,7 @@ import numpy as np
 from .errors import InvalidInput
 from .failures import Scenarios, scenarios
 from .indices import RESPONSES, rcn_gradient
-from .linalg import projection
+from .linalg import damped_pivots, pivot_block, projection
 
 #: Default MDA gain α [rad² per unit of K per s]: q̇ = J⁺ẋ − α N ∇K.
 MDA_GAIN = 1e-2
@@ -39,6 +39,7 @@ def jvja(
     weights: Sequence[float] | None = None,
     response: str = "least_norm",
     joint_names: Sequence[str] = (),
+    tolerate: bool = False,
     **_: object,
 ) -> np.ndarray:
     r"""JVJA, minimum square-sum joint velocity jump, eq. (5).
@@ -50,31 +51,36 @@ def jvja(
     Continuation response (G3): :math:`\dot q = a + N z`, :math:`z = -(N W N)^+ N W a` with
     :math:`W = \sum_S w_S E_S N_{S,S}^{-1} E_S^T`.
 
+    ``tolerate=True`` (used by the simulation after its first step) damps the pivots of ``N[S, S]``
+    below ``linalg.PIVOT_EPS`` instead of raising: the rates stay finite when the path crosses a
+    singularity of a reduced Jacobian (the scenario is intolerable only there).
+
     Raises:
-        IntolerableFailure: a scenario's ``N[S, S]`` is singular (locking it loses the task).
+        IntolerableFailure: a scenario's ``N[S, S]`` is singular (locking it loses the task), unless
+            ``tolerate``.
     """
     sc = _scenarios(J, lockable, weights, joint_names)
     proj = projection(J)
     N = proj.N
     a = proj.Jpinv @ xdot
-    pivots = sc.check_tolerable(N)
+    pivots = damped_pivots(sc.pivots(N)) if tolerate else sc.check_tolerable(N)
     if response == "least_norm":
         if sc.singletons:
             c = np.zeros_like(a)
             c[sc.columns] = sc.weights * a[sc.columns] / pivots
             return a - N @ c / sc.weights.sum()
         shift = sum(
-            w * N[:, list(S)] @ np.linalg.solve(N[np.ix_(S, S)], a[list(S)])
+            w * N[:, list(S)] @ np.linalg.solve(pivot_block(N, S, tolerate), a[list(S)])
             for S, w in zip(sc.sets, sc.weights)
         )
         return a - shift / sc.weights.sum()
     if response == "continuation":
         W = np.zeros_like(N)
         for S, w in zip(sc.sets, sc.weights):
-            W[np.ix_(S, S)] += w * np.linalg.inv(N[np.ix_(S, S)])
+            W[np.ix_(S, S)] += w * np.linalg.inv(pivot_block(N, S, tolerate))
         z = -np.linalg.pinv(N @ W @ N, rcond=1e-10, hermitian=True) @ (N @ W @ a)
         return a + N @ z
-    raise ValueError(f"response {response!r} is not one of {RESPONSES}")
+    raise InvalidInput(f"response {response!r} is not one of {RESPONSES}")
 
 
 # Eqn. (5) the explicit way: one pseudo-inverse per scenario (reference, slow).
@@ -99,6 +105,7 @@ def mda(
     q: np.ndarray | None = None,
     gain: float = MDA_GAIN,
     dJ: np.ndarray | None = None,
+    joint_names: Sequence[str] = (),
     **_: object,
 ) -> np.ndarray:
     r"""MDA, maximum dexterity: :math:`\dot q = J^+\dot x - \alpha N \nabla_q K(q)`.
@@ -114,7 +121,8 @@ def mda(
     if not np.isfinite(gain) or gain < 0:
         raise InvalidInput(f"mda gain must be finite and >= 0, got {gain}")
     proj = projection(J)
-    return proj.Jpinv @ xdot - gain * proj.N @ rcn_gradient(J, dJ, lockable)
+    grad = rcn_gradient(J, dJ, lockable, joint_names=joint_names)
+    return proj.Jpinv @ xdot - gain * proj.N @ grad
 
 
 RESOLVERS: dict[str, Callable[..., np.ndarray]] = {"lnva": lnva, "jvja": jvja, "mda": mda}
@@ -129,7 +137,8 @@ def resolve(name: str, J: np.ndarray, xdot: np.ndarray, lockable=None, **options
         xdot: Task velocity, shape (m,).
         lockable: Joints that may lock: column indices, names (with ``joint_names=``), tuples for
             multi-joint scenarios, ``None``/``"all"`` for every joint, or a :class:`Scenarios`.
-        **options: ``weights``, ``response`` (jvja); ``arm``, ``q``, ``gain`` (mda).
+        **options: ``weights``, ``response`` (jvja); ``arm``, ``q``, ``gain`` (mda);
+            ``joint_names`` to name lockable joints (taken from ``arm`` when it is given).
 
     Example:
         >>> import numpy as np, fault_tolerance as ft
@@ -147,4 +156,6 @@ def resolve(name: str, J: np.ndarray, xdot: np.ndarray, lockable=None, **options
         raise InvalidInput(f"J must be (m, n) and xdot (m,); got {J.shape} and {xdot.shape}")
     if not (np.all(np.isfinite(J)) and np.all(np.isfinite(xdot))):
         raise InvalidInput("J and xdot must be finite")
+    if options.get("arm") is not None and not options.get("joint_names"):
+        options["joint_names"] = options["arm"].joint_names  # lockable joints by name
     return RESOLVERS[name](J, xdot, lockable, **options)

@@ -19,17 +19,17 @@ COLORS = {"lnva": "#1f77b4", "jvja": "#d62728", "mda": "#2ca02c"}
 LABELS = {"lnva": "LNVA (least norm)", "jvja": "JVJA (minimum jump)", "mda": "MDA (maximum dexterity)"}
 
 
-def _pyplot():
-    import matplotlib
+def _subplots(nrows: int, ncols: int, figsize, **kw):
+    """A figure outside pyplot's global state: works headless and never changes a notebook's backend."""
+    from matplotlib.figure import Figure
 
-    matplotlib.use("Agg", force=False)
-    import matplotlib.pyplot as plt
-
-    return plt
+    fig = Figure(figsize=figsize)
+    axes = fig.subplots(nrows, ncols, **kw)
+    return fig, axes
 
 
 def save_figure(fig, stem: str | Path, formats: Sequence[str] = ("png", "svg")) -> list[Path]:
-    """Save ``fig`` as ``stem.png`` and ``stem.svg`` (atomically) and close it."""
+    """Save ``fig`` as ``stem.png`` and ``stem.svg`` (atomically)."""
     import io
 
     out = []
@@ -37,14 +37,12 @@ def save_figure(fig, stem: str | Path, formats: Sequence[str] = ("png", "svg")) 
         buf = io.BytesIO()
         fig.savefig(buf, format=fmt, dpi=130, bbox_inches="tight")
         out.append(write_atomic(Path(f"{stem}.{fmt}"), buf.getvalue()))
-    _pyplot().close(fig)
     return out
 
 
 def plot_comparison(runs: Mapping[str, Run], title: str = ""):
     """Panel (a) λ(t), panel (b) K(t), one curve per algorithm; returns the figure."""
-    plt = _pyplot()
-    fig, (ax1, ax2) = plt.subplots(2, 1, figsize=(7.0, 6.2), sharex=True)
+    fig, (ax1, ax2) = _subplots(2, 1, (7.0, 6.2), sharex=True)
     for name, run in runs.items():
         style = {"color": COLORS.get(name), "label": LABELS.get(name, name), "lw": 1.6}
         ax1.plot(run.t, run.jvj, **style)
@@ -65,8 +63,7 @@ def plot_comparison(runs: Mapping[str, Run], title: str = ""):
 
 def plot_lock(runs: Mapping[str, Run], title: str = ""):
     """Panel (a) desired and actual tool path per lock run, panel (b) path error over time."""
-    plt = _pyplot()
-    fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(11.0, 4.6))
+    fig, (ax1, ax2) = _subplots(1, 2, (11.0, 4.6))
     first = next(iter(runs.values()))
     ax1.plot(first.x_des[:, 0], first.x_des[:, 1], "k--", lw=1.2, label="desired path")
     colors = ["#d62728", "#1f77b4", "#2ca02c", "#9467bd"]
@@ -97,8 +94,7 @@ def plot_lock(runs: Mapping[str, Run], title: str = ""):
 
 def plot_run(run: Run, title: str = ""):
     """One run: joint rates, λ(t) and K(t), task error; returns the figure."""
-    plt = _pyplot()
-    fig, axes = plt.subplots(2, 2, figsize=(10.0, 6.4), sharex=True)
+    fig, axes = _subplots(2, 2, (10.0, 6.4), sharex=True)
     names = run.meta.get("joint_names") or [f"q{i}" for i in range(run.q.shape[1])]
     for j, name in enumerate(names):
         axes[0, 0].plot(run.t, run.qd[:, j], lw=1.2, label=name)

@@ -149,14 +149,15 @@ def initial_posture(
     x0: np.ndarray,
     lockable=None,
     *,
-    seeds: int = 24,
+    seeds: int | None = None,
     rng: np.random.Generator | None = None,
     step: float = 0.01,
 ) -> Posture:
     """Configuration of minimum square-sum RCN at ``x0`` (paper Sec. III.D, step i).
 
-    ``r = 1``: global, over every self-motion curve found from ``seeds`` inverse-kinematics seeds.
-    ``r > 1``: projected gradient descent on ``K`` from each seed (local minima, best kept).
+    ``r = 1``: global, over every self-motion curve found from ``seeds`` inverse-kinematics seeds
+    (default 24). ``r > 1``: projected gradient descent on ``K`` from each seed (default 8; local
+    minima, best kept). The reference configuration and the neutral one are always tried too.
 
     Raises:
         InvalidInput: ``x0`` has the wrong size or no seed reaches it (out of reach).
@@ -165,6 +166,8 @@ def initial_posture(
     if x0.shape != (arm.m,) or not np.all(np.isfinite(x0)):
         raise InvalidInput(f"x0 must be {arm.m} finite numbers for task {'/'.join(arm.task)}, got {x0.tolist()}")
     rng = rng or np.random.default_rng(0)
+    if seeds is None:  # a global search needs many seeds; descent from each is costlier
+        seeds = 24 if arm.redundancy == 1 else 8
     sc = scenarios(arm.default_lockable if lockable is None else lockable, arm.n,
                    r=arm.redundancy, joint_names=arm.joint_names)
     starts = [arm.q_reference, arm.neutral()] + [arm.random_q(rng) for _ in range(seeds)]
