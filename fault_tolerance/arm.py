@@ -19,6 +19,7 @@ import numpy as np
 import pinocchio as pin
 
 from .errors import (
+    AmbiguousFrame,
     FrameNotFound,
     InvalidInput,
     InvalidTask,
@@ -112,20 +113,24 @@ class Arm:
         package_dirs: Sequence[str] = (),
         q_reference: np.ndarray | None = None,
     ) -> None:
-        if model.nq != model.nv:
+        label = source or name or model.name or "model"
+        odd = [j for j in range(1, model.njoints) if model.joints[j].nq != model.joints[j].nv]
+        if odd:
+            kinds = [f"'{model.names[j]}' ({_joint_kind(model.joints[j])})" for j in odd]
             raise URDFError(
-                f"{name or 'model'}: joints with nq != nv (floating, spherical, planar or "
-                "continuous joints) are not supported; use revolute or prismatic joints"
+                f"{label}: active joint(s) {', '.join(kinds)} are not supported; an arm moves "
+                "revolute and prismatic joints (continuous ones when loaded from a URDF file); "
+                "leave these out of the active joints (joints=[...], --joints) to hold them fixed"
             )
         if model.nv == 0:
-            raise URDFError(f"{name or 'model'}: the model has no moving joint")
-        if not model.existFrame(tip):
-            raise FrameNotFound(tip, [f.name for f in model.frames])
+            raise URDFError(f"{label}: the model has no moving joint; an arm needs at least one "
+                            "revolute or prismatic joint")
+        frame_id = _frame_id(model, tip)
         self.model = model
         self.data = model.createData()
         self.name = name or model.name
         self.tip = tip
-        self.frame_id = model.getFrameId(tip)
+        self.frame_id = frame_id
         self.task = parse_task(task)
         self.rows = np.array([TASK_ROWS.index(r) for r in self.task], dtype=int)
         self.visual_model = visual_model
@@ -244,13 +249,13 @@ class Arm:
         J6 = pin.computeFrameJacobian(
             self.model, self.data, self.check_q(q), self.frame_id, pin.LOCAL_WORLD_ALIGNED
         )
-        return J6[self.rows]
+        return J6.reshape(6, self.n)[self.rows]  # one joint: eigenpy gives shape (6,)
 
     def jacobian_unchecked(self, q: np.ndarray) -> np.ndarray:
         """As :meth:`jacobian` without input validation (for control loops), a view of 6 rows."""
         return pin.computeFrameJacobian(
             self.model, self.data, q, self.frame_id, pin.LOCAL_WORLD_ALIGNED
-        )[self.rows]
+        ).reshape(6, self.n)[self.rows]
 
     def jacobian_derivatives(self, q: np.ndarray) -> np.ndarray:
         r"""Partial derivatives of the task Jacobian, ``dJ[j] = ∂J/∂q_j``, shape (n, m, n).
@@ -265,8 +270,8 @@ class Arm:
         model, data = self.model, self.data
         pin.computeJointJacobians(model, data, q)
         p = pin.updateFramePlacement(model, data, self.frame_id).translation.copy()
-        Jw = pin.getFrameJacobian(model, data, self.frame_id, pin.WORLD)
-        Jl = pin.getFrameJacobian(model, data, self.frame_id, pin.LOCAL_WORLD_ALIGNED)
+        Jw = pin.getFrameJacobian(model, data, self.frame_id, pin.WORLD).reshape(6, self.n)
+        Jl = pin.getFrameJacobian(model, data, self.frame_id, pin.LOCAL_WORLD_ALIGNED).reshape(6, self.n)
         n = self.n
         vw, ww = Jw[:3], Jw[3:]
         dJw = np.zeros((n, 6, n))
@@ -303,19 +308,52 @@ def _supporting_joints(model: pin.Model, frame_id: int) -> list[int]:
     return [j for j in model.supports[joint] if j > 0 and model.joints[j].nv > 0]
 
 
+def _joint_kind(joint) -> str:
+    """A readable kind for Pinocchio's joint model names (``JointModelRUBZ`` → continuous)."""
+    short = joint.shortname()
+    for key, kind in (("RUB", "continuous"), ("FreeFlyer", "floating"), ("Planar", "planar"),
+                      ("Spherical", "spherical"), ("Mimic", "mimic"), ("Composite", "composite")):
+        if key in short:
+            return kind
+    return short
+
+
+def _frame_id(model: pin.Model, tip: str) -> int:
+    """Id of the frame named ``tip``; refused when several frames of that name are at different places."""
+    if not model.existFrame(tip):
+        raise FrameNotFound(tip, [f.name for f in model.frames])
+    same = [f for f in model.frames if f.name == tip]
+    first = same[0]
+    if any(f.parentJoint != first.parentJoint or not f.placement.isApprox(first.placement)
+           for f in same[1:]):
+        raise AmbiguousFrame(tip, [f"{f.name} ({f.type.name} on joint "
+                                   f"'{model.names[f.parentJoint]}')" for f in same])
+    return model.getFrameId(tip)
+
+
 def reduce_model(
     model: pin.Model,
     tip: str,
     joints: Sequence[str] | None,
     q_reference: np.ndarray | None = None,
     visual_model: pin.GeometryModel | None = None,
+    label: str = "",
 ) -> tuple[pin.Model, pin.GeometryModel | None]:
-    """Keep ``joints`` (default: the chain to ``tip``) and fix every other joint at ``q_reference``."""
-    if not model.existFrame(tip):
-        raise FrameNotFound(tip, [f.name for f in model.frames])
+    """Keep ``joints`` (default: the chain to ``tip``) and fix every other joint at ``q_reference``.
+
+    ``label`` names the robot in error messages (default: the model's name).
+    """
+    frame_id = _frame_id(model, tip)
     names = [model.names[j] for j in range(1, model.njoints)]
     if joints is None:
-        keep = _supporting_joints(model, model.getFrameId(tip))
+        keep = _supporting_joints(model, frame_id)
+        if not keep:
+            moving = [model.names[j] for j in range(1, model.njoints) if model.joints[j].nv > 0]
+            raise URDFError(
+                f"{label or model.name}: no moving joint between the root and frame '{tip}'"
+                + (f"; the moving joints are {moving}: choose a tip beyond them" if moving else
+                   "; the model has no moving joint at all (every joint is fixed)")
+            )
     else:
         keep = []
         for name in joints:
@@ -334,26 +372,53 @@ def reduce_model(
 
 def _load_urdf(path: Path, package_dirs: Sequence[str] | None) -> tuple[pin.Model, pin.GeometryModel | None]:
     """Model and visual geometry of a URDF file; geometry is dropped with a warning if unreadable."""
-    from .urdf import check_urdf_file
+    model, visual, _ = _load_urdf_file(path, package_dirs)
+    return model, visual
 
-    check_urdf_file(path)
-    try:
-        model = pin.buildModelFromUrdf(str(path))
-    except Exception as err:  # Pinocchio raises RuntimeError / ValueError with C++ messages
-        raise URDFError(f"{path}: Pinocchio could not build a model from it: {err}") from err
+
+def _load_urdf_file(path: Path, package_dirs: Sequence[str] | None):
+    """Model, visual geometry and :class:`~.urdf.URDFDescription` of a URDF file.
+
+    Pinocchio reads the text that passed :func:`~.urdf.read_urdf`, never the file again. Meshes
+    that cannot be found (``package://`` without ``package_dirs``) drop the visual geometry with a
+    warning: the kinematics does not need it.
+    """
+    from .urdf import native_reason, native_stderr, read_urdf
+
+    desc = read_urdf(path)
+    failure = None
+    with native_stderr() as log:
+        try:
+            model = pin.buildModelFromXML(desc.xml)
+        except Exception as err:  # Pinocchio raises ValueError / RuntimeError with C++ messages
+            failure = err
+    if failure is not None:
+        reason = native_reason(log) or str(failure)
+        raise URDFError(f"{path}: Pinocchio could not build a model from it: {reason}") from failure
+    if desc.unlimited:  # continuous joints without <limit>: no velocity or effort limit
+        vel, eff = model.velocityLimit.copy(), model.effortLimit.copy()
+        for joint in desc.unlimited:
+            idx = model.joints[model.getJointId(joint)].idx_v
+            vel[idx] = eff[idx] = np.inf
+        model.velocityLimit, model.effortLimit = vel, eff
     dirs = [str(d) for d in (package_dirs or [])] + [str(path.parent)]
-    try:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", UserWarning)  # Pinocchio's notice about package dirs
-            visual = pin.buildGeomFromUrdf(model, str(path), pin.GeometryType.VISUAL, dirs)
-    except Exception as err:
+    failure = None
+    with native_stderr() as log, warnings.catch_warnings():
+        warnings.simplefilter("ignore", UserWarning)  # Pinocchio's notice about package dirs
+        try:
+            visual = pin.buildGeomFromUrdfString(model, desc.xml, pin.GeometryType.VISUAL,
+                                                 package_dirs=dirs)
+        except Exception as err:
+            failure = err
+    if failure is not None:
         warnings.warn(
-            f"{path}: visual geometry not loaded ({err}); the arm works without it, the replay "
-            "shows no meshes. Pass package_dirs (--package-dir) where package:// meshes live.",
+            f"{path}: visual geometry not loaded ({native_reason(log) or failure}); the arm works "
+            "without it, the replay shows no meshes. Pass package_dirs (--package-dir) where "
+            "package:// meshes live.",
             stacklevel=3,
         )
         visual = None
-    return model, visual
+    return model, visual, desc
 
 
 def load_arm(
@@ -370,7 +435,8 @@ def load_arm(
         robot: ``"planar_3r"``, ``"spatial_4r"``, ``"powercube_3r"``, ``"iiwa"``, an
             example-robot-data name (``"panda"``, ``"ur5"``, ``"xarm7"``, ...) or the path of a
             URDF file.
-        tip: Tip frame (default: the catalog's, else the last frame of the model).
+        tip: Tip frame (default: the catalog's; for a URDF file its only leaf link, else an
+            error listing the leaf links; for example-robot-data the preset or last frame).
         task: ``"planar"``, ``"position"``, ``"pose"`` or a list of rows among ``x y z rx ry rz``.
         joints: Active joint names; the others are fixed (default: the chain to the tip).
         package_dirs: Folders where ``package://`` meshes of a URDF file are found.
@@ -404,9 +470,18 @@ def load_arm(
     if path.suffix.lower() in (".urdf", ".xml") or path.exists():
         if not path.is_file():
             raise URDFError(f"{path}: no such URDF file")
-        model, visual = _load_urdf(path, package_dirs)
-        tip = model.frames[len(model.frames) - 1].name if tip is None else tip
-        model, visual = reduce_model(model, tip, joints, visual_model=visual)
+        from .urdf import default_tip
+
+        model, visual, desc = _load_urdf_file(path, package_dirs)
+        tip = default_tip(desc) if tip is None else tip
+        model, visual = reduce_model(model, tip, joints, visual_model=visual, label=str(path))
+        mimics = [j for j in model.names[1:] if j in desc.mimic]
+        if mimics:
+            raise URDFError(
+                f"{path}: active joint(s) {mimics} follow other joints (<mimic>); Pinocchio would "
+                "move them independently. Leave them out of the active joints (joints=[...], "
+                "--joints) to hold them fixed, or choose a tip frame that does not depend on them"
+            )
         task = "position" if task is None else task
         return Arm(model, tip, task, name=path.stem, visual_model=visual,
                    source=str(path.resolve()), package_dirs=package_dirs or ())

@@ -33,6 +33,17 @@ class FrameNotFound(FaultToleranceError):
         super().__init__(f"frame '{name}' is not in the model; its frames are {list(frames)}")
 
 
+class AmbiguousFrame(FrameNotFound):
+    """Several frames of the model carry the name, at different places (e.g. a link and a joint)."""
+
+    def __init__(self, name: str, frames: Sequence[str]) -> None:
+        FaultToleranceError.__init__(
+            self,
+            f"frame name '{name}' is ambiguous: {len(frames)} frames at different places carry it "
+            f"({', '.join(frames)}); rename the link or the joint in the URDF so the tip is unique",
+        )
+
+
 class URDFError(FaultToleranceError):
     """A URDF file cannot be read or turned into an arm."""
 
@@ -59,5 +70,8 @@ class IntolerableFailure(FaultToleranceError):
         )
 
 
-class InvalidInput(FaultToleranceError):
-    """A numeric input (configuration, rate, time step, path) has the wrong shape or value."""
+class InvalidInput(FaultToleranceError, ValueError):
+    """A numeric input (configuration, rate, time step, path) has the wrong shape or value.
+
+    Also a ``ValueError``, so code that catches NumPy-style value errors catches it too.
+    """

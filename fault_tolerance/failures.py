@@ -57,12 +57,15 @@ class Scenarios:
             return [self.joint_names[i] for i in S]
         return [f"joint index {i}" for i in S]
 
+    def pivots(self, N: np.ndarray) -> np.ndarray:
+        """Smallest eigenvalue of ``N[S, S]`` per scenario, shape (f,); ~0 means intolerable."""
+        if self.singletons:
+            return N[self.columns, self.columns]
+        return np.array([min_pivot(N, S) for S in self.sets])
+
     def check_tolerable(self, N: np.ndarray) -> np.ndarray:
         """Smallest pivot of ``N[S, S]`` per scenario; raise :class:`IntolerableFailure` if one is ~0."""
-        if self.singletons:
-            pivots = N[self.columns, self.columns]
-        else:
-            pivots = np.array([min_pivot(N, S) for S in self.sets])
+        pivots = self.pivots(N)
         k = int(np.argmin(pivots))
         if pivots[k] < PIVOT_TOL:
             raise IntolerableFailure(self.name(self.sets[k]), float(pivots[k]))
@@ -120,6 +123,11 @@ def scenarios(
             raise InvalidScenario("a scenario is empty; each scenario locks at least one joint")
         if len(set(cols)) != len(cols):
             raise InvalidScenario(f"scenario {item!r} names a joint twice")
+        if r is not None and r < 1:
+            raise InvalidScenario(
+                f"scenario {item!r}: the arm has no redundancy for this task (r = n - m = {r}), so "
+                "any locked joint loses it; use a task with fewer rows or an arm with more joints"
+            )
         if r is not None and len(cols) > r:
             raise InvalidScenario(
                 f"scenario {item!r} locks {len(cols)} joints but the arm has only r = {r} degrees "

@@ -27,6 +27,11 @@ DAMPING = 1e-2
 RANK_RTOL = 1e-9
 #: A scenario is intolerable when the smallest eigenvalue of N[S, S] is below this.
 PIVOT_TOL = 1e-9
+#: Pivots of N[S, S] below PIVOT_EPS are damped where near-intolerable scenarios are tolerated (a
+#: simulation after its first step): p → p + PIVOT_DAMPING² (1 − (p/PIVOT_EPS)²), never below
+#: PIVOT_DAMPING², so the reduced rates and JVJA's rates stay finite through a reduced singularity.
+PIVOT_EPS = 1e-4
+PIVOT_DAMPING = 1e-2
 
 
 class Projection(NamedTuple):
@@ -73,6 +78,23 @@ def nullspace_projector(J: np.ndarray) -> np.ndarray:
     return projection(J).N
 
 
+def damped_pivots(p):
+    """Pivots ``p + μ²``, ``μ² = PIVOT_DAMPING² (1 - (p/PIVOT_EPS)²)`` below PIVOT_EPS, else ``p``."""
+    p = np.maximum(np.asarray(p, dtype=float), 0.0)
+    mu2 = np.where(p < PIVOT_EPS, PIVOT_DAMPING**2 * (1.0 - (p / PIVOT_EPS) ** 2), 0.0)
+    return p + mu2
+
+
+def pivot_block(N: np.ndarray, S: Sequence[int], damp: bool = False) -> np.ndarray:
+    """``N[S, S]``; with ``damp`` its smallest eigenvalue raised to :func:`damped_pivots` of itself."""
+    S = list(S)
+    M = N[np.ix_(S, S)]
+    if damp:
+        lam = float(np.linalg.eigvalsh(M)[0])
+        M = M + (float(damped_pivots(lam)) - lam) * np.eye(len(S))
+    return M
+
+
 def min_pivot(N: np.ndarray, S: Sequence[int]) -> float:
     """Smallest eigenvalue of ``N[S, S]``; zero means locking ``S`` loses the task."""
     S = list(S)
@@ -82,19 +104,21 @@ def min_pivot(N: np.ndarray, S: Sequence[int]) -> float:
 
 
 # Eqn. (2) in closed form (G1).
-def reduced_rates(a: np.ndarray, N: np.ndarray, S: Sequence[int]) -> np.ndarray:
+def reduced_rates(a: np.ndarray, N: np.ndarray, S: Sequence[int], damp: bool = False) -> np.ndarray:
     r"""Rates of the reduced robot with joints ``S`` locked, eq. (2) in closed form (G1).
 
     :math:`{}^S\dot q' = a - N_{:,S} N_{S,S}^{-1} a_S`, with :math:`a = J^+\dot x`.
-    Shape (n,); entries in ``S`` are zero. The caller checks ``N[S, S]`` is not singular.
+    Shape (n,); entries in ``S`` are zero. The caller checks ``N[S, S]`` is not singular, or asks
+    for ``damp``: pivots below :data:`PIVOT_EPS` damped (:func:`damped_pivots`), always finite.
     """
     S = list(S)
     if len(S) == 1:
         i = S[0]
-        qd = a - (a[i] / N[i, i]) * N[:, i]
+        piv = float(damped_pivots(N[i, i])) if damp else N[i, i]
+        qd = a - (a[i] / piv) * N[:, i]
         qd[i] = 0.0
         return qd
-    qd = a - N[:, S] @ np.linalg.solve(N[np.ix_(S, S)], a[S])
+    qd = a - N[:, S] @ np.linalg.solve(pivot_block(N, S, damp), a[S])
     qd[S] = 0.0
     return qd
 

@@ -18,6 +18,11 @@ from .linalg import damped_pivots, pivot_block, projection
 
 #: Default MDA gain α [rad² per unit of K per s]: q̇ = J⁺ẋ − α N ∇K.
 MDA_GAIN = 1e-2
+#: Largest norm of MDA's null-space step α N ∇K [rad/s]: a numerical guard, not a speed limit.
+#: Near a singularity of J or of a reduced Jacobian ∇K grows like k³ (k up to indices.RCN_MAX ≈ 1e8,
+#: steps up to ~1e21 rad/s that no longer satisfy J q̇ = ẋ); the step keeps its direction and is
+#: capped here. Ordinary steps are far below it (the paper's cases: < 0.1 rad/s).
+MDA_MAX_STEP = 1e4
 
 
 def _scenarios(J: np.ndarray, lockable, weights, joint_names) -> Scenarios:
@@ -106,13 +111,16 @@ def mda(
     gain: float = MDA_GAIN,
     dJ: np.ndarray | None = None,
     joint_names: Sequence[str] = (),
+    max_step: float | None = MDA_MAX_STEP,
     **_: object,
 ) -> np.ndarray:
     r"""MDA, maximum dexterity: :math:`\dot q = J^+\dot x - \alpha N \nabla_q K(q)`.
 
     ``K = Σ_S k_S²`` is the square-sum reduced condition number (15); its gradient uses the
     Jacobian derivatives of ``arm`` at ``q`` (or ``dJ`` given directly, shape (n, m, n)).
-    Default gain :data:`MDA_GAIN`.
+    Default gain :data:`MDA_GAIN`. The null-space step is capped at ``max_step`` [rad/s]
+    (:data:`MDA_MAX_STEP`; ``None``: no cap), so the rates stay finite and in the null space near
+    singularities; a step that is not finite is dropped.
     """
     if dJ is None:
         if arm is None or q is None:
@@ -122,7 +130,13 @@ def mda(
         raise InvalidInput(f"mda gain must be finite and >= 0, got {gain}")
     proj = projection(J)
     grad = rcn_gradient(J, dJ, lockable, joint_names=joint_names)
-    return proj.Jpinv @ xdot - gain * proj.N @ grad
+    step = gain * proj.N @ grad  # [rad/s], shape (n,)
+    size = float(np.linalg.norm(step))
+    if not np.isfinite(size):  # ∇K overflowed at a reduced singularity: no usable direction
+        step = np.zeros_like(step)
+    elif max_step is not None and size > max_step:
+        step *= max_step / size
+    return proj.Jpinv @ xdot - step
 
 
 RESOLVERS: dict[str, Callable[..., np.ndarray]] = {"lnva": lnva, "jvja": jvja, "mda": mda}

@@ -25,13 +25,14 @@ import numpy as np
 from .arm import Arm
 from .errors import InvalidInput
 from .failures import Scenarios, scenarios
-from .indices import condition_numbers, post_failure_rates, reduced_singular_values
-from .linalg import SIGMA_EPS, projection
+from .indices import RESPONSES, condition_numbers, post_failure_rates, reduced_singular_values
+from .linalg import PIVOT_EPS, SIGMA_EPS, projection
 from .planner import MDA_GAIN, RESOLVERS, resolve
 from .trajectories import TaskPath
 
-#: Reduced robots whose smallest N[S, S] pivot falls below this are flagged near-intolerable.
-NEAR_INTOLERABLE = 1e-4
+#: Reduced robots whose smallest N[S, S] pivot falls below this are flagged near-intolerable; the
+#: pivots are damped there (``linalg.PIVOT_EPS``), so JVJA's rates and λ stay finite.
+NEAR_INTOLERABLE = PIVOT_EPS
 
 
 # -- atomic files ---------------------------------------------------------------------------
@@ -82,8 +83,8 @@ ARRAYS = (
 OPTIONAL_ARRAYS = ("qd_cmd",)
 
 #: Bits of ``Run.flags``.
-FLAG_NEAR_SINGULAR = 1  # σ_min(J) < SIGMA_EPS: least-norm rates damped
-FLAG_NEAR_INTOLERABLE = 2  # a scenario's N[S, S] pivot < NEAR_INTOLERABLE
+FLAG_NEAR_SINGULAR = 1  # σ_min(J) (after a lock: of the remaining columns) < SIGMA_EPS: rates damped
+FLAG_NEAR_INTOLERABLE = 2  # a scenario's N[S, S] pivot < NEAR_INTOLERABLE: pivots damped
 FLAG_LOCKED = 4  # the arm runs with a locked joint
 
 
@@ -238,7 +239,10 @@ def _check_time(dt: float, duration: float) -> int:
         raise InvalidInput(f"dt must be a finite number > 0, got {dt}")
     if not (np.isfinite(duration) and duration > 0):
         raise InvalidInput(f"duration must be a finite number > 0, got {duration}")
-    return int(round(duration / dt))
+    steps = int(round(duration / dt))
+    if steps < 1:
+        raise InvalidInput(f"dt = {dt} s is longer than the run ({duration} s); choose dt <= duration")
+    return steps
 
 
 def simulate(
@@ -300,6 +304,11 @@ def simulate(
             raise InvalidInput(f"lock time must be within [0, {duration}] s, got {lock_time}")
         servo = servo or ServoModel()
     servo = servo or ServoModel(tau=0.0)
+    if response not in RESPONSES:
+        raise InvalidInput(f"response {response!r} is not one of {list(RESPONSES)}")
+    # an intolerable scenario is refused before any work; later, a path through a reduced
+    # singularity gets damped pivots and FLAG_NEAR_INTOLERABLE instead of an exception
+    sc.check_tolerable(projection(arm.jacobian(q)).N)
     f, n, m = sc.f, arm.n, arm.m
     K1 = steps + 1
     rec = {
@@ -322,29 +331,34 @@ def simulate(
         J = arm.jacobian(q)
         x = arm.fk(q)
         x_des = path.x(t)
+        xd_des = np.asarray(path.xdot(t), dtype=float)
+        if not (np.all(np.isfinite(x_des)) and xd_des.shape == (m,) and np.all(np.isfinite(xd_des))):
+            raise InvalidInput(f"the path gives x = {np.asarray(x_des).tolist()}, ẋ = {xd_des.tolist()} "
+                               f"at t = {t:.6g} s; it must give {m} finite numbers each")
         err = arm.task_error(x_des, q)
-        xd_cmd = path.xdot(t) + feedback_gain * err
+        xd_cmd = xd_des + feedback_gain * err
         proj = projection(J)
         flag = FLAG_NEAR_SINGULAR if proj.sigma_min < SIGMA_EPS else 0
         if locked:
             qd_cmd = np.zeros(n)
-            qd_cmd[keep] = projection(J[:, keep]).Jpinv @ xd_cmd
-            flag |= FLAG_LOCKED
+            reduced = projection(J[:, keep])
+            qd_cmd[keep] = reduced.Jpinv @ xd_cmd
+            flag = FLAG_LOCKED | (FLAG_NEAR_SINGULAR if reduced.sigma_min < SIGMA_EPS else 0)
             if lock_jump is None:  # the jump the lock causes: reduced rates minus planned rates
-                planned = resolve(algorithm, J, xd_cmd, sc, response=response, arm=arm, q=q, gain=gain)
+                planned = resolve(algorithm, J, xd_cmd, sc, response=response, arm=arm, q=q,
+                                  gain=gain, tolerate=True)
                 lock_jump = float(np.sum((qd_cmd - planned) ** 2))
         else:
             qd_cmd = resolve(algorithm, J, xd_cmd, sc, weights=None, response=response,
-                             arm=arm, q=q, gain=gain)
+                             arm=arm, q=q, gain=gain, tolerate=True)
         k_s = condition_numbers(reduced_singular_values(J, sc))
         if locked:
             parts = np.zeros(f)  # the failure has happened; no jump is pending
         else:
             # the jump the planned rates would suffer if a scenario happened now, eq. (9)/(10)
-            pivots = sc.check_tolerable(proj.N)
-            if pivots.min() < NEAR_INTOLERABLE:
+            if sc.pivots(proj.N).min() < NEAR_INTOLERABLE:
                 flag |= FLAG_NEAR_INTOLERABLE
-            post = post_failure_rates(proj.Jpinv @ xd_cmd, proj.N, sc, qd_cmd, response)
+            post = post_failure_rates(proj.Jpinv @ xd_cmd, proj.N, sc, qd_cmd, response, damp=True)
             parts = sc.weights * np.einsum("fn,fn->f", post - qd_cmd, post - qd_cmd)
         qd = qd_cmd.copy() if k == 0 else servo.follow(qd, qd_cmd, dt)
         if locked:
