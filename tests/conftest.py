@@ -40,6 +40,7 @@ class RobotCase:
     id: str
     arm: ft.Arm
     lockable: tuple
+    multi_sets: tuple | None = None  # overrides the default multi-joint scenarios
 
     @property
     def n(self) -> int:
@@ -56,6 +57,25 @@ class RobotCase:
         """Degree of redundancy."""
         return self.arm.redundancy
 
+    @property
+    def multi(self) -> list[tuple[int, ...]]:
+        """Multi-joint scenarios the arm allows (|S| <= r): none for r = 1."""
+        if self.multi_sets is not None:
+            return list(self.multi_sets)
+        out: list[tuple[int, ...]] = []
+        if self.r >= 2:
+            out += [(0, 1), (2, 3), (1, 5), (4, 6)]
+        if self.r >= 3:
+            out += [(0, 2, 4), (1, 3, 6)]
+        if self.r >= 4:
+            out += [(0, 2, 4, 6)]
+        return [S for S in out if max(S) < self.n]
+
+    @property
+    def sets(self) -> list[tuple[int, ...]]:
+        """Singletons of the lockable set, then the multi-joint scenarios the arm allows."""
+        return [(i,) for i in self.lockable] + self.multi
+
     def __repr__(self) -> str:
         return f"RobotCase({self.id})"
 
@@ -69,7 +89,7 @@ def well_conditioned(
     min_sigma: float = 1e-2,
     min_pivot_value: float = 1e-2,
 ) -> bool:
-    """True when J(q) is far from singular (no damping) and every scenario is far from intolerable."""
+    """True when J(q) is far from singular (no damping) and no scenario is near-intolerable."""
     J = arm.jacobian(q)
     s = np.linalg.svd(J, compute_uv=False)
     if s[-1] < min_sigma or s[0] / s[-1] > max_cond:
@@ -82,7 +102,7 @@ def well_conditioned(
 def random_well_conditioned_q(
     arm: ft.Arm, rng: np.random.Generator, lockable: Sequence, *, tries: int = 2000, **criteria
 ) -> np.ndarray:
-    """A configuration drawn uniformly within the limits, rejected until :func:`well_conditioned`."""
+    """A configuration uniform within the limits, redrawn until :func:`well_conditioned`."""
     for _ in range(tries):
         q = arm.random_q(rng)
         if well_conditioned(arm, q, lockable, **criteria):
@@ -96,8 +116,8 @@ def random_xdot(rng: np.random.Generator, m: int) -> np.ndarray:
     return v / np.linalg.norm(v)
 
 
-def _case(id_: str, robot: str, lockable: tuple, **kw) -> RobotCase:
-    return RobotCase(id_, ft.load_arm(robot, **kw), lockable)
+def _case(id_: str, robot: str, lockable: tuple, multi_sets=None, **kw) -> RobotCase:
+    return RobotCase(id_, ft.load_arm(robot, **kw), lockable, multi_sets)
 
 
 @pytest.fixture(scope="session")
@@ -130,6 +150,22 @@ def panda_position() -> RobotCase:
     return _case("panda_position", "panda", tuple(range(7)), task="position")
 
 
+@pytest.fixture(scope="session")
+def ur5_position() -> RobotCase:
+    """example-robot-data UR5, position task (r = 3), every joint lockable.
+
+    wrist_3 (index 5) does not move tool0's origin, so a scenario is tolerable only if the joints
+    left unlocked among 0-4 still span the position: the multi-joint scenarios are chosen so.
+    """
+    return _case(
+        "ur5_position",
+        "ur5",
+        tuple(range(6)),
+        task="position",
+        multi_sets=((0, 1), (2, 3), (1, 4), (0, 3, 5)),
+    )
+
+
 @pytest.fixture(scope="session", params=ALL_ROBOTS)
 def robot(request) -> RobotCase:
     """Each of the three shipped arms and the Panda's pose and position tasks."""
@@ -139,6 +175,12 @@ def robot(request) -> RobotCase:
 @pytest.fixture(scope="session", params=R1_ROBOTS)
 def r1_robot(request) -> RobotCase:
     """Each arm with one degree of redundancy (the shipped arms and the Panda's pose task)."""
+    return request.getfixturevalue(request.param)
+
+
+@pytest.fixture(scope="session", params=["panda_position", "ur5_position"])
+def redundant_robot(request) -> RobotCase:
+    """Arms with r > 1: the Panda position task (r = 4) and the UR5 position task (r = 3)."""
     return request.getfixturevalue(request.param)
 
 

@@ -9,11 +9,10 @@ import sys
 import numpy as np
 import pinocchio as pin
 import pytest
+from conftest import ROOT, SHIPPED
 
 import fault_tolerance as ft
 from fault_tolerance.arm import TASK_ROWS
-
-from conftest import ROOT, SHIPPED
 
 H = 1e-6  # central-difference step [rad]
 FD_TOL = 1e-5
@@ -49,7 +48,7 @@ def test_catalog_lists_the_shipped_robots():
 
 @pytest.mark.parametrize("as_path", [False, True])
 def test_urdf_path_loads_the_same_arm_as_the_catalog(as_path, rng):
-    """load_arm('robots/planar_3r.urdf', task='planar') has the catalog arm's joints and Jacobian."""
+    """load_arm('robots/planar_3r.urdf', task='planar') has the catalog arm's joints and J."""
     path = ROOT / "robots" / "planar_3r.urdf"
     arm = ft.load_arm(path if as_path else str(path), task="planar")
     ref = ft.load_arm("planar_3r")
@@ -69,7 +68,7 @@ def test_relative_urdf_path_from_the_repository_root(monkeypatch):
 
 
 def test_panda_has_seven_active_joints_and_fixed_fingers(panda_pose, panda_position):
-    """example-robot-data 'panda': 7 arm joints active, fingers fixed; r = 1 (pose), r = 4 (position)."""
+    """example-robot-data 'panda': 7 active joints, fingers fixed; r = 1 (pose), 4 (position)."""
     for case, m in ((panda_pose, 6), (panda_position, 3)):
         arm = case.arm
         assert arm.joint_names == [f"panda_joint{i}" for i in range(1, 8)]
@@ -204,7 +203,7 @@ def test_import_does_not_import_meshcat_or_matplotlib():
 # -- kinematics -----------------------------------------------------------------------------
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _load_pose_arm(robot: str) -> ft.Arm:
     return ft.load_arm(robot, task="pose")
 
@@ -285,11 +284,11 @@ def test_planar_3r_jacobian_closed_form(planar_3r, rng):
     """The planar 3R with 0.5 m links has the textbook Jacobian −Σ l sin / Σ l cos."""
     q = rng.uniform(-np.pi, np.pi, 3)
     c = np.cumsum(q)
-    l = 0.5
+    link = 0.5
     J = np.array(
         [
-            [-l * np.sin(c[k:]).sum() for k in range(3)],
-            [l * np.cos(c[k:]).sum() for k in range(3)],
+            [-link * np.sin(c[k:]).sum() for k in range(3)],
+            [link * np.cos(c[k:]).sum() for k in range(3)],
         ]
     )
     np.testing.assert_allclose(planar_3r.arm.jacobian(q), J, atol=ATOL)

@@ -1,30 +1,14 @@
-"""linalg: pseudo-inverse, null-space projector, closed-form reduced rates (MATH.md (2), (G1), (G3))."""
+"""linalg: pseudo-inverse, null-space projector, closed-form reduced rates (MATH (2), G1, G3)."""
 
 from __future__ import annotations
 
 import numpy as np
-import pytest
 
 import fault_tolerance as ft
 from fault_tolerance import linalg
 
 ATOL = 1e-10  # algebraic identities
 RTOL = 1e-9
-
-
-def _multi(case):
-    """Multi-joint scenarios allowed on this arm (|S| <= r): pairs for r >= 2, triples for r >= 3."""
-    out = []
-    if case.r >= 2:
-        out += [(0, 1), (2, 3), (1, 5), (4, 6)]
-    if case.r >= 3:
-        out += [(0, 2, 4), (1, 3, 6)]
-    return out
-
-
-def _sets(case):
-    """Singletons of the lockable set, plus the multi-joint scenarios the arm allows."""
-    return [(i,) for i in case.lockable] + _multi(case)
 
 
 def test_pinv_equals_normal_equations_and_numpy(robot, rng, draw_q):
@@ -59,7 +43,7 @@ def test_projection_reports_sigma_min_and_no_damping(robot, rng, draw_q):
 
 def test_reduced_rates_closed_form_equals_explicit_pinv(robot, rng, draw_q, draw_xdot):
     """Eq. (2) in closed form (G1): a − N[:,S] N[S,S]⁻¹ a[S] equals E_S J_S⁺ ẋ (|S| <= r)."""
-    sets = _sets(robot)
+    sets = robot.sets
     for _ in range(5):
         q = draw_q(robot, rng, lockable=sets)
         J = robot.arm.jacobian(q)
@@ -74,7 +58,7 @@ def test_reduced_rates_closed_form_equals_explicit_pinv(robot, rng, draw_q, draw
 
 def test_reduced_rates_zero_at_locked_joints_and_track_task(robot, rng, draw_q, draw_xdot):
     """Reduced rates are exactly 0 at the locked joints and still satisfy J ˢq̇' = ẋ."""
-    sets = _sets(robot)
+    sets = robot.sets
     q = draw_q(robot, rng, lockable=sets)
     J = robot.arm.jacobian(q)
     xd = draw_xdot(rng, robot.m)
@@ -100,7 +84,7 @@ def test_single_joint_formula(robot, rng, draw_q, draw_xdot):
 
 
 def _nearest_solution(J, xd, qd, S):
-    """Explicit reference: the rates nearest to qd with J v = ẋ and v[S] = 0 (min-norm correction)."""
+    """Explicit reference: the rates nearest to qd with J v = ẋ and v[S] = 0."""
     n = J.shape[1]
     E = np.eye(n)[list(S)]
     A = np.vstack([J, E])
@@ -110,7 +94,7 @@ def _nearest_solution(J, xd, qd, S):
 
 def test_continuation_rates_are_nearest_solution(robot, rng, draw_q, draw_xdot):
     """(G3) ˢq̇'' = q̇ − N[:,S] N[S,S]⁻¹ q̇[S] is the solution of the reduced robot nearest to q̇."""
-    sets = _sets(robot)
+    sets = robot.sets
     q = draw_q(robot, rng, lockable=sets)
     J = robot.arm.jacobian(q)
     xd = draw_xdot(rng, robot.m)
@@ -136,8 +120,10 @@ def test_continuation_equals_least_norm_response_when_r_is_1(r1_robot, rng, draw
     qd = a + proj.N @ rng.standard_normal(robot.n)
     for i in robot.lockable:
         np.testing.assert_allclose(
-            linalg.continuation_rates(qd, proj.N, [i]), ft.reduced_rates(a, proj.N, [i]),
-            rtol=RTOL, atol=ATOL,
+            linalg.continuation_rates(qd, proj.N, [i]),
+            ft.reduced_rates(a, proj.N, [i]),
+            rtol=RTOL,
+            atol=ATOL,
         )
 
 
@@ -152,7 +138,7 @@ def test_min_pivot_is_smallest_eigenvalue(panda_position, rng, draw_q):
 
 
 def test_projection_at_a_singularity_is_damped_and_finite(planar_3r):
-    """At the stretched planar 3R (rank 1) J⁺ is damped and finite and N projects onto the 2-D null space."""
+    """At the stretched planar 3R (rank 1) J⁺ is damped and finite; N projects on the 2-D kernel."""
     J = planar_3r.arm.jacobian(np.zeros(3))
     proj = ft.projection(J)
     assert proj.damped
