@@ -1,0 +1,820 @@
+"""Real-time redundancy resolution: one preallocated workspace per arm, one call per control tick.
+
+:class:`Controller` is built once from an :class:`~fault_tolerance.arm.Arm` and a lockable set;
+each call of :meth:`Controller.step` computes the task Jacobian with Pinocchio and the LNVA, JVJA
+or MDA rates, with the numbers of :func:`fault_tolerance.resolve` (tested to 1e-10) at a fraction
+of its cost:
+
+* one Cholesky factorisation of ``G = J Jᵀ`` per step and no pseudo-inverse at all: it gives
+  ``B = G⁻¹J``, from which ``a = J⁺ẋ = Bᵀẋ`` and ``N = I - JᵀB``;
+* JVJA in closed form (G2), ``q̇ = a - N c / W`` with ``cᵢ = wᵢ aᵢ / Nᵢᵢ``: no per-scenario
+  pseudo-inverse; multi-joint scenarios (G1) with one batched solve per scenario size;
+* the reduced condition numbers of all scenarios from one batched ``eigvalsh`` of the stack
+  ``J_S J_Sᵀ`` (MATH.md, eq. 15), and the MDA gradient from one batched ``eigh``;
+* buffers allocated once; pass ``out=`` to get the rates in your own array.
+
+Near singularities nothing is approximated. A step first checks a certificate that no damping is
+needed: with the Cholesky factor ``G = UᵀU``, ``λ_min(G) ≥ 1 / trace(G⁻¹)`` and
+``trace(G⁻¹) = ‖U⁻¹‖_F²``, so ``‖U⁻¹‖_F² ≤ 1 / SIGMA_EPS²`` proves ``σ_min(J) ≥ SIGMA_EPS`` (up
+to the factorisation's backward error, ~1e-16 ‖G‖). The certificate is taken from the factor, not
+from the solution ``B``: for a numerically singular ``G`` a solve can return a moderate ``B``.
+When the certificate fails (or the factorisation does), the step is handed to
+:mod:`fault_tolerance.planner` itself, which damps and drops rank as documented in
+:mod:`fault_tolerance.linalg`; :attr:`Controller.fallbacks` counts those steps. An intolerable
+scenario raises the same :class:`~fault_tolerance.errors.IntolerableFailure` as the planner.
+
+Backends for the LNVA and single-joint JVJA steps (``backend=``):
+
+* ``"numba"``: the whole step after the Jacobian in one compiled kernel, no allocation at all
+  (needs the optional ``numba`` package; compiled once, cached on disk);
+* ``"lapack"``: LAPACK/BLAS through ``scipy.linalg`` (``dsyrk``, ``dposv``, ``dtrtri``,
+  ``dgemm``, ``dgemv``), a handful of calls per step; what remains allocated per step
+  (Pinocchio's Jacobian, the wrappers' small results) is out of reach from Python;
+* ``"numpy"``: the same code with NumPy in place of the LAPACK wrappers (no extra dependency);
+* ``"auto"`` (default): the first of these that is installed.
+
+MDA, the RCN and multi-joint JVJA always use the lapack (or numpy) code.
+
+Example:
+    >>> import numpy as np, fault_tolerance as ft
+    >>> from fault_tolerance.realtime import Controller
+    >>> arm = ft.load_arm("planar_3r")
+    >>> ctrl = Controller(arm, lockable="all")
+    >>> q, xd, qd = np.array([0.3, 1.2, 1.0]), np.array([0.1, 0.0]), np.empty(3)
+    >>> _ = ctrl.step(q, xd, out=qd)
+    >>> bool(np.allclose(qd, ft.resolve("jvja", arm.jacobian(q), xd, lockable="all")))
+    True
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Sequence
+from types import SimpleNamespace
+
+import numpy as np
+import pinocchio as pin
+
+from . import planner
+from .arm import Arm
+from .errors import FaultToleranceError, InvalidInput
+from .failures import Scenarios, scenarios
+from .indices import RCN_MAX
+from .linalg import PIVOT_EPS, PIVOT_TOL, RANK_RTOL, SIGMA_EPS
+
+__all__ = ["BACKENDS", "Controller", "METHODS", "TRACE_MAX", "available_backends"]
+
+#: Methods a :class:`Controller` steps with.
+METHODS = ("lnva", "jvja", "mda")
+#: Backends of the LNVA / JVJA steps, fastest first.
+BACKENDS = ("numba", "lapack", "numpy")
+
+#: ``trace((J Jᵀ)⁻¹)`` up to which ``σ_min(J) ≥ SIGMA_EPS`` is certain, so no damping is needed.
+TRACE_MAX = 1.0 / SIGMA_EPS**2
+
+_LWA = pin.LOCAL_WORLD_ALIGNED
+_WORLD = pin.WORLD
+_INF = float("inf")
+_STEP_ERRORS = (ValueError, TypeError, RuntimeError, AttributeError, IndexError)
+
+
+# -- linear algebra backends -----------------------------------------------------------------
+
+
+def _numpy_linalg() -> SimpleNamespace:
+    """The LAPACK/BLAS calls of a step, with scipy's signatures and results, done by NumPy."""
+
+    def dsyrk(alpha, a, beta=0.0, c=None, trans=0, lower=0, overwrite_c=0):
+        return alpha * (a.T @ a if trans else a @ a.T)
+
+    def dposv(a, b, lower=0, overwrite_a=0):
+        try:
+            U = np.linalg.cholesky(a).T  # upper factor, G = UᵀU; raises unless G is PD
+        except np.linalg.LinAlgError:
+            return a, b, 1
+        return U, np.linalg.solve(a, b), 0
+
+    def dtrtri(c, lower=0, unitdiag=0, overwrite_c=0):
+        return np.triu(np.linalg.inv(c)), 0
+
+    def dgemm(alpha, a, b, beta, c):
+        return beta * c + alpha * (a @ b)
+
+    def dgemv(alpha, a, x, beta=0.0, y=None, offx=0, incx=1, offy=0, incy=1, trans=0,
+              overwrite_y=0):
+        r = alpha * ((a.T if trans else a) @ x)
+        if y is None:
+            return r
+        y *= beta
+        y += r
+        return y
+
+    def ddot(x, y):
+        return float(np.vdot(x, y))
+
+    return SimpleNamespace(name="numpy", dsyrk=dsyrk, dposv=dposv, dtrtri=dtrtri, dgemm=dgemm,
+                           dgemv=dgemv, ddot=ddot)
+
+
+def _lapack_linalg() -> SimpleNamespace:
+    """The same calls from scipy.linalg's LAPACK/BLAS wrappers."""
+    from scipy.linalg import blas, lapack
+
+    return SimpleNamespace(
+        name="lapack", dsyrk=blas.dsyrk, dposv=lapack.dposv, dtrtri=lapack.dtrtri,
+        dgemm=blas.dgemm, dgemv=blas.dgemv, ddot=blas.ddot,
+    )
+
+
+def _lapack_linalg_or_numpy() -> SimpleNamespace:
+    try:
+        return _lapack_linalg()
+    except ImportError:
+        return _numpy_linalg()
+
+
+def available_backends() -> list[str]:
+    """Backends that can run here, fastest first."""
+    out = []
+    for name, module in (("numba", "numba"), ("lapack", "scipy.linalg")):
+        try:
+            __import__(module)
+            out.append(name)
+        except ImportError:
+            pass
+    return out + ["numpy"]
+
+
+# Eqn. (5) in closed form (G2), one step after the Jacobian; compiled by numba.
+def _step_kernel(J, xdot, out, G, B, N, c, fw, params, jvja):  # pragma: no cover - numba
+    """LNVA (``jvja=0``) or single-joint JVJA (``jvja=1``) rates into ``out``; returns a status.
+
+    ``params = [TRACE_MAX, pivot threshold, rank coefficient, alpha]``; ``fw[0]`` is 0 on lockable
+    columns and +inf elsewhere, ``fw[1]`` the weight ``w_i/W`` (or 1 with uniform weights, then
+    ``alpha = -1/f``). Status 0: done; 1: no certificate of ``σ_min ≥ SIGMA_EPS`` (or non-finite
+    numbers), the caller falls back to the planner; 2: a pivot ``N_ii`` is below the threshold
+    (``PIVOT_TOL``: intolerable; ``PIVOT_EPS`` with ``tolerate``: to be damped by the planner).
+    Plain Python (valid without numba, and tested so): only scalar loops.
+    """
+    m, n = J.shape
+    # G = J Jᵀ (lower triangle) and its Cholesky factor L, in place.
+    for i in range(m):
+        for j in range(i + 1):
+            s = 0.0
+            for k in range(n):
+                s += J[i, k] * J[j, k]
+            G[i, j] = s
+    for j in range(m):
+        s = G[j, j]
+        for k in range(j):
+            s -= G[j, k] * G[j, k]
+        if not s > 0.0:
+            return 1
+        s = math.sqrt(s)
+        G[j, j] = s
+        for i in range(j + 1, m):
+            t = G[i, j]
+            for k in range(j):
+                t -= G[i, k] * G[j, k]
+            G[i, j] = t / s
+    # trace(G⁻¹) = ‖L⁻¹‖_F², column by column of L⁻¹ (c as scratch): the certificate.
+    tr = 0.0
+    for j in range(m):
+        for i in range(j, m):
+            t = 1.0 if i == j else 0.0
+            for k in range(j, i):
+                t -= G[i, k] * c[k]
+            c[i] = t / G[i, i]
+            tr += c[i] * c[i]
+    if not tr <= params[0]:
+        return 1
+    if not jvja:
+        # LNVA: y = G⁻¹ ẋ (L z = ẋ, Lᵀ y = z, in c), a = Jᵀ y.
+        for i in range(m):
+            t = xdot[i]
+            for k in range(i):
+                t -= G[i, k] * c[k]
+            c[i] = t / G[i, i]
+        for i in range(m - 1, -1, -1):
+            t = c[i]
+            for k in range(i + 1, m):
+                t -= G[k, i] * c[k]
+            c[i] = t / G[i, i]
+        s = 0.0
+        for col in range(n):
+            t = 0.0
+            for i in range(m):
+                t += J[i, col] * c[i]
+            out[col] = t
+            s += t * t
+        if not s < _INF:
+            return 1
+        return 0
+    # JVJA: B = G⁻¹ J (L Y = J, Lᵀ B = Y); a = Bᵀ ẋ.
+    for col in range(n):
+        for i in range(m):
+            t = J[i, col]
+            for k in range(i):
+                t -= G[i, k] * B[k, col]
+            B[i, col] = t / G[i, i]
+        for i in range(m - 1, -1, -1):
+            t = B[i, col]
+            for k in range(i + 1, m):
+                t -= G[k, i] * B[k, col]
+            B[i, col] = t / G[i, i]
+        s = 0.0
+        for i in range(m):
+            s += B[i, col] * xdot[i]
+        out[col] = s
+    if params[2] > 0.0:  # rank certificate (linalg.RANK_RTOL) for arms without a static bound
+        s = 0.0
+        for i in range(m):
+            for k in range(n):
+                s += J[i, k] * J[i, k]
+        if not params[2] * s * tr < 1.0:
+            return 1
+    # N = I - Jᵀ B; c_i = (w_i / W) a_i / N_ii on lockable columns; out = a + alpha N c.
+    for r in range(n):
+        for col in range(n):
+            s = 0.0
+            for i in range(m):
+                s -= J[i, r] * B[i, col]
+            N[r, col] = s
+        N[r, r] += 1.0
+    for i in range(n):
+        d = N[i, i] + fw[0, i]
+        if d < params[1]:
+            return 2
+        c[i] = out[i] / d * fw[1, i]
+    alpha = params[3]
+    for r in range(n):
+        s = 0.0
+        for col in range(n):
+            s += N[r, col] * c[col]
+        out[r] += alpha * s
+    s = 0.0
+    for i in range(n):
+        s += out[i] * out[i]
+    if not s < _INF:
+        return 1
+    return 0
+
+
+_COMPILED: dict[str, Callable] = {}
+
+
+def _compiled_kernel() -> Callable:
+    """:func:`_step_kernel` compiled by numba (once per process; cached on disk)."""
+    if "step" not in _COMPILED:
+        import numba
+
+        _COMPILED["step"] = numba.njit(cache=True, nogil=True, error_model="numpy")(_step_kernel)
+    return _COMPILED["step"]
+
+
+# -- kinematic Hessian helpers ----------------------------------------------------------------
+
+
+def _hat_tensor() -> np.ndarray:
+    """``hat(x).ravel() = x @ H`` with ``hat(x) y = x × y``, i.e. ``hat(x)[a, b] = -ε_abc x_c``."""
+    eps = np.zeros((3, 3, 3))
+    for a, b, c in ((0, 1, 2), (1, 2, 0), (2, 0, 1)):
+        eps[a, b, c], eps[a, c, b] = 1.0, -1.0
+    return -np.transpose(eps, (2, 0, 1)).reshape(3, 9)
+
+
+_HAT = _hat_tensor()
+
+
+def _ad_tensor() -> np.ndarray:
+    """``ad(V).ravel() = V @ T`` for a spatial velocity ``V = [v; ω]``: ``[[ω̂, v̂], [0, ω̂]]``."""
+    T = np.zeros((6, 6, 6))
+    H = _HAT.reshape(3, 3, 3)  # H[c, a, b] = -ε_abc
+    T[3:, :3, :3] = H
+    T[:3, :3, 3:] = H
+    T[3:, 3:, 3:] = H
+    return T.reshape(6, 36)
+
+
+_AD = _ad_tensor()
+
+
+def _jacobian_norm2_bound(arm: Arm) -> float:
+    """An upper bound of ``‖J‖_F²`` over all configurations, or inf when none is known.
+
+    A revolute column has a unit angular part and a linear part no longer than the distance from
+    its axis to the tip, itself below the sum of the joint and tip offsets.
+    """
+    model = arm.model
+    kinds = [model.joints[j].shortname() for j in range(1, model.njoints)]
+    if not all(k.startswith("JointModelR") for k in kinds):
+        return _INF
+    reach = sum(
+        float(np.linalg.norm(model.jointPlacements[j].translation)) for j in range(1, model.njoints)
+    )
+    reach += float(np.linalg.norm(model.frames[arm.frame_id].placement.translation))
+    return arm.n * (1.0 + reach**2)
+
+
+class Controller:
+    """A preallocated workspace for LNVA / JVJA / MDA steps of one arm and one lockable set.
+
+    Build it once, outside the control loop, then call :attr:`step` (or :attr:`lnva`,
+    :attr:`jvja`, :attr:`mda`, :meth:`rcn`) at every tick. The steps take the active-joint
+    positions ``q`` [rad], shape (n,), and the task velocity ``xdot``, shape (m,), as float64
+    arrays, and return the joint rates [rad/s], shape (n,): written into ``out`` when it is given
+    (a C-contiguous float64 array of shape (n,), returned as is), else in a new array. A wrong
+    shape or a non-finite input raises :class:`~fault_tolerance.errors.InvalidInput`.
+
+    Args:
+        arm: The arm (``ft.load_arm(...)``); the controller keeps its own ``pinocchio.Data``.
+        lockable: Joints that may lock, as for :func:`fault_tolerance.resolve`: ``None`` or
+            ``"all"`` (every joint), column indices or joint names, tuples for multi-joint
+            scenarios (``|S| <= r``), or a :class:`~fault_tolerance.failures.Scenarios`. The
+            catalog's choice for an arm is ``arm.default_lockable``.
+        method: What :attr:`step` computes: ``"jvja"`` (default), ``"lnva"`` or ``"mda"``.
+        weights: One positive weight per scenario (default 1).
+        gain: MDA gain α of ``q̇ = J⁺ẋ - α N ∇K`` (default ``planner.MDA_GAIN``).
+        max_step: Cap of the norm of MDA's null-space step [rad/s] (``planner.MDA_MAX_STEP``).
+        tolerate: As ``planner.jvja(tolerate=True)``: pivots of ``N[S, S]`` below
+            ``linalg.PIVOT_EPS`` are damped (by the planner) instead of raising
+            :class:`~fault_tolerance.errors.IntolerableFailure`; for loops that may cross a
+            singularity of a reduced Jacobian.
+        backend: ``"auto"``, ``"numba"``, ``"lapack"`` or ``"numpy"`` (see the module doc).
+
+    Attributes:
+        step: The step chosen by ``method``: ``step(q, xdot, out=None) -> qd``.
+        lnva: ``lnva(q, xdot, out=None) -> qd``, least-norm rates.
+        jvja: ``jvja(q, xdot, out=None) -> qd``, minimum-jump rates, eq. (5).
+        mda: ``mda(q, xdot, out=None) -> qd``, maximum-dexterity rates.
+        scenarios: The validated failure scenarios.
+        backend: The backend in use.
+        fallbacks: Number of steps handed to :mod:`~fault_tolerance.planner` (near a singularity
+            of ``J``, where the rates are damped).
+    """
+
+    step: Callable[..., np.ndarray]
+    lnva: Callable[..., np.ndarray]
+    jvja: Callable[..., np.ndarray]
+    mda: Callable[..., np.ndarray]
+
+    def __init__(
+        self,
+        arm: Arm,
+        lockable=None,
+        *,
+        method: str = "jvja",
+        weights: Sequence[float] | None = None,
+        gain: float = planner.MDA_GAIN,
+        max_step: float = planner.MDA_MAX_STEP,
+        tolerate: bool = False,
+        backend: str = "auto",
+    ) -> None:
+        if method not in METHODS:
+            raise InvalidInput(f"method '{method}' is not one of {list(METHODS)}")
+        gain = float(gain)
+        if not np.isfinite(gain) or gain < 0:
+            raise InvalidInput(f"mda gain must be finite and >= 0, got {gain}")
+        if arm.redundancy < 1:
+            raise InvalidInput(
+                f"{arm.name} has n = {arm.n} joints for m = {arm.m} task rows; a controller for "
+                "locked-joint failures needs a redundant arm (n > m)"
+            )
+        available = available_backends()
+        if backend == "auto":
+            backend = available[0]
+        elif backend not in BACKENDS:
+            raise InvalidInput(f"backend '{backend}' is not one of {['auto', *BACKENDS]}")
+        elif backend not in available:
+            package = {"numba": "numba", "lapack": "scipy"}[backend]
+            raise InvalidInput(
+                f"backend '{backend}' needs the package {package} (pip install {package}); "
+                f"available here: {available}"
+            )
+        self.arm = arm
+        self.model = arm.model
+        self.data = arm.model.createData()
+        self.frame_id = arm.frame_id
+        self.n, self.m = arm.n, arm.m
+        self.scenarios: Scenarios = scenarios(
+            lockable, arm.n, r=arm.redundancy, weights=weights, joint_names=arm.joint_names
+        )
+        self.method = method
+        self.gain = gain
+        self.max_step = float(max_step)
+        self.tolerate = bool(tolerate)
+        # Pivots N_ii below this leave the fast path: intolerable (raise), or damped by the planner.
+        self._pivot_threshold = PIVOT_EPS if self.tolerate else PIVOT_TOL
+        self.backend = backend
+        self.fallbacks = 0
+        rows = np.asarray(arm.rows)
+        # Row selector of the 6-row frame Jacobian: a slice (a view, no copy) when it can be.
+        contiguous = bool(np.all(np.diff(rows) == 1))
+        self._rows = slice(int(rows[0]), int(rows[0]) + len(rows)) if contiguous else rows
+        # With σ_min ≥ SIGMA_EPS certified, the rank test of linalg.projection (σ > RANK_RTOL σ_max)
+        # can fail only if ‖J‖_F² > SIGMA_EPS² / RANK_RTOL² (= 1e12): arms whose Jacobian is
+        # bounded far below that skip the per-step test (rank coefficient 0).
+        bounded = _jacobian_norm2_bound(arm) * RANK_RTOL**2 * TRACE_MAX < 0.5
+        self._rank_coef = 0.0 if bounded else RANK_RTOL**2
+        self._la = _numpy_linalg() if backend == "numpy" else _lapack_linalg_or_numpy()
+        self._init_scenario_tables()
+        if backend == "numba":
+            self.lnva = self._build_kernel_step(0)
+            self.jvja = self._build_kernel_step(1) if self._singletons else self._build_jvja()
+        else:
+            self.lnva = self._build_lnva()
+            self.jvja = self._build_jvja()
+        self.mda = self._build_mda()
+        self.step = {"lnva": self.lnva, "jvja": self.jvja, "mda": self.mda}[method]
+
+    # -- helpers ----------------------------------------------------------------------------
+    @property
+    def f(self) -> int:
+        """Number of failure scenarios."""
+        return self.scenarios.f
+
+    def __repr__(self) -> str:
+        return (
+            f"Controller({self.arm.name!r}, method={self.method!r}, backend={self.backend!r}, "
+            f"n={self.n}, m={self.m}, scenarios={self.f})"
+        )
+
+    def jacobian(self, q: np.ndarray) -> np.ndarray:
+        """Task Jacobian at ``q``, shape (m, n), computed as in the steps (no input validation)."""
+        return pin.computeFrameJacobian(self.model, self.data, q, self.frame_id, _LWA)[self._rows]
+
+    def _init_scenario_tables(self) -> None:
+        sc, n = self.scenarios, self.n
+        W = float(sc.weights.sum())
+        self._singletons = sc.singletons
+        self._uniform = bool(np.all(sc.weights == sc.weights[0]))
+        self._all_uniform = False
+        # fw[0]: 0 on lockable columns, +inf elsewhere (a_i / (N_ii + inf) = 0 there);
+        # fw[1]: w_i / W on lockable columns (1 everywhere with uniform weights: alpha = -1/f).
+        self._fw = np.zeros((2, n))
+        self._fw[1] = 1.0
+        if sc.singletons:
+            cols = sc.columns
+            self._all_uniform = self._uniform and sorted(cols.tolist()) == list(range(n))
+            self._fw[0] = _INF
+            self._fw[0, cols] = 0.0
+            if not self._uniform:
+                self._fw[1] = 0.0
+                self._fw[1, cols] = sc.weights / W
+        self._alpha = -1.0 / sc.f if (self._uniform and sc.singletons) else -1.0
+        # Scenarios grouped by size for the batched (G1) solve: (columns (k, s), w / W (k,)).
+        self._groups: list[tuple[np.ndarray, np.ndarray]] = []
+        for size in sorted({len(S) for S in sc.sets}):
+            members = [k for k, S in enumerate(sc.sets) if len(S) == size]
+            idx = np.array([sc.sets[k] for k in members], dtype=int)
+            self._groups.append((idx, sc.weights[members] / W))
+        # keep[k, 0, j] = 0 when joint j is locked in scenario k: J_S = J * keep[k] (column mask).
+        keep = np.ones((sc.f, n))
+        for k, S in enumerate(sc.sets):
+            keep[k, list(S)] = 0.0
+        self._keep = keep[:, None, :]
+        self._Jm = np.empty((sc.f, self.m, n))
+        self._stack = np.empty((sc.f, self.m, self.m))
+        j = np.arange(n)
+        self._upper = (j[:, None] < j[None, :]).astype(float)[:, None, :]  # (n, 1, n)
+
+    def _fallback(self, name: str, J: np.ndarray, xdot, out: np.ndarray, q=None) -> np.ndarray:
+        """The step done by :mod:`.planner` itself (damped near singularities), into ``out``."""
+        J = np.array(J, dtype=float)
+        xdot = np.asarray(xdot, dtype=float)
+        if xdot.shape != (self.m,):
+            raise InvalidInput(f"xdot has shape {xdot.shape}; {self.arm.name} needs ({self.m},)")
+        if not (np.all(np.isfinite(J)) and np.all(np.isfinite(xdot))):
+            raise InvalidInput("q and xdot must be finite")
+        self.fallbacks += 1
+        if name == "lnva":
+            qd = planner.lnva(J, xdot)
+        elif name == "jvja":
+            qd = planner.jvja(J, xdot, self.scenarios, tolerate=self.tolerate)
+        else:
+            qd = planner.mda(
+                J, xdot, self.scenarios, dJ=self.jacobian_derivatives(q), gain=self.gain,
+                max_step=self.max_step,
+            )
+        out[...] = qd
+        return out
+
+    def _bad_call(self, err: Exception, q, xdot, out) -> InvalidInput:
+        """An :class:`InvalidInput` that says which argument of a step is wrong."""
+        if not (isinstance(q, np.ndarray) and q.dtype == np.float64):
+            return InvalidInput(f"q must be a float64 NumPy array of shape ({self.n},), got {q!r}")
+        for name, value, shape in (("q", q, (self.n,)), ("xdot", xdot, (self.m,))):
+            if np.shape(value) != shape:
+                return InvalidInput(
+                    f"{name} has shape {np.shape(value)}; {self.arm.name} needs shape {shape}"
+                )
+        if out is not None and not (
+            isinstance(out, np.ndarray) and out.shape == (self.n,) and out.dtype == np.float64
+            and out.flags.c_contiguous
+        ):
+            return InvalidInput(f"out must be a C-contiguous float64 array of shape ({self.n},)")
+        return InvalidInput(f"step failed: {err}")
+
+    # -- LNVA / JVJA with LAPACK calls ----------------------------------------------------------
+    def _build_lnva(self) -> Callable[..., np.ndarray]:
+        model, data, fid, rows = self.model, self.data, self.frame_id, self._rows
+        n, m = self.n, self.m
+        la = self._la
+        dsyrk, dposv, dtrtri, ddot = la.dsyrk, la.dposv, la.dtrtri, la.ddot
+        cfj, dot, empty = pin.computeFrameJacobian, np.dot, np.empty
+        GT = np.zeros((m, m), order="F")  # LAPACK works in its upper triangle; the rest stays 0
+        fallback, bad_call = self._fallback, self._bad_call
+
+        def lnva(q: np.ndarray, xdot: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+            """LNVA, least-norm rates ``q̇ = J⁺ẋ`` (damped near singularities as in linalg)."""
+            if out is None:
+                out = empty(n)
+            try:
+                J = cfj(model, data, q, fid, _LWA)[rows]
+                G = dsyrk(1.0, J.T, 0.0, GT, 1, 0, 1)  # G = J Jᵀ
+                U, y, info = dposv(G, xdot, 0, 1)  # G = UᵀU, y = G⁻¹ẋ: one factorisation
+                if info:
+                    return fallback("lnva", J, xdot, out)
+                Ui, info = dtrtri(U, 0, 0, 1)
+                if info or not ddot(Ui, Ui) <= TRACE_MAX:  # ‖U⁻¹‖² = trace(G⁻¹); NaN fails too
+                    return fallback("lnva", J, xdot, out)
+                dot(y, J, out=out)  # a = J⁺ẋ = Jᵀy
+            except FaultToleranceError:
+                raise
+            except _STEP_ERRORS as err:
+                raise bad_call(err, q, xdot, out) from err
+            if not ddot(out, out) < _INF:
+                return fallback("lnva", J, xdot, out)
+            return out
+
+        return lnva
+
+    def _build_jvja(self) -> Callable[..., np.ndarray]:
+        model, data, fid, rows = self.model, self.data, self.frame_id, self._rows
+        n, m = self.n, self.m
+        la = self._la
+        dsyrk, dposv, dtrtri, dgemm, dgemv, ddot = (
+            la.dsyrk, la.dposv, la.dtrtri, la.dgemm, la.dgemv, la.ddot)
+        cfj, dot, empty, divide, multiply, add = (
+            pin.computeFrameJacobian, np.dot, np.empty, np.divide, np.multiply, np.add)
+        GT = np.zeros((m, m), order="F")
+        eye = np.asfortranarray(np.eye(n))
+        c = np.empty(n)
+        dF = np.empty(n)
+        off, wrel = self._fw[0], self._fw[1]
+        rank_coef, alpha = self._rank_coef, self._alpha
+        fallback, bad_call, general = self._fallback, self._bad_call, self._shift_general
+        tol, tolerate = self._pivot_threshold, self.tolerate
+        check_tolerable = self.scenarios.check_tolerable
+        mode = ("all" if self._all_uniform else "singletons") if self._singletons else "general"
+        weighted = not self._uniform
+
+        def jvja(q: np.ndarray, xdot: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+            """JVJA, minimum square-sum jump rates, eq. (5) in closed form (G1, G2)."""
+            if out is None:
+                out = empty(n)
+            try:
+                J = cfj(model, data, q, fid, _LWA)[rows]
+                G = dsyrk(1.0, J.T, 0.0, GT, 1, 0, 1)
+                U, B, info = dposv(G, J, 0, 1)
+                if info:
+                    return fallback("jvja", J, xdot, out)
+                Ui, info = dtrtri(U, 0, 0, 1)
+                tr = ddot(Ui, Ui)
+                rank_ok = not rank_coef or rank_coef * ddot(J, J) * tr < 1.0
+                if info or not tr <= TRACE_MAX or not rank_ok:  # NaN fails too
+                    return fallback("jvja", J, xdot, out)
+                dot(xdot, B, out=out)  # a
+                N = dgemm(-1.0, J.T, B, 1.0, eye)  # N = I - JᵀG⁻¹J
+                d = N.diagonal()
+                if mode == "all":  # c_i = a_i / N_ii, alpha = -1/f
+                    if min(d.tolist()) < tol:
+                        if not tolerate:
+                            check_tolerable(N)  # raises IntolerableFailure naming the joint
+                        return fallback("jvja", J, xdot, out)  # pivots damped by the planner
+                    divide(out, d, out=c)
+                elif mode == "singletons":
+                    add(d, off, out=dF)
+                    if min(dF.tolist()) < tol:
+                        if not tolerate:
+                            check_tolerable(N)
+                        return fallback("jvja", J, xdot, out)
+                    divide(out, dF, out=c)
+                    if weighted:
+                        multiply(c, wrel, out=c)
+                elif not general(N, out, c):
+                    return fallback("jvja", J, xdot, out)
+                r = dgemv(alpha, N, c, 1.0, out, 0, 1, 0, 1, 0, 1)  # a + alpha N c, in place
+            except FaultToleranceError:
+                raise
+            except _STEP_ERRORS as err:
+                raise bad_call(err, q, xdot, out) from err
+            if r is not out:  # pragma: no cover - BLAS wrote a copy (np.dot accepted out)
+                out[...] = r
+            if not ddot(out, out) < _INF:
+                return fallback("jvja", J, xdot, out)
+            return out
+
+        return jvja
+
+    def _shift_general(self, N: np.ndarray, a: np.ndarray, c: np.ndarray) -> bool:
+        """``c = Σ_S (w_S/W) E_S N[S,S]⁻¹ a[S]`` (G1), one batched solve per scenario size.
+
+        False when a pivot needs the planner's damping (``tolerate``); raises when intolerable.
+        """
+        c[:] = 0.0
+        for idx, wrel in self._groups:
+            NSS = N[idx[:, :, None], idx[:, None, :]]  # (k, s, s)
+            if idx.shape[1] == 1:
+                piv = NSS[:, 0, 0]
+                if piv.min() < self._pivot_threshold:
+                    if self.tolerate:
+                        return False
+                    self.scenarios.check_tolerable(N)
+                np.add.at(c, idx[:, 0], wrel * a[idx[:, 0]] / piv)
+                continue
+            if np.linalg.eigvalsh(NSS)[:, 0].min() < self._pivot_threshold:
+                if self.tolerate:
+                    return False
+                self.scenarios.check_tolerable(N)
+            sol = np.linalg.solve(NSS, a[idx][:, :, None])[:, :, 0]  # (k, s)
+            np.add.at(c, idx.ravel(), (wrel[:, None] * sol).ravel())
+        return True
+
+    # -- LNVA / JVJA in one compiled kernel -----------------------------------------------------
+    def _build_kernel_step(self, jvja: int) -> Callable[..., np.ndarray]:
+        model, data, fid, rows = self.model, self.data, self.frame_id, self._rows
+        n, m = self.n, self.m
+        kernel = _compiled_kernel()
+        cfj, empty, ndarray, f64 = pin.computeFrameJacobian, np.empty, np.ndarray, np.float64
+        G, B, N, c = np.empty((m, m)), np.empty((m, n)), np.empty((n, n)), np.empty(n)
+        fw = self._fw
+        params = np.array([TRACE_MAX, self._pivot_threshold, self._rank_coef, self._alpha])
+        tolerate = self.tolerate
+        shape_n, shape_m = (n,), (m,)
+        fallback, bad_call = self._fallback, self._bad_call
+        check_tolerable = self.scenarios.check_tolerable
+        name = "jvja" if jvja else "lnva"
+        kernel(np.zeros((m, n)), np.zeros(m), np.zeros(n), G, B, N, c, fw, params, jvja)  # compile
+
+        def step(q: np.ndarray, xdot: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+            if out is None:
+                out = empty(n)
+            elif type(out) is not ndarray or out.shape != shape_n or out.dtype != f64:
+                raise bad_call(ValueError("out"), q, xdot, out)
+            if type(xdot) is not ndarray or xdot.shape != shape_m or xdot.dtype != f64:
+                xdot = np.asarray(xdot, dtype=float)
+                if xdot.shape != shape_m:
+                    raise bad_call(ValueError("xdot"), q, xdot, out)
+            try:
+                J = cfj(model, data, q, fid, _LWA)[rows]
+                status = kernel(J, xdot, out, G, B, N, c, fw, params, jvja)
+            except FaultToleranceError:
+                raise
+            except _STEP_ERRORS as err:
+                raise bad_call(err, q, xdot, out) from err
+            if status:
+                if status == 2 and not tolerate:
+                    check_tolerable(N)  # raises IntolerableFailure naming the joint
+                return fallback(name, J, xdot, out)
+            return out
+
+        step.__name__ = name
+        step.__doc__ = (
+            "JVJA, minimum square-sum jump rates, eq. (5) in closed form (G2); compiled."
+            if jvja else "LNVA, least-norm rates ``q̇ = J⁺ẋ``; compiled."
+        )
+        return step
+
+    # -- indices: RCN and its gradient --------------------------------------------------------
+    def _reduced_gram(self, J: np.ndarray) -> np.ndarray:
+        """The stack ``J_S J_Sᵀ`` of all scenarios, shape (f, m, m), in the workspace."""
+        np.multiply(J, self._keep, out=self._Jm)
+        np.matmul(self._Jm, J.T, out=self._stack)
+        return self._stack
+
+    def rcn(self, q: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+        """Reduced condition numbers ``k_S`` of all scenarios at ``q``, eq. (15), shape (f,).
+
+        One batched ``eigvalsh`` of the stack ``J_S J_Sᵀ``; capped at ``RCN_MAX`` as
+        :func:`fault_tolerance.rcn`.
+        """
+        J = pin.computeFrameJacobian(self.model, self.data, q, self.frame_id, _LWA)[self._rows]
+        return self.rcn_of(J, out)
+
+    def rcn_of(self, J: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+        """As :meth:`rcn`, for a given task Jacobian ``J`` of shape (m, n)."""
+        if out is None:
+            out = np.empty(self.f)
+        sigma = np.linalg.eigvalsh(self._reduced_gram(J))  # (f, m) ascending, σ²
+        np.maximum(sigma, 0.0, out=sigma)
+        np.sqrt(sigma, out=sigma)
+        smax, smin = sigma[:, -1], sigma[:, 0]
+        np.maximum(smin, smax / RCN_MAX, out=smin)
+        if min(smin.tolist()) > 0.0:
+            np.divide(smax, smin, out=out)
+        else:  # some reduced Jacobian is zero: σ_max = 0
+            out[...] = np.where(smax > 0, smax / np.where(smin > 0, smin, 1.0), RCN_MAX)
+        np.minimum(out, RCN_MAX, out=out)
+        return out
+
+    def jacobian_derivatives(self, q: np.ndarray) -> np.ndarray:
+        """``dJ[j] = ∂J/∂q_j``, shape (n, m, n), as :meth:`Arm.jacobian_derivatives`, vectorised."""
+        model, data, fid = self.model, self.data, self.frame_id
+        pin.computeJointJacobians(model, data, q)
+        Jw = pin.getFrameJacobian(model, data, fid, _WORLD)
+        Jl = pin.getFrameJacobian(model, data, fid, _LWA)  # also updates data.oMf[fid]
+        return self._djac(Jw, Jl, data.oMf[fid].translation)
+
+    def _djac(self, Jw: np.ndarray, Jl: np.ndarray, p: np.ndarray) -> np.ndarray:
+        r"""Kinematic Hessian of the tip frame from its WORLD and LOCAL_WORLD_ALIGNED Jacobians.
+
+        WORLD columns move as :math:`\partial J_k/\partial q_j = \mathrm{ad}(J_j)\, J_k` (j < k);
+        the linear rows of ``LOCAL_WORLD_ALIGNED`` add :math:`\partial\omega_k/\partial q_j
+        \times p + \omega_k \times \partial p/\partial q_j`.
+        """
+        n = self.n
+        ad = np.dot(Jw.T, _AD).reshape(n, 6, 6)
+        dJ = np.matmul(ad, Jw)  # (n, 6, n): ad(J_j) J_k
+        dJ *= self._upper  # zero unless joint j comes before joint k
+        hat_p = np.dot(p, _HAT).reshape(3, 3)
+        hat_dp = np.dot(Jl[:3].T, _HAT).reshape(n, 3, 3)  # ∂p/∂q_j: linear part of LWA column j
+        dJ[:, :3, :] -= np.matmul(hat_p, dJ[:, 3:, :])  # + ∂ω_k/∂q_j × p
+        dJ[:, :3, :] -= np.matmul(hat_dp, Jw[3:])  # + ω_k × ∂p/∂q_j
+        return dJ[:, self._rows, :]
+
+    def rcn_gradient(self, J: np.ndarray, dJ: np.ndarray) -> np.ndarray:
+        r"""Gradient of ``K = Σ_S k_S²``, shape (n,), as :func:`fault_tolerance.rcn_gradient`.
+
+        One batched ``eigh`` of ``J_S J_Sᵀ`` gives σ² and the left singular vectors ``u``; the
+        right ones are ``v = J_Sᵀu/σ``, and :math:`\partial\sigma/\partial q_j = u^T \partial_j
+        J_S\, v`.
+        """
+        n, m = self.n, self.m
+        lam, U = np.linalg.eigh(self._reduced_gram(J))
+        s = np.sqrt(np.maximum(lam, 0.0))
+        smax, sminr = s[:, -1], s[:, 0]
+        smin = np.maximum(sminr, smax / RCN_MAX)
+        Ue = U[:, :, [m - 1, 0]]  # (f, m, 2): u of σ_max and of σ_min
+        V = np.matmul(self._Jm.transpose(0, 2, 1), Ue)  # (f, n, 2): J_Sᵀ u
+        V /= np.maximum(np.stack([smax, sminr], axis=1), 1e-300)[:, None, :]
+        X = np.matmul(dJ.reshape(n * m, n), V).reshape(-1, n, m, 2)  # (∂J/∂q_j) v
+        D = np.einsum("fjms,fms->fjs", X, Ue)  # (f, n, 2): ∂σ_max/∂q_j, ∂σ_min/∂q_j
+        k = smax / smin
+        return (2.0 * k / smin) @ D[:, :, 0] - (2.0 * k * smax / smin**2) @ D[:, :, 1]
+
+    # -- MDA --------------------------------------------------------------------------------
+    def _build_mda(self) -> Callable[..., np.ndarray]:
+        model, data, fid, rows = self.model, self.data, self.frame_id, self._rows
+        n, m = self.n, self.m
+        la = self._la
+        dsyrk, dposv, dtrtri, dgemm, dgemv, ddot = (
+            la.dsyrk, la.dposv, la.dtrtri, la.dgemm, la.dgemv, la.ddot)
+        GT = np.zeros((m, m), order="F")
+        eye = np.asfortranarray(np.eye(n))
+        fallback, bad_call = self._fallback, self._bad_call
+        djac, grad_of = self._djac, self.rcn_gradient
+        rank_coef = self._rank_coef
+        gain, max_step = self.gain, self.max_step
+        oMf = data.oMf
+
+        def mda(q: np.ndarray, xdot: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+            """MDA, maximum-dexterity rates ``q̇ = J⁺ẋ - α N ∇K``."""
+            if out is None:
+                out = np.empty(n)
+            try:
+                pin.computeJointJacobians(model, data, q)
+                Jw = pin.getFrameJacobian(model, data, fid, _WORLD)
+                Jl = pin.getFrameJacobian(model, data, fid, _LWA)
+                J = Jl[rows]
+                G = dsyrk(1.0, J.T, 0.0, GT, 1, 0, 1)
+                U, B, info = dposv(G, J, 0, 1)
+                if info:
+                    return fallback("mda", J, xdot, out, q)
+                Ui, info = dtrtri(U, 0, 0, 1)
+                tr = ddot(Ui, Ui)
+                rank_ok = not rank_coef or rank_coef * ddot(J, J) * tr < 1.0
+                if info or not tr <= TRACE_MAX or not rank_ok:  # NaN fails too
+                    return fallback("mda", J, xdot, out, q)
+                np.dot(xdot, B, out=out)
+                N = dgemm(-1.0, J.T, B, 1.0, eye)
+                grad = grad_of(J, djac(Jw, Jl, oMf[fid].translation))
+                step = dgemv(gain, N, grad)  # α N ∇K [rad/s], capped as planner.mda does
+                size = math.sqrt(ddot(step, step))
+                if not size < _INF:  # ∇K overflowed at a reduced singularity: no direction
+                    step = 0.0
+                elif size > max_step:
+                    step *= max_step / size
+                r = out
+                np.subtract(out, step, out=out)
+            except FaultToleranceError:
+                raise
+            except _STEP_ERRORS as err:
+                raise bad_call(err, q, xdot, out) from err
+            if r is not out:  # pragma: no cover
+                out[...] = r
+            if not ddot(out, out) < _INF:
+                return fallback("mda", J, xdot, out, q)
+            return out
+
+        return mda

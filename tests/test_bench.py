@@ -1,0 +1,131 @@
+"""The benchmark runs, writes its JSON atomically, compares two runs and refuses bad input.
+
+No timing is asserted here: timing lives in the benchmark itself.
+"""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+import fault_tolerance as ft
+from fault_tolerance import bench
+from fault_tolerance.planner import jvja_explicit
+
+ROOT = __import__("pathlib").Path(__file__).resolve().parents[1]
+TINY = ["--robots", "planar_3r", "--steps", "4", "--warmup", "1"]
+
+
+@pytest.fixture(scope="module")
+def tiny_run(tmp_path_factory):
+    """One tiny benchmark run of the planar 3R, written to JSON (shared by the tests below)."""
+    path = tmp_path_factory.mktemp("bench") / "a.json"
+    assert bench.main([*TINY, "--json", str(path)]) == 0
+    return path, json.loads(path.read_text())
+
+
+def test_json_structure(tiny_run):
+    """The JSON holds the machine, the settings, every row's median and p99, and the targets."""
+    path, data = tiny_run
+    assert data["schema"] == bench.SCHEMA
+    machine = data["machine"]
+    for key in ("cpu", "cores", "numpy", "pinocchio", "python", "blas_threads", "env", "loadavg"):
+        assert key in machine
+    assert isinstance(machine["env"], dict)
+    assert data["settings"]["steps"] == 4
+    res = data["results"]["planar_3r"]
+    assert (res["n"], res["m"], res["r"]) == (3, 2, 1)
+    assert res["lockable"] == [["joint1"], ["joint2"], ["joint3"]]
+    for op in ("jacobian", "lnva", "jvja", "rcn", "mda", "jvja_explicit", "lnva_resolve",
+               "jvja_resolve", "mda_resolve", "rcn_resolve"):
+        st = res["ops"][op]
+        assert 0 < st["min_us"] <= st["median_us"] <= st["p99_us"] <= st["max_us"]
+        assert st["steps"] >= 1 and st["description"]
+    for name, diff in res["max_rel_diff_vs_jvja"].items():  # relative to the rates' size
+        assert diff < (1e-4 if name == "jvja_slsqp" else 1e-8), name
+    names = {t["name"] for t in data["targets"]}
+    assert {"jvja_over_lnva", "explicit_over_jvja", "jvja_p99_us"} <= names
+    for t in data["targets"]:
+        assert t["pass"] in (True, False, None) and np.isfinite(t["value"])
+    # written atomically: no temporary file is left beside it
+    assert [p.name for p in path.parent.iterdir()] == ["a.json"]
+
+
+def test_table_and_targets_are_printed(tmp_path, capsys):
+    """The printed report has the table (arm, operation, median, p99) and PASS/FAIL lines."""
+    assert bench.main([*TINY, "--robots", "spatial_4r"]) == 0
+    out = capsys.readouterr().out
+    assert "median µs" in out and "p99 µs" in out
+    assert "spatial_4r      jvja " in out
+    assert "JVJA step / LNVA step" in out
+    assert ("PASS" in out) or ("FAIL" in out)
+
+
+def test_compare(tiny_run, tmp_path, capsys):
+    """--compare prints, for every row of both runs, the ratio B/A of medians and of p99."""
+    path, data = tiny_run
+    slower = json.loads(json.dumps(data))
+    for st in slower["results"]["planar_3r"]["ops"].values():
+        st["median_us"] *= 2.0
+        st["p99_us"] *= 4.0
+    b = tmp_path / "b.json"
+    bench.write_json(b, slower)
+    capsys.readouterr()
+    assert bench.main(["--compare", str(path), str(b)]) == 0
+    out = capsys.readouterr().out
+    jvja_line = next(line for line in out.splitlines() if line.startswith("planar_3r       jvja "))
+    assert "2.00" in jvja_line and "4.00" in jvja_line
+    rows = bench.compare(data, slower)
+    assert len(rows) == len(data["results"]["planar_3r"]["ops"])
+    assert all(r["median_ratio"] == pytest.approx(2.0) for r in rows)
+
+
+def test_bad_input_exits_2(tmp_path, capsys):
+    """Unknown arms, unreadable or foreign JSON and bad counts exit 2 with a one-line message."""
+    assert bench.main(["--robots", "nope"]) == 2
+    assert "unknown benchmark arm" in capsys.readouterr().err
+    assert bench.main(["--compare", str(tmp_path / "missing.json"), str(tmp_path / "x.json")]) == 2
+    assert "cannot read" in capsys.readouterr().err
+    foreign = tmp_path / "foreign.json"
+    foreign.write_text('{"hello": 1}')
+    assert bench.main(["--compare", str(foreign), str(foreign)]) == 2
+    assert "not a benchmark file" in capsys.readouterr().err
+    assert bench.main(["--robots", "planar_3r", "--steps", "0"]) == 2
+    assert "--steps" in capsys.readouterr().err
+
+
+def test_generic_solver_routes_match_closed_form(planar_3r, draw_q, draw_xdot, rng):
+    """The QP and SLSQP routes solve the same minimisation (3)-(4) as the closed form."""
+    arm = planar_3r.arm
+    sc = ft.scenarios("all", arm.n, r=arm.redundancy)
+    q, xd = draw_q(planar_3r, rng), draw_xdot(rng, arm.m)
+    J = arm.jacobian(q)
+    ref = jvja_explicit(J, xd, sc)
+    if bench._installed("quadprog"):
+        np.testing.assert_allclose(bench.jvja_qp(J, xd, sc), ref, rtol=0, atol=1e-10)
+    if bench._installed("scipy"):
+        np.testing.assert_allclose(bench.jvja_slsqp(J, xd, sc), ref, rtol=0, atol=1e-5)
+
+
+def test_script_runs(tmp_path):
+    """scripts/benchmark.py runs in a subprocess and writes its JSON."""
+    out = tmp_path / "s.json"
+    proc = subprocess.run(
+        [sys.executable, str(ROOT / "scripts" / "benchmark.py"), *TINY, "--json", str(out)],
+        capture_output=True, text=True, timeout=300,
+    )
+    assert proc.returncode == 0, proc.stderr
+    assert json.loads(out.read_text())["results"]["planar_3r"]["ops"]["jvja"]["steps"] == 4
+
+
+def test_cli_subcommand_help():
+    """`fault-tolerance bench --help` lists the benchmark's options."""
+    from fault_tolerance.cli import main
+
+    with pytest.raises(SystemExit) as exc:
+        main(["bench", "--help"])
+    assert exc.value.code == 0
