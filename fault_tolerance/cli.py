@@ -9,6 +9,7 @@ from __future__ import annotations
 import argparse
 import sys
 import textwrap
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -124,6 +125,10 @@ def start_and_path(args, arm):
     from .trajectories import CirclePath, load_csv
 
     entry = catalog().get(arm.name) if arm.source == arm.name else None
+    if not (np.isfinite(args.dt) and args.dt > 0):
+        raise InvalidInput(f"--dt must be a finite number > 0 [s], got {args.dt}")
+    if args.duration is not None and not (np.isfinite(args.duration) and args.duration > 0):
+        raise InvalidInput(f"--duration must be a finite number > 0 [s], got {args.duration}")
     lockable = lockable_of(args, arm)
     q0 = None if args.q0 is None else arm.check_q(_floats(args.q0, "--q0"))
     if args.csv:
@@ -208,7 +213,7 @@ def cmd_inspect(args) -> int:
 
 def cmd_simulate(args) -> int:
     """One task run per algorithm; files into --out."""
-    from .simulation import simulate
+    from .simulation import output_folder, simulate
 
     arm = load_robot(args)
     q0, path, lockable = start_and_path(args, arm)
@@ -218,10 +223,10 @@ def cmd_simulate(args) -> int:
     bad = [a for a in algs if a not in RESOLVERS]
     if bad or not algs:
         raise InvalidInput(f"--algorithms {args.algorithms!r}: choose among {sorted(RESOLVERS)}")
-    out = Path(args.out) if args.out else None
+    out = output_folder(args.out) if args.out else None
     steps = int(round((args.duration or path.duration) / args.dt)) + 1
     bar = _bar(steps * len(algs), not args.no_progress, "simulate")
-    runs = {}
+    runs, saved = {}, []
     try:
         for alg in algs:
             runs[alg] = simulate(
@@ -231,10 +236,12 @@ def cmd_simulate(args) -> int:
             )
             if out:
                 runs[alg].save(out / alg)
+                saved.append(alg)
     except KeyboardInterrupt:
         if bar:
             bar.close()
-        print(f"interrupted: finished {list(runs)}, not finished {[a for a in algs if a not in runs]}"
+        done = saved if out else list(runs)
+        print(f"interrupted: finished {done}, not finished {[a for a in algs if a not in done]}"
               + (f"; finished runs are in {out}" if out else ""), file=sys.stderr)
         return 130
     if bar:
@@ -264,12 +271,14 @@ def _print_table(runs) -> None:
 
 def cmd_lock(args) -> int:
     """A run in which a joint locks (at a time, or at the largest / smallest jump)."""
-    from .simulation import ServoModel, simulate
+    from .simulation import ServoModel, output_folder, simulate
 
     arm = load_robot(args)
     q0, path, lockable = start_and_path(args, arm)
     joint = arm.joint_names[arm.joint_index(args.joint)]
     servo = ServoModel(tau=args.tau, accel_limit=args.accel_limit)
+    if args.out:
+        output_folder(args.out)  # refuse a bad --out before the runs
     feedback = 10.0 if args.feedback is None else args.feedback
     gain = {} if args.gain is None else {"gain": args.gain}
     duration = args.duration or path.duration
@@ -434,12 +443,15 @@ def main(argv: list[str] | None = None) -> int:
     if not getattr(args, "func", None):
         parser.print_help()
         return 0
+    shown = warnings.showwarning
+    if not args.debug:  # a warning is one line on stderr too
+        warnings.showwarning = _warning_line
     try:
         return int(args.func(args) or 0)
     except FaultToleranceError as err:
         if args.debug:
             raise
-        print(f"fault-tolerance {args.command}: error: {err}", file=sys.stderr)
+        print(f"fault-tolerance {args.command}: error: {_one_line(err)}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print("interrupted", file=sys.stderr)
@@ -447,9 +459,19 @@ def main(argv: list[str] | None = None) -> int:
     except Exception as err:  # noqa: BLE001 - the last line of defence
         if args.debug:
             raise
-        print(f"fault-tolerance {args.command}: unexpected error: {type(err).__name__}: {err} "
-              "(run with --debug for the traceback)", file=sys.stderr)
+        print(f"fault-tolerance {args.command}: unexpected error: {type(err).__name__}: "
+              f"{_one_line(err)} (run with --debug for the traceback)", file=sys.stderr)
         return 1
+    finally:
+        warnings.showwarning = shown
+
+
+def _one_line(message) -> str:
+    return " ".join(str(message).split("\n"))
+
+
+def _warning_line(message, category, filename, lineno, file=None, line=None) -> None:
+    print(f"fault-tolerance: warning: {_one_line(message)}", file=sys.stderr)
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -18,7 +18,7 @@ from .arm import Arm, load_arm
 from .indices import jump_reduction
 from .linalg import projection
 from .posture import initial_posture
-from .simulation import Run, ServoModel, simulate, write_atomic
+from .simulation import Run, ServoModel, output_folder, simulate, write_atomic
 from .trajectories import CirclePath
 
 ALGORITHMS = ("lnva", "jvja", "mda")
@@ -256,20 +256,20 @@ def reproduce(
         progress: Show a progress bar.
         html: Also write a self-contained meshcat replay (``replay.html``) for each JVJA run.
 
-    On Ctrl-C the cases already finished stay on disk, ``summary.partial.json`` lists what was
-    and was not finished, an existing ``summary.json`` is left as it was, and KeyboardInterrupt
-    is raised again.
+    On Ctrl-C (or an error) the cases already finished stay on disk, ``summary.partial.json``
+    lists what was and was not finished and what stopped the run, an existing ``summary.json`` is
+    left as it was, and the exception is raised again.
     """
     from . import plots
 
-    out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
     keys = list(CASES) + ["experiment"] if not cases else list(cases)
     unknown = [k for k in keys if k not in CASES and k != "experiment"]
-    if unknown:
+    if unknown or not keys:
         from .errors import InvalidInput
 
-        raise InvalidInput(f"unknown case(s) {unknown}; choose among {list(CASES) + ['experiment']}")
+        raise InvalidInput(f"unknown case(s) {unknown or keys}; choose among "
+                           f"{list(CASES) + ['experiment']}")
+    out = output_folder(out)
     case_T = 0.25 if quick else None
     exp_T = 3.0 if quick else None
     total = sum(3 * int(round((case_T or CASES[k].duration) / 1e-3)) + 3 for k in keys if k in CASES)
@@ -306,10 +306,16 @@ def reproduce(
                     _html(res["runs"]["jvja"], res["arm"], out / "runs" / key / "jvja")
             done.append(key)
         summary["checks"] = {"eq8": eq8_check(case_T), "step_time_us": step_timing()}
-    except KeyboardInterrupt:
+    except BaseException as err:  # Ctrl-C or a failure: keep what is done, say what is not
         bar.close()
-        partial = {"finished": done, "unfinished": [k for k in keys if k not in done], **summary}
-        write_atomic(out / "summary.partial.json", json.dumps(partial, indent=2) + "\n")
+        partial = {
+            "stopped_by": "interrupted (Ctrl-C)" if isinstance(err, KeyboardInterrupt)
+            else f"{type(err).__name__}: {err}",
+            "finished": done,
+            "unfinished": [k for k in keys if k not in done] + ["checks"],
+            **summary,
+        }
+        write_atomic(out / "summary.partial.json", json.dumps(partial, indent=2, default=str) + "\n")
         raise
     bar.close()
     summary["meta"] = {

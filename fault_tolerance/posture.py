@@ -27,6 +27,8 @@ from .linalg import projection
 
 #: Largest reduced condition number k_S accepted along a planned run (step iii).
 RCN_THRESHOLD = 100.0
+#: Largest task error [m or rad] of the start posture at x0 (else x0 counts as out of reach).
+POSTURE_TOL = 1e-8
 
 
 def _wrappable(arm: Arm) -> np.ndarray:
@@ -175,12 +177,20 @@ def initial_posture(
     sols = [s for s in sols if np.all(_wrappable(arm) | ((s >= arm.lower) & (s <= arm.upper)))]
     if not sols:
         raise InvalidInput(
-            f"x0 = {x0.tolist()} is out of reach of {arm.name} (no inverse-kinematics solution "
-            f"from {len(starts)} seeds within the joint limits)"
+            f"x0 = {x0.tolist()} is out of reach of {arm.name}, or on the edge of its workspace (no "
+            f"inverse-kinematics solution from {len(starts)} seeds within the joint limits)"
         )
     if arm.redundancy == 1:
-        return _posture_on_curves(arm, x0, sols, sc, step)
-    return _posture_by_descent(arm, x0, sols, sc)
+        posture = _posture_on_curves(arm, x0, sols, sc, step)
+    else:
+        posture = _posture_by_descent(arm, x0, sols, sc)
+    miss = float(np.linalg.norm(arm.task_error(x0, posture.q)))
+    if miss > POSTURE_TOL:  # only singular configurations reach x0: the search drifted off it
+        raise InvalidInput(
+            f"x0 = {x0.tolist()} is at the edge of {arm.name}'s workspace: only singular "
+            f"configurations reach it and the posture search ends {miss:.2g} away; move x0 inward"
+        )
+    return posture
 
 
 def _posture_on_curves(arm, x0, sols, sc, step) -> Posture:

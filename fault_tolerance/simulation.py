@@ -63,6 +63,20 @@ def write_atomic(path: str | Path, data: bytes | str) -> Path:
     return path
 
 
+def output_folder(path: str | Path) -> Path:
+    """``path`` as a folder that exists and can be written to, or :class:`InvalidInput` saying why."""
+    path = Path(path)
+    if path.exists() and not path.is_dir():
+        raise InvalidInput(f"{path}: exists and is not a folder; choose a folder for the output")
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+    except OSError as err:
+        raise InvalidInput(f"{path}: cannot create the output folder ({err.strerror})") from None
+    if not os.access(path, os.W_OK | os.X_OK):
+        raise InvalidInput(f"{path}: the output folder is not writable")
+    return path
+
+
 def _json(obj) -> str:
     return json.dumps(obj, indent=2, default=_to_builtin) + "\n"
 
@@ -149,8 +163,7 @@ class Run:
     # -- files -------------------------------------------------------------------------------
     def save(self, folder: str | Path) -> Path:
         """Write ``run.npz``, ``run.csv`` and ``summary.json`` into ``folder`` (atomically)."""
-        folder = Path(folder)
-        folder.mkdir(parents=True, exist_ok=True)
+        folder = output_folder(folder)
         arrays = {k: getattr(self, k) for k in ARRAYS}
         arrays.update({k: getattr(self, k) for k in OPTIONAL_ARRAYS if getattr(self, k) is not None})
         buf = io.BytesIO()

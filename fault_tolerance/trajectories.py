@@ -62,6 +62,11 @@ class CirclePath(TaskPath):
         object.__setattr__(self, "x0", np.asarray(self.x0, dtype=float))
         if self.duration <= 0 or not np.isfinite(self.duration):
             raise InvalidInput(f"duration must be > 0, got {self.duration}")
+        if self.x0.ndim != 1 or not np.all(np.isfinite(self.x0)):
+            raise InvalidInput(f"x0 must be a vector of finite numbers, got {self.x0.tolist()}")
+        for key in ("radius", "omega", "sign"):
+            if not np.isfinite(getattr(self, key)):
+                raise InvalidInput(f"circle {key} must be a finite number, got {getattr(self, key)}")
         i, j = self.rows
         if not (0 <= i < len(self.x0) and 0 <= j < len(self.x0)) or i == j:
             raise InvalidInput(f"rows {self.rows} must be two distinct rows of x0 (m={len(self.x0)})")
@@ -192,7 +197,29 @@ def load_csv(path: str | Path, rows: Sequence[str] | None = None) -> SampledPath
     path = Path(path)
     if not path.is_file():
         raise InvalidInput(f"{path}: no such CSV file")
-    with path.open(newline="") as fh:
+    try:
+        header, data = _read_csv_rows(path)
+    except UnicodeDecodeError as err:
+        raise InvalidInput(f"{path}: not UTF-8 text (byte {err.start}); a CSV path must be UTF-8") from None
+    except csv.Error as err:
+        raise InvalidInput(f"{path}: not a readable CSV file ({err})") from None
+    coords = list(rows) if rows else [h for h in header[1:] if not h.startswith("v")]
+    missing = [c for c in coords if c not in header]
+    if missing or not coords:
+        raise InvalidInput(f"{path}: columns {missing or coords} not found in header {header}")
+    vel = [f"v{c}" for c in coords]
+    has_v = all(v in header for v in vel)
+    arr = np.array([row for _, row in data])
+    if len(arr) < 2:
+        raise InvalidInput(f"{path}: needs at least 2 data rows, found {len(arr)}")
+    idx = [header.index(c) for c in coords]
+    v = arr[:, [header.index(c) for c in vel]] if has_v else None
+    return SampledPath(arr[:, 0], arr[:, idx], v, source=str(path))
+
+
+def _read_csv_rows(path: Path) -> tuple[list[str], list[tuple[int, list[float]]]]:
+    """Header and numeric rows ``(line number, values)`` of a path CSV, each row checked."""
+    with path.open(newline="", encoding="utf-8-sig") as fh:  # -sig: a spreadsheet's BOM is fine
         reader = csv.reader(fh)
         try:
             header = [h.strip() for h in next(reader)]
@@ -200,25 +227,23 @@ def load_csv(path: str | Path, rows: Sequence[str] | None = None) -> SampledPath
             raise InvalidInput(f"{path}: the file is empty; expected a header 't,x,y,...'") from None
         if not header or header[0] != "t":
             raise InvalidInput(f"{path}: the first column must be 't', the header is {header}")
-        coords = list(rows) if rows else [h for h in header[1:] if not h.startswith("v")]
-        missing = [c for c in coords if c not in header]
-        if missing or not coords:
-            raise InvalidInput(f"{path}: columns {missing or coords} not found in header {header}")
-        vel = [f"v{c}" for c in coords]
-        has_v = all(v in header for v in vel)
-        data = []
+        twice = sorted({h for h in header if header.count(h) > 1})
+        if twice:
+            raise InvalidInput(f"{path}: columns {twice} appear twice in the header {header}")
+        data: list[tuple[int, list[float]]] = []
         for lineno, row in enumerate(reader, start=2):
             if not row or all(not c.strip() for c in row):
                 continue
             if len(row) != len(header):
                 raise InvalidInput(f"{path}:{lineno}: {len(row)} fields, the header has {len(header)}")
             try:
-                data.append([float(c) for c in row])
+                values = [float(c) for c in row]
             except ValueError:
                 raise InvalidInput(f"{path}:{lineno}: a field is not a number: {row}") from None
-    arr = np.array(data)
-    if len(arr) < 2:
-        raise InvalidInput(f"{path}: needs at least 2 data rows, found {len(arr)}")
-    idx = [header.index(c) for c in coords]
-    v = arr[:, [header.index(c) for c in vel]] if has_v else None
-    return SampledPath(arr[:, 0], arr[:, idx], v, source=str(path))
+            if not all(np.isfinite(values)):
+                raise InvalidInput(f"{path}:{lineno}: fields must be finite numbers, got {row}")
+            if data and values[0] <= data[-1][1][0]:
+                raise InvalidInput(f"{path}:{lineno}: t = {values[0]} does not increase (line "
+                                   f"{data[-1][0]} has t = {data[-1][1][0]}); times must increase strictly")
+            data.append((lineno, values))
+    return header, data

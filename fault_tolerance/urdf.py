@@ -290,7 +290,7 @@ def native_stderr() -> Iterator[list[str]]:
 
 
 def native_reason(lines: list[str]) -> str:
-    """urdfdom's error lines in one line, without its source locations."""
+    """The error lines urdfdom printed, in one line, without their source locations."""
     keep = [s.removeprefix("Error:").strip() for s in lines if not s.startswith("at line ")]
     return "; ".join(k for k in keep if k)
 
@@ -323,7 +323,6 @@ def inspect_text(
 ) -> str:
     """A readable description of a robot: the URDF tree (read with yourdfpy), chain, task, intolerable joints."""
     import numpy as np
-    import yourdfpy
 
     from .arm import catalog, example_robot_names, load_arm
     from .failures import scenarios
@@ -336,6 +335,8 @@ def inspect_text(
     # Pinocchio's checks first (their messages are the clearer), then the tree from yourdfpy
     arm = None if choose_tip else load_arm(target, tip=tip, task=task, joints=joints,
                                            package_dirs=package_dirs)
+    import yourdfpy  # after the checks: a hostile file is refused without this import's cost
+
     try:  # yourdfpy parses the checked bytes, never the file itself
         urdf = yourdfpy.URDF.load(io.BytesIO(desc.data), load_meshes=False, build_scene_graph=False,
                                   build_collision_scene_graph=False)
