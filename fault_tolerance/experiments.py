@@ -17,7 +17,7 @@ import numpy as np
 from .arm import Arm, load_arm
 from .indices import jump_reduction
 from .linalg import projection
-from .posture import initial_posture
+from .posture import RCN_THRESHOLD, initial_posture, plan
 from .simulation import Run, ServoModel, output_folder, simulate, write_atomic
 from .trajectories import CirclePath
 
@@ -122,20 +122,32 @@ class _Progress:
 
 
 def run_case(case: Case, *, duration: float | None = None, progress=None, arm: Arm | None = None) -> dict:
-    """Posture search and one run per algorithm; returns ``{"arm", "posture", "runs"}``."""
+    """Sec. III.D planning, then one run per algorithm from the chosen start.
+
+    Step (i) finds the minimum-RCN start; steps (ii)-(iii) run JVJA from it and accept it when the
+    largest reduced condition number stays under :data:`~.posture.RCN_THRESHOLD`, else try the
+    next local minimum. LNVA and MDA start from the same configuration. Returns ``{"arm",
+    "posture", "runs", "path", "attempts", "q0"}``.
+    """
     arm = arm or load_arm(case.robot)
-    posture = initial_posture(arm, np.array(case.x0), list(case.lockable))
+    lockable = list(case.lockable)
+    posture = initial_posture(arm, np.array(case.x0), lockable)
     path = case.path(duration)
+    jvja_run, attempts = plan(arm, path, "jvja", lockable=lockable, posture=posture, progress=progress)
+    if len(attempts) > 1 and hasattr(progress, "grow"):
+        progress.grow((len(attempts) - 1) * len(jvja_run.t))
+    q0 = np.array(jvja_run.meta["q0"])
     runs = {
-        alg: simulate(arm, path, alg, q0=posture.q, lockable=list(case.lockable), progress=progress)
+        alg: jvja_run if alg == "jvja" else
+        simulate(arm, path, alg, q0=q0, lockable=lockable, progress=progress)
         for alg in ALGORITHMS
     }
-    return {"arm": arm, "posture": posture, "runs": runs, "path": path}
+    return {"arm": arm, "posture": posture, "runs": runs, "path": path, "attempts": attempts, "q0": q0}
 
 
 def case_summary(case: Case, result: dict) -> tuple[dict, dict]:
     """The ``cases[key]`` entry of summary.json and the case's diagnostics (``details``)."""
-    arm, runs, q0 = result["arm"], result["runs"], result["posture"].q
+    arm, runs, q0 = result["arm"], result["runs"], result["q0"]
     algs = {}
     for alg, run in runs.items():
         s = run.summary()
@@ -148,6 +160,11 @@ def case_summary(case: Case, result: dict) -> tuple[dict, dict]:
         "posture_method": result["posture"].method,
         "eq14_at_start": {"delta": red.delta, "f_qh2": red.predicted},
         "near_singular_samples": {a: r.summary()["near_singular_samples"] for a, r in runs.items()},
+        "planning": {
+            "rcn_threshold": RCN_THRESHOLD,
+            "attempts": [{"q0": a.q0.tolist(), "K0": a.K0, "rcn_max": a.rcn_max,
+                          "accepted": a.accepted, "reason": a.reason} for a in result["attempts"]],
+        },
     }
     if arm.name == "spatial_4r":
         extra["N44_max"] = float(max(abs(projection(arm.jacobian(q)).N[3, 3])

@@ -166,6 +166,20 @@ def write_report(summary: dict) -> str:
                 "machine). `fault-tolerance bench` measures the fast path and the explicit and "
                 "generic-solver routes.", ""]
 
+    plans = {k: details[k]["planning"] for k in cases if "planning" in details.get(k, {})}
+    if plans:
+        out += ["## Planning loop (Sec. III.D, steps ii-iii)", "",
+                "Each case starts at the global minimum of K on the self-motion manifold; JVJA is run "
+                "from it and the start is kept when no reduced condition number along the run exceeds "
+                "the threshold, else the next local minimum of K is tried.", "",
+                "| case | starts tried | chosen start K | largest RCN on the run | why |",
+                "|---|---|---|---|---|"]
+        for key, p in plans.items():
+            chosen = next((a for a in p["attempts"] if a["accepted"]), min(p["attempts"], key=lambda a: a["rcn_max"]))
+            out.append(f"| {key} | {len(p['attempts'])} | {_f(chosen['K0'])} | {_f(chosen['rcn_max'])} "
+                       f"| {chosen['reason']} |")
+        out.append("")
+
     out += ["## Figures", ""]
     for key in cases:
         out += [f"![{key}]({key}.png)", ""]
