@@ -100,6 +100,14 @@ OPTIONAL_ARRAYS = ("qd_cmd",)
 FLAG_NEAR_SINGULAR = 1  # σ_min(J) (after a lock: of the remaining columns) < SIGMA_EPS: rates damped
 FLAG_NEAR_INTOLERABLE = 2  # a scenario's N[S, S] pivot < NEAR_INTOLERABLE: pivots damped
 FLAG_LOCKED = 4  # the arm runs with a locked joint
+FLAG_STEP_LIMITED = 8  # MDA's null-space step was capped at MDA_MAX_ANGLE / dt
+FLAG_OVER_SPEED = 16  # a commanded joint rate exceeds the joint's velocity limit (URDF <limit>)
+
+#: Largest joint motion MDA's null-space step may make in one time step [rad]. Far from the
+#: minimum-K start the gradient of K is steep (‖α N ∇K‖ of 10⁴ rad/s near singular reduced
+#: Jacobians); an explicit Euler step that long leaves the self-motion manifold and loses the path.
+#: The paper's runs stay below 1e-4 rad per step.
+MDA_MAX_ANGLE = 0.01
 
 
 @dataclass
@@ -150,6 +158,8 @@ class Run:
             "tracking_error_final": float(self.error[-1]),
             "near_singular_samples": int(np.count_nonzero(self.flags & FLAG_NEAR_SINGULAR)),
             "near_intolerable_samples": int(np.count_nonzero(self.flags & FLAG_NEAR_INTOLERABLE)),
+            "step_limited_samples": int(np.count_nonzero(self.flags & FLAG_STEP_LIMITED)),
+            "over_speed_samples": int(np.count_nonzero(self.flags & FLAG_OVER_SPEED)),
         }
         lock = self.meta.get("lock")
         if lock:
@@ -323,6 +333,9 @@ def simulate(
     # singularity gets damped pivots and FLAG_NEAR_INTOLERABLE instead of an exception
     sc.check_tolerable(projection(arm.jacobian(q)).N)
     f, n, m = sc.f, arm.n, arm.m
+    max_step = MDA_MAX_ANGLE / dt  # [rad/s], MDA's null-space step
+    vmax = arm.velocity_limit
+    vmax = np.where(np.isfinite(vmax) & (vmax > 0), vmax, np.inf)  # 0 or inf: no limit given
     K1 = steps + 1
     rec = {
         "t": np.arange(K1) * dt, "q": np.zeros((K1, n)), "qd": np.zeros((K1, n)),
@@ -359,11 +372,15 @@ def simulate(
             flag = FLAG_LOCKED | (FLAG_NEAR_SINGULAR if reduced.sigma_min < SIGMA_EPS else 0)
             if lock_jump is None:  # the jump the lock causes: reduced rates minus planned rates
                 planned = resolve(algorithm, J, xd_cmd, sc, response=response, arm=arm, q=q,
-                                  gain=gain, tolerate=True)
+                                  gain=gain, tolerate=True, max_step=max_step)
                 lock_jump = float(np.sum((qd_cmd - planned) ** 2))
         else:
             qd_cmd = resolve(algorithm, J, xd_cmd, sc, weights=None, response=response,
-                             arm=arm, q=q, gain=gain, tolerate=True)
+                             arm=arm, q=q, gain=gain, tolerate=True, max_step=max_step)
+            if algorithm == "mda" and np.linalg.norm(qd_cmd - proj.Jpinv @ xd_cmd) >= 0.999 * max_step:
+                flag |= FLAG_STEP_LIMITED
+        if np.any(np.abs(qd_cmd) > vmax):
+            flag |= FLAG_OVER_SPEED
         k_s = condition_numbers(reduced_singular_values(J, sc))
         if locked:
             parts = np.zeros(f)  # the failure has happened; no jump is pending
