@@ -26,6 +26,9 @@ def _files(root: Path) -> dict[str, str]:
             '<link name="b"/>')),
         "bad_csv": ("bad.csv", "t,x,y\n0,0.35,0\n0.1,abc,0\n"),
         "a_file": ("a_file", "not a folder"),
+        "meshy": ("meshy.urdf", robot(*chain3()).replace(
+            '<link name="base"/>', '<link name="base"><visual><geometry><mesh filename='
+            '"package://no_pkg/base.stl"/></geometry></visual></link>')),
     }
     for name, text in files.values():
         (root / name).write_text(text)
@@ -76,6 +79,7 @@ def results(tmp_path_factory) -> dict[str, subprocess.CompletedProcess]:
     keys = _files(root)
     cases = {k: args for k, (args, _) in CASES.items()}
     cases["debug"] = ["--debug", "simulate", "--robot", "plannar_3r"]
+    cases["warning"] = ["inspect", "{meshy}", "--task", "planar"]
     procs = {
         key: subprocess.Popen([sys.executable, "-m", "fault_tolerance", *(a.format(**keys) for a in args)],
                               cwd=root, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
@@ -106,3 +110,13 @@ def test_debug_shows_the_traceback(results):
     assert p.returncode != 0
     assert "Traceback (most recent call last)" in p.stderr
     assert "RobotNotFound: robot 'plannar_3r'" in p.stderr
+
+
+def test_a_warning_is_one_line_too(results):
+    """A URDF whose meshes are missing loads (exit 0) with one warning line on stderr naming the
+    file and --package-dir."""
+    p = results["warning"]
+    assert p.returncode == 0, p.stderr
+    assert p.stderr.count("\n") == 1 and p.stderr.startswith("fault-tolerance: warning: ")
+    assert "meshy.urdf: visual geometry not loaded" in p.stderr and "--package-dir" in p.stderr
+    assert "chain to tip 'tool'" in p.stdout
