@@ -8,6 +8,17 @@ nor matplotlib.
 __version__ = "0.1.0"
 
 from .arm import Arm, load_arm, parse_task  # noqa: E402
+from .errors import (  # noqa: E402
+    FaultToleranceError,
+    FrameNotFound,
+    IntolerableFailure,
+    InvalidInput,
+    InvalidScenario,
+    InvalidTask,
+    JointNotFound,
+    RobotNotFound,
+    URDFError,
+)
 from .failures import Scenarios, scenarios  # noqa: E402
 from .indices import (  # noqa: E402
     fault_tolerance_measure,
@@ -20,17 +31,6 @@ from .indices import (  # noqa: E402
 )
 from .linalg import nullspace_projector, pinv, projection, reduced_rates  # noqa: E402
 from .planner import RESOLVERS, jvja, jvja_explicit, lnva, mda, resolve  # noqa: E402
-from .errors import (  # noqa: E402
-    FaultToleranceError,
-    FrameNotFound,
-    IntolerableFailure,
-    InvalidInput,
-    InvalidScenario,
-    InvalidTask,
-    JointNotFound,
-    RobotNotFound,
-    URDFError,
-)
 
 __all__ = [
     "__version__",

@@ -123,8 +123,10 @@ class Arm:
                 "leave these out of the active joints (joints=[...], --joints) to hold them fixed"
             )
         if model.nv == 0:
-            raise URDFError(f"{label}: the model has no moving joint; an arm needs at least one "
-                            "revolute or prismatic joint")
+            raise URDFError(
+                f"{label}: the model has no moving joint; an arm needs at least one "
+                "revolute or prismatic joint"
+            )
         frame_id = _frame_id(model, tip)
         self.model = model
         self.data = model.createData()
@@ -139,7 +141,9 @@ class Arm:
         self.joint_names: list[str] = [
             model.names[j] for j in range(1, model.njoints) if model.joints[j].nv > 0
         ]
-        self.default_lockable = list(default_lockable) if default_lockable else list(self.joint_names)
+        self.default_lockable = (
+            list(default_lockable) if default_lockable else list(self.joint_names)
+        )
         self.q_reference = (
             self.neutral() if q_reference is None else np.asarray(q_reference, dtype=float).copy()
         )
@@ -271,14 +275,16 @@ class Arm:
         pin.computeJointJacobians(model, data, q)
         p = pin.updateFramePlacement(model, data, self.frame_id).translation.copy()
         Jw = pin.getFrameJacobian(model, data, self.frame_id, pin.WORLD).reshape(6, self.n)
-        Jl = pin.getFrameJacobian(model, data, self.frame_id, pin.LOCAL_WORLD_ALIGNED).reshape(6, self.n)
+        Jl = pin.getFrameJacobian(model, data, self.frame_id, pin.LOCAL_WORLD_ALIGNED).reshape(
+            6, self.n
+        )
         n = self.n
         vw, ww = Jw[:3], Jw[3:]
         dJw = np.zeros((n, 6, n))
         for j in range(n):
             k = np.arange(j + 1, n)
             # spatial cross product [v1; w1] x [v2; w2] = [w1 x v2 + v1 x w2; w1 x w2]
-            dJw[j, :3, k] = (np.cross(ww[:, j], vw[:, k].T) + np.cross(vw[:, j], ww[:, k].T))
+            dJw[j, :3, k] = np.cross(ww[:, j], vw[:, k].T) + np.cross(vw[:, j], ww[:, k].T)
             dJw[j, 3:, k] = np.cross(ww[:, j], ww[:, k].T)
         dJ = dJw.copy()
         for j in range(n):
@@ -311,8 +317,14 @@ def _supporting_joints(model: pin.Model, frame_id: int) -> list[int]:
 def _joint_kind(joint) -> str:
     """A readable kind for Pinocchio's joint model names (``JointModelRUBZ`` → continuous)."""
     short = joint.shortname()
-    for key, kind in (("RUB", "continuous"), ("FreeFlyer", "floating"), ("Planar", "planar"),
-                      ("Spherical", "spherical"), ("Mimic", "mimic"), ("Composite", "composite")):
+    for key, kind in (
+        ("RUB", "continuous"),
+        ("FreeFlyer", "floating"),
+        ("Planar", "planar"),
+        ("Spherical", "spherical"),
+        ("Mimic", "mimic"),
+        ("Composite", "composite"),
+    ):
         if key in short:
             return kind
     return short
@@ -324,10 +336,13 @@ def _frame_id(model: pin.Model, tip: str) -> int:
         raise FrameNotFound(tip, [f.name for f in model.frames])
     same = [f for f in model.frames if f.name == tip]
     first = same[0]
-    if any(f.parentJoint != first.parentJoint or not f.placement.isApprox(first.placement)
-           for f in same[1:]):
-        raise AmbiguousFrame(tip, [f"{f.name} ({f.type.name} on joint "
-                                   f"'{model.names[f.parentJoint]}')" for f in same])
+    if any(
+        f.parentJoint != first.parentJoint or not f.placement.isApprox(first.placement)
+        for f in same[1:]
+    ):
+        raise AmbiguousFrame(
+            tip, [f"{f.name} ({f.type.name} on joint '{model.names[f.parentJoint]}')" for f in same]
+        )
     return model.getFrameId(tip)
 
 
@@ -351,8 +366,11 @@ def reduce_model(
             moving = [model.names[j] for j in range(1, model.njoints) if model.joints[j].nv > 0]
             raise URDFError(
                 f"{label or model.name}: no moving joint between the root and frame '{tip}'"
-                + (f"; the moving joints are {moving}: choose a tip beyond them" if moving else
-                   "; the model has no moving joint at all (every joint is fixed)")
+                + (
+                    f"; the moving joints are {moving}: choose a tip beyond them"
+                    if moving
+                    else "; the model has no moving joint at all (every joint is fixed)"
+                )
             )
     else:
         keep = []
@@ -370,7 +388,9 @@ def reduce_model(
     return reduced, geoms[0]
 
 
-def _load_urdf(path: Path, package_dirs: Sequence[str] | None) -> tuple[pin.Model, pin.GeometryModel | None]:
+def _load_urdf(
+    path: Path, package_dirs: Sequence[str] | None
+) -> tuple[pin.Model, pin.GeometryModel | None]:
     """Model and visual geometry of a URDF file; geometry is dropped with a warning if unreadable."""
     model, visual, _ = _load_urdf_file(path, package_dirs)
     return model, visual
@@ -406,8 +426,9 @@ def _load_urdf_file(path: Path, package_dirs: Sequence[str] | None):
     with native_stderr() as log, warnings.catch_warnings():
         warnings.simplefilter("ignore", UserWarning)  # Pinocchio's notice about package dirs
         try:
-            visual = pin.buildGeomFromUrdfString(model, desc.xml, pin.GeometryType.VISUAL,
-                                                 package_dirs=dirs)
+            visual = pin.buildGeomFromUrdfString(
+                model, desc.xml, pin.GeometryType.VISUAL, package_dirs=dirs
+            )
         except Exception as err:
             failure = err
     if failure is not None:
@@ -459,12 +480,26 @@ def load_arm(
         q_full = None if q_full is None else np.asarray(q_full, dtype=float)
         full = model
         model, visual = reduce_model(model, tip, joints, q_full, visual_model=visual)
-        q_ref = None if q_full is None else np.array(
-            [q_full[full.joints[full.getJointId(model.names[j])].idx_q]
-             for j in range(1, model.njoints) if model.joints[j].nv > 0])
+        q_ref = (
+            None
+            if q_full is None
+            else np.array(
+                [
+                    q_full[full.joints[full.getJointId(model.names[j])].idx_q]
+                    for j in range(1, model.njoints)
+                    if model.joints[j].nv > 0
+                ]
+            )
+        )
         return Arm(
-            model, tip, entry["task"] if task is None else task, name=name, visual_model=visual,
-            default_lockable=entry.get("lockable"), source=name, q_reference=q_ref,
+            model,
+            tip,
+            entry["task"] if task is None else task,
+            name=name,
+            visual_model=visual,
+            default_lockable=entry.get("lockable"),
+            source=name,
+            q_reference=q_ref,
         )
     path = Path(name).expanduser()
     if path.suffix.lower() in (".urdf", ".xml") or path.exists():
@@ -483,8 +518,15 @@ def load_arm(
                 "--joints) to hold them fixed, or choose a tip frame that does not depend on them"
             )
         task = "position" if task is None else task
-        return Arm(model, tip, task, name=path.stem, visual_model=visual,
-                   source=str(path.resolve()), package_dirs=package_dirs or ())
+        return Arm(
+            model,
+            tip,
+            task,
+            name=path.stem,
+            visual_model=visual,
+            source=str(path.resolve()),
+            package_dirs=package_dirs or (),
+        )
     return _load_example_robot(name, tip, task, joints, shipped)
 
 
@@ -497,9 +539,7 @@ def example_robot_names() -> list[str]:
     return sorted(ROBOTS)
 
 
-def _load_example_robot(
-    name: str, tip: str | None, task, joints, shipped: dict
-) -> Arm:
+def _load_example_robot(name: str, tip: str | None, task, joints, shipped: dict) -> Arm:
     known = list(shipped) + example_robot_names()
     if name not in example_robot_names():
         raise RobotNotFound(name, known)
@@ -517,16 +557,23 @@ def _load_example_robot(
     q_active = None
     if q_ref is not None:
         full = robot.model
-        q_active = np.array([q_ref[full.joints[full.getJointId(model.names[j])].idx_q]
-                             for j in range(1, model.njoints) if model.joints[j].nv > 0])
+        q_active = np.array(
+            [
+                q_ref[full.joints[full.getJointId(model.names[j])].idx_q]
+                for j in range(1, model.njoints)
+                if model.joints[j].nv > 0
+            ]
+        )
     task = preset.get("task", "position") if task is None else task
-    return Arm(model, tip, task, name=name, visual_model=visual, source=name,
-               q_reference=q_active)
+    return Arm(model, tip, task, name=name, visual_model=visual, source=name, q_reference=q_active)
 
 
 def arm_from_meta(meta: dict) -> Arm:
     """Rebuild the arm a saved run was made with (its ``meta``: source, tip, task, joints)."""
     return load_arm(
-        meta.get("source") or meta["robot"], tip=meta.get("tip"), task=meta.get("task"),
-        joints=meta.get("joint_names"), package_dirs=meta.get("package_dirs") or None,
+        meta.get("source") or meta["robot"],
+        tip=meta.get("tip"),
+        task=meta.get("task"),
+        joints=meta.get("joint_names"),
+        package_dirs=meta.get("package_dirs") or None,
     )

@@ -168,8 +168,12 @@ def _blas_threads() -> list[dict]:
         from threadpoolctl import threadpool_info
 
         return [
-            {"library": i.get("internal_api"), "path": i.get("filepath"),
-             "version": i.get("version"), "threads": i.get("num_threads")}
+            {
+                "library": i.get("internal_api"),
+                "path": i.get("filepath"),
+                "version": i.get("version"),
+                "threads": i.get("num_threads"),
+            }
             for i in threadpool_info()
         ]
     except ImportError:
@@ -177,7 +181,8 @@ def _blas_threads() -> list[dict]:
     out = []
     try:
         paths = {
-            line.split()[-1] for line in Path("/proc/self/maps").read_text().splitlines()
+            line.split()[-1]
+            for line in Path("/proc/self/maps").read_text().splitlines()
             if "openblas" in line.lower() and line.split()[-1].startswith("/")
         }
     except OSError:
@@ -187,8 +192,12 @@ def _blas_threads() -> list[dict]:
             lib = ctypes.CDLL(path)
         except OSError:
             continue
-        for symbol in ("openblas_get_num_threads", "openblas_get_num_threads64_",
-                       "scipy_openblas_get_num_threads64_", "scipy_openblas_get_num_threads"):
+        for symbol in (
+            "openblas_get_num_threads",
+            "openblas_get_num_threads64_",
+            "scipy_openblas_get_num_threads64_",
+            "scipy_openblas_get_num_threads",
+        ):
             fn = getattr(lib, symbol, None)
             if fn is not None:
                 fn.restype = ctypes.c_int
@@ -225,7 +234,8 @@ def machine_info() -> dict:
         "quadprog": _version("quadprog"),
         "numpy_blas": _blas_build(np),
         "env": {
-            k: v for k, v in sorted(os.environ.items())
+            k: v
+            for k, v in sorted(os.environ.items())
             if k.startswith(("OPENBLAS_", "OMP_", "MKL_", "BLIS_", "GOTO", "VECLIB_", "NUMBA_"))
         },
         "loadavg": list(os.getloadavg()) if hasattr(os, "getloadavg") else None,
@@ -397,16 +407,23 @@ def bench_arm(
     # (a fast wrong answer is no answer).
     deviation = {}
     ref = [ctrl.jvja(q, xd).copy() for q, xd in qx]
-    for name in ("jvja_resolve", "jvja_explicit", "jvja_qp", "jvja_slsqp",
-                 *(k for k in fast if k.startswith("jvja_"))):
+    for name in (
+        "jvja_resolve",
+        "jvja_explicit",
+        "jvja_qp",
+        "jvja_slsqp",
+        *(k for k in fast if k.startswith("jvja_")),
+    ):
         fn, args = {**fast, **slow, **slower}.get(name, (None, None))
         if fn is None:
             continue
         got = [np.array(fn(*a[:2]), dtype=float) for a in args]
-        deviation[name] = float(max(
-            np.abs(g - r).max() / max(1.0, np.abs(r).max())
-            for g, r in zip(got, ref, strict=True)
-        ))
+        deviation[name] = float(
+            max(
+                np.abs(g - r).max() / max(1.0, np.abs(r).max())
+                for g, r in zip(got, ref, strict=True)
+            )
+        )
     ctrl.fallbacks = 0
 
     samples: dict[str, np.ndarray] = {}
@@ -456,38 +473,89 @@ def targets(results: dict) -> list[dict]:
 
         jv, ln = med("jvja"), med("lnva")
         if jv and ln:
-            out.append({"arm": key, "name": "jvja_over_lnva", "label": "JVJA step / LNVA step",
-                        "value": jv / ln, "limit": MAX_JVJA_OVER_LNVA, "relation": "<=",
-                        "pass": jv / ln <= MAX_JVJA_OVER_LNVA})
+            out.append(
+                {
+                    "arm": key,
+                    "name": "jvja_over_lnva",
+                    "label": "JVJA step / LNVA step",
+                    "value": jv / ln,
+                    "limit": MAX_JVJA_OVER_LNVA,
+                    "relation": "<=",
+                    "pass": jv / ln <= MAX_JVJA_OVER_LNVA,
+                }
+            )
         for backend in ("lapack", "numpy", "numba"):
             j2, l2 = med(f"jvja_{backend}"), med(f"lnva_{backend}")
             if j2 and l2:
-                out.append({"arm": key, "name": f"jvja_over_lnva_{backend}",
-                            "label": f"JVJA / LNVA, {backend} backend", "value": j2 / l2,
-                            "limit": MAX_JVJA_OVER_LNVA, "relation": "<=", "pass": None})
+                out.append(
+                    {
+                        "arm": key,
+                        "name": f"jvja_over_lnva_{backend}",
+                        "label": f"JVJA / LNVA, {backend} backend",
+                        "value": j2 / l2,
+                        "limit": MAX_JVJA_OVER_LNVA,
+                        "relation": "<=",
+                        "pass": None,
+                    }
+                )
         ex = med("jvja_explicit")
         if jv and ex:
             target = key in EXPLICIT_TARGET_ARMS
-            out.append({"arm": key, "name": "explicit_over_jvja",
-                        "label": "explicit per-scenario route / JVJA", "value": ex / jv,
-                        "limit": MIN_EXPLICIT_OVER_JVJA, "relation": ">=",
-                        "pass": (ex / jv >= MIN_EXPLICIT_OVER_JVJA) if target else None})
-        for name, label in (("jvja_qp", "quadprog route / JVJA"),
-                            ("jvja_slsqp", "SLSQP route / JVJA"),
-                            ("qp_solve_only", "quadprog call alone / JVJA")):
+            out.append(
+                {
+                    "arm": key,
+                    "name": "explicit_over_jvja",
+                    "label": "explicit per-scenario route / JVJA",
+                    "value": ex / jv,
+                    "limit": MIN_EXPLICIT_OVER_JVJA,
+                    "relation": ">=",
+                    "pass": (ex / jv >= MIN_EXPLICIT_OVER_JVJA) if target else None,
+                }
+            )
+        for name, label in (
+            ("jvja_qp", "quadprog route / JVJA"),
+            ("jvja_slsqp", "SLSQP route / JVJA"),
+            ("qp_solve_only", "quadprog call alone / JVJA"),
+        ):
             g = med(name)
             if jv and g:
-                out.append({"arm": key, "name": f"{name}_over_jvja", "label": label,
-                            "value": g / jv, "limit": 1.0, "relation": ">", "pass": g / jv > 1.0})
+                out.append(
+                    {
+                        "arm": key,
+                        "name": f"{name}_over_jvja",
+                        "label": label,
+                        "value": g / jv,
+                        "limit": 1.0,
+                        "relation": ">",
+                        "pass": g / jv > 1.0,
+                    }
+                )
         rs = med("jvja_resolve")
         if jv and rs:
-            out.append({"arm": key, "name": "resolve_over_jvja", "label": "ft.resolve / JVJA",
-                        "value": rs / jv, "limit": None, "relation": None, "pass": None})
+            out.append(
+                {
+                    "arm": key,
+                    "name": "resolve_over_jvja",
+                    "label": "ft.resolve / JVJA",
+                    "value": rs / jv,
+                    "limit": None,
+                    "relation": None,
+                    "pass": None,
+                }
+            )
         if "jvja" in ops:
             p99 = ops["jvja"]["p99_us"]
-            out.append({"arm": key, "name": "jvja_p99_us", "label": "JVJA step p99 [µs]",
-                        "value": p99, "limit": MAX_JVJA_P99_US, "relation": "<",
-                        "pass": p99 < MAX_JVJA_P99_US})
+            out.append(
+                {
+                    "arm": key,
+                    "name": "jvja_p99_us",
+                    "label": "JVJA step p99 [µs]",
+                    "value": p99,
+                    "limit": MAX_JVJA_P99_US,
+                    "relation": "<",
+                    "pass": p99 < MAX_JVJA_P99_US,
+                }
+            )
     return out
 
 
@@ -559,13 +627,18 @@ def compare(a: dict, b: dict) -> list[dict]:
             st_b = res_b["ops"].get(name)
             if st_b is None:
                 continue
-            rows.append({
-                "arm": key, "operation": name,
-                "median_a": st_a["median_us"], "median_b": st_b["median_us"],
-                "median_ratio": st_b["median_us"] / st_a["median_us"],
-                "p99_a": st_a["p99_us"], "p99_b": st_b["p99_us"],
-                "p99_ratio": st_b["p99_us"] / st_a["p99_us"],
-            })
+            rows.append(
+                {
+                    "arm": key,
+                    "operation": name,
+                    "median_a": st_a["median_us"],
+                    "median_b": st_b["median_us"],
+                    "median_ratio": st_b["median_us"] / st_a["median_us"],
+                    "p99_a": st_a["p99_us"],
+                    "p99_b": st_b["p99_us"],
+                    "p99_ratio": st_b["p99_us"] / st_a["p99_us"],
+                }
+            )
     return rows
 
 
@@ -592,30 +665,49 @@ def format_compare(rows: list[dict], a_name: str, b_name: str) -> str:
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Options of ``fault-tolerance bench`` (and ``scripts/benchmark.py``)."""
     parser.add_argument(
-        "--robots", nargs="+", default=None, metavar="ARM",
+        "--robots",
+        nargs="+",
+        default=None,
+        metavar="ARM",
         help=f"arms to time (space or comma separated) among {sorted(ARMS)}; "
-             f"default {' '.join(DEFAULT_ARMS)}",
+        f"default {' '.join(DEFAULT_ARMS)}",
     )
     parser.add_argument(
-        "--steps", type=int, default=DEFAULT_STEPS,
+        "--steps",
+        type=int,
+        default=DEFAULT_STEPS,
         help=f"timed calls per operation (default {DEFAULT_STEPS}; the slowest routes get a "
-             "tenth); the default bench takes well under a minute",
+        "tenth); the default bench takes well under a minute",
     )
     parser.add_argument(
-        "--warmup", type=int, default=DEFAULT_WARMUP,
+        "--warmup",
+        type=int,
+        default=DEFAULT_WARMUP,
         help=f"untimed calls per operation first (default {DEFAULT_WARMUP})",
     )
     parser.add_argument(
-        "--backend", default="auto", choices=["auto", "numba", "lapack", "numpy"],
+        "--backend",
+        default="auto",
+        choices=["auto", "numba", "lapack", "numpy"],
         help="backend of the fast LNVA / JVJA steps (default: the fastest installed); the "
-             "other installed backends get their own rows",
+        "other installed backends get their own rows",
     )
-    parser.add_argument("--json", default=None, metavar="FILE",
-                        help="also write all results and the machine to FILE (atomically)")
-    parser.add_argument("--compare", nargs=2, default=None, metavar=("A.json", "B.json"),
-                        help="print the per-row ratio B/A of two saved runs instead of timing")
-    parser.add_argument("--strict", action="store_true",
-                        help="exit with status 1 if a target fails")
+    parser.add_argument(
+        "--json",
+        default=None,
+        metavar="FILE",
+        help="also write all results and the machine to FILE (atomically)",
+    )
+    parser.add_argument(
+        "--compare",
+        nargs=2,
+        default=None,
+        metavar=("A.json", "B.json"),
+        help="print the per-row ratio B/A of two saved runs instead of timing",
+    )
+    parser.add_argument(
+        "--strict", action="store_true", help="exit with status 1 if a target fails"
+    )
 
 
 def _arm_keys(robots: Sequence[str] | None) -> list[str]:
@@ -674,10 +766,14 @@ def _run(args: argparse.Namespace) -> int:
         "command": " ".join(sys.argv),
         "machine": machine,
         "settings": {
-            "steps": args.steps, "warmup": args.warmup, "pool": POOL, "seed": SEED,
-            "backend": args.backend, "gc_disabled_while_timing": True,
+            "steps": args.steps,
+            "warmup": args.warmup,
+            "pool": POOL,
+            "seed": SEED,
+            "backend": args.backend,
+            "gc_disabled_while_timing": True,
             "timing": f"{ROUNDS} rounds of one block per row, "
-                      f"{BLOCK_WARMUP} untimed calls per block",
+            f"{BLOCK_WARMUP} untimed calls per block",
             "timer_overhead_ns": _timer_overhead_ns(),
             "seconds": round(time.time() - started, 1),
         },
@@ -708,7 +804,8 @@ def _run(args: argparse.Namespace) -> int:
 def main(argv: Sequence[str] | None = None) -> int:
     """``scripts/benchmark.py``: the same options as ``fault-tolerance bench``."""
     parser = argparse.ArgumentParser(
-        prog="benchmark.py", description=__doc__.split("\n\n")[0],
+        prog="benchmark.py",
+        description=__doc__.split("\n\n")[0],
         epilog="example: python scripts/benchmark.py --robots panda_pose --json new.json",
     )
     add_arguments(parser)

@@ -64,14 +64,30 @@ def add_robot_options(p: argparse.ArgumentParser) -> None:
     """``--robot | --urdf PATH [--package-dir DIR]``, ``--tip``, ``--task``, ``--joints``, ``--lockable``."""
     g = p.add_argument_group("robot")
     src = g.add_mutually_exclusive_group()
-    src.add_argument("--robot", default=None, help="shipped or example-robot-data arm (see `fault-tolerance robots`)")
+    src.add_argument(
+        "--robot",
+        default=None,
+        help="shipped or example-robot-data arm (see `fault-tolerance robots`)",
+    )
     src.add_argument("--urdf", default=None, help="path of a URDF file")
-    g.add_argument("--package-dir", action="append", default=[], help="folder for package:// meshes (repeatable)")
-    g.add_argument("--tip", default=None, help="tip frame (default: the catalog's, or the last frame)")
-    g.add_argument("--task", default=None, help="planar | position | pose | rows among x,y,z,rx,ry,rz")
+    g.add_argument(
+        "--package-dir",
+        action="append",
+        default=[],
+        help="folder for package:// meshes (repeatable)",
+    )
+    g.add_argument(
+        "--tip", default=None, help="tip frame (default: the catalog's, or the last frame)"
+    )
+    g.add_argument(
+        "--task", default=None, help="planar | position | pose | rows among x,y,z,rx,ry,rz"
+    )
     g.add_argument("--joints", default=None, help="active joints, comma-separated (others fixed)")
-    g.add_argument("--lockable", default=None,
-                   help="joints that may lock: all | joint2,joint3 | joint1+joint2,joint3 (+ joins a multi-joint scenario)")
+    g.add_argument(
+        "--lockable",
+        default=None,
+        help="joints that may lock: all | joint2,joint3 | joint1+joint2,joint3 (+ joins a multi-joint scenario)",
+    )
 
 
 def load_robot(args) -> object:
@@ -79,9 +95,16 @@ def load_robot(args) -> object:
     from .arm import load_arm
 
     if args.robot is None and args.urdf is None:
-        raise InvalidInput("name a robot with --robot NAME or --urdf PATH (see `fault-tolerance robots`)")
-    return load_arm(args.urdf or args.robot, tip=args.tip, task=args.task,
-                    joints=_names(args.joints), package_dirs=args.package_dir or None)
+        raise InvalidInput(
+            "name a robot with --robot NAME or --urdf PATH (see `fault-tolerance robots`)"
+        )
+    return load_arm(
+        args.urdf or args.robot,
+        tip=args.tip,
+        task=args.task,
+        joints=_names(args.joints),
+        package_dirs=args.package_dir or None,
+    )
 
 
 def lockable_of(args, arm):
@@ -104,17 +127,40 @@ def lockable_of(args, arm):
 def add_path_options(p: argparse.ArgumentParser) -> None:
     """Start (``--x0`` / ``--q0``), path (circle or ``--csv``), time step and duration."""
     g = p.add_argument_group("start and path")
-    g.add_argument("--x0", default=None, help="start point (task coordinates); the start posture is the minimum-RCN one")
+    g.add_argument(
+        "--x0",
+        default=None,
+        help="start point (task coordinates); the start posture is the minimum-RCN one",
+    )
     g.add_argument("--q0", default=None, help="start configuration (rad), used as given")
-    g.add_argument("--csv", default=None, help="task path from a CSV file with header t,x,y[,z...] [,vx,vy...]")
-    g.add_argument("--radius", type=float, default=None, help="circle radius [m] (default: the paper's for shipped arms, else 0.05)")
-    g.add_argument("--omega", type=float, default=None, help="circle angular rate [rad/s] (default 2π)")
-    g.add_argument("--rows", default=None, help="the two task rows the circle lies in, e.g. x,y or y,z")
+    g.add_argument(
+        "--csv", default=None, help="task path from a CSV file with header t,x,y[,z...] [,vx,vy...]"
+    )
+    g.add_argument(
+        "--radius",
+        type=float,
+        default=None,
+        help="circle radius [m] (default: the paper's for shipped arms, else 0.05)",
+    )
+    g.add_argument(
+        "--omega", type=float, default=None, help="circle angular rate [rad/s] (default 2π)"
+    )
+    g.add_argument(
+        "--rows", default=None, help="the two task rows the circle lies in, e.g. x,y or y,z"
+    )
     g.add_argument("--dt", type=float, default=1e-3, help="time step [s] (default 0.001)")
-    g.add_argument("--duration", type=float, default=None, help="run length [s] (default: the path's)")
-    g.add_argument("--feedback", type=float, default=None, help="task-space feedback gain K_p [1/s]")
-    g.add_argument("--response", default="least_norm", choices=["least_norm", "continuation"],
-                   help="post-failure response of the reduced robot (MATH.md G3)")
+    g.add_argument(
+        "--duration", type=float, default=None, help="run length [s] (default: the path's)"
+    )
+    g.add_argument(
+        "--feedback", type=float, default=None, help="task-space feedback gain K_p [1/s]"
+    )
+    g.add_argument(
+        "--response",
+        default="least_norm",
+        choices=["least_norm", "continuation"],
+        help="post-failure response of the reduced robot (MATH.md G3)",
+    )
     g.add_argument("--gain", type=float, default=None, help="MDA gain α (default planner.MDA_GAIN)")
 
 
@@ -145,12 +191,16 @@ def start_and_path(args, arm):
             q0 = arm.q_reference
             x0 = arm.fk(q0)
         if len(x0) != arm.m:
-            raise InvalidInput(f"--x0 has {len(x0)} numbers; task {'/'.join(arm.task)} needs {arm.m}")
+            raise InvalidInput(
+                f"--x0 has {len(x0)} numbers; task {'/'.join(arm.task)} needs {arm.m}"
+            )
         spec = (entry or {}).get("path", {})
         if args.rows:
             names = _names(args.rows) or []
             if len(names) != 2 or any(r not in arm.task for r in names) or names[0] == names[1]:
-                raise InvalidInput(f"--rows must name two different task rows among {list(arm.task)}, got '{args.rows}'")
+                raise InvalidInput(
+                    f"--rows must name two different task rows among {list(arm.task)}, got '{args.rows}'"
+                )
             rows = (arm.task.index(names[0]), arm.task.index(names[1]))
         else:
             rows = tuple(spec.get("rows", (0, 1) if arm.m >= 2 else (0, 0)))
@@ -159,12 +209,15 @@ def start_and_path(args, arm):
         radius = args.radius if args.radius is not None else spec.get("radius", 0.05)
         omega = args.omega if args.omega is not None else spec.get("omega", 2 * np.pi)
         duration = spec.get("duration", 1.0)
-        path = CirclePath(x0, radius, omega, args.duration or duration, rows=rows,
-                          sign=spec.get("sign", 1.0))
+        path = CirclePath(
+            x0, radius, omega, args.duration or duration, rows=rows, sign=spec.get("sign", 1.0)
+        )
     if q0 is None:
         q0 = initial_posture(arm, x0, lockable).q
     elif np.linalg.norm(arm.task_error(x0, q0)) > 1e-6:
-        raise InvalidInput(f"--q0 puts the tool at {arm.fk(q0).round(4).tolist()}, not at the path's start {np.round(x0, 4).tolist()}")
+        raise InvalidInput(
+            f"--q0 puts the tool at {arm.fk(q0).round(4).tolist()}, not at the path's start {np.round(x0, 4).tolist()}"
+        )
     return q0, path, lockable
 
 
@@ -186,19 +239,41 @@ def cmd_robots(args) -> int:
     rows = []
     for name, entry in catalog().items():
         arm = load_arm(name)
-        rows.append((name, "shipped", arm.n, "/".join(arm.task), arm.m, arm.redundancy, entry["description"]))
+        rows.append(
+            (
+                name,
+                "shipped",
+                arm.n,
+                "/".join(arm.task),
+                arm.m,
+                arm.redundancy,
+                entry["description"],
+            )
+        )
     for name, preset in EXAMPLE_ROBOTS.items():
         try:
             arm = load_arm(name)
         except FaultToleranceError as err:  # pragma: no cover - depends on the installed data
             rows.append((name, "example-robot-data", "?", "?", "?", "?", f"unavailable: {err}"))
             continue
-        rows.append((name, "example-robot-data", arm.n, "/".join(arm.task), arm.m, arm.redundancy, preset["description"]))
+        rows.append(
+            (
+                name,
+                "example-robot-data",
+                arm.n,
+                "/".join(arm.task),
+                arm.m,
+                arm.redundancy,
+                preset["description"],
+            )
+        )
     head = ("name", "source", "DOF", "task", "m", "r", "description")
     widths = [max(len(str(r[i])) for r in rows + [head]) for i in range(len(head))]
     for r in [head] + rows:
-        print("  ".join(str(v).ljust(w) for v, w in zip(r, widths)).rstrip())
-    print("\nAny other example-robot-data name or a URDF path works too (--robot NAME | --urdf PATH).")
+        print("  ".join(str(v).ljust(w) for v, w in zip(r, widths, strict=True)).rstrip())
+    print(
+        "\nAny other example-robot-data name or a URDF path works too (--robot NAME | --urdf PATH)."
+    )
     return 0
 
 
@@ -206,8 +281,15 @@ def cmd_inspect(args) -> int:
     """Print the kinematic tree, the chosen chain and task, and intolerable joints."""
     from .urdf import inspect_text
 
-    print(inspect_text(args.target, tip=args.tip, task=args.task, joints=_names(args.joints),
-                       package_dirs=args.package_dir or None))
+    print(
+        inspect_text(
+            args.target,
+            tip=args.tip,
+            task=args.task,
+            joints=_names(args.joints),
+            package_dirs=args.package_dir or None,
+        )
+    )
     return 0
 
 
@@ -230,9 +312,17 @@ def cmd_simulate(args) -> int:
     try:
         for alg in algs:
             runs[alg] = simulate(
-                arm, path, alg, q0=q0, lockable=lockable, dt=args.dt, duration=args.duration,
-                feedback_gain=args.feedback or 0.0, response=args.response,
-                gain=MDA_GAIN if args.gain is None else args.gain, progress=bar,
+                arm,
+                path,
+                alg,
+                q0=q0,
+                lockable=lockable,
+                dt=args.dt,
+                duration=args.duration,
+                feedback_gain=args.feedback or 0.0,
+                response=args.response,
+                gain=MDA_GAIN if args.gain is None else args.gain,
+                progress=bar,
             )
             if out:
                 runs[alg].save(out / alg)
@@ -241,8 +331,11 @@ def cmd_simulate(args) -> int:
         if bar:
             bar.close()
         done = saved if out else list(runs)
-        print(f"interrupted: finished {done}, not finished {[a for a in algs if a not in done]}"
-              + (f"; finished runs are in {out}" if out else ""), file=sys.stderr)
+        print(
+            f"interrupted: finished {done}, not finished {[a for a in algs if a not in done]}"
+            + (f"; finished runs are in {out}" if out else ""),
+            file=sys.stderr,
+        )
         return 130
     if bar:
         bar.close()
@@ -250,7 +343,9 @@ def cmd_simulate(args) -> int:
     if out:
         from . import plots
 
-        plots.save_figure(plots.plot_comparison(runs, f"{arm.name}: {', '.join(algs)}"), out / "comparison")
+        plots.save_figure(
+            plots.plot_comparison(runs, f"{arm.name}: {', '.join(algs)}"), out / "comparison"
+        )
         for alg, run in runs.items():
             plots.save_figure(plots.plot_run(run), out / alg / "run")
             if args.html:
@@ -262,11 +357,15 @@ def cmd_simulate(args) -> int:
 
 
 def _print_table(runs) -> None:
-    print(f"{'algorithm':10} {'λ mean':>10} {'λ max':>10} {'K mean':>10} {'K max':>10} {'track err max [m]':>18}")
+    print(
+        f"{'algorithm':10} {'λ mean':>10} {'λ max':>10} {'K mean':>10} {'K max':>10} {'track err max [m]':>18}"
+    )
     for alg, run in runs.items():
         s = run.summary()
-        print(f"{alg:10} {s['jvj_mean']:10.4g} {s['jvj_max']:10.4g} {s['rcn_mean']:10.4g} "
-              f"{s['rcn_max']:10.4g} {s['tracking_error_max']:18.3g}")
+        print(
+            f"{alg:10} {s['jvj_mean']:10.4g} {s['jvj_max']:10.4g} {s['rcn_mean']:10.4g} "
+            f"{s['rcn_max']:10.4g} {s['tracking_error_max']:18.3g}"
+        )
 
 
 def cmd_lock(args) -> int:
@@ -283,23 +382,49 @@ def cmd_lock(args) -> int:
     gain = {} if args.gain is None else {"gain": args.gain}
     duration = args.duration or path.duration
     if args.at in ("max", "min"):
-        planned = simulate(arm, path, args.algorithm, q0=q0, lockable=[joint], dt=args.dt,
-                           duration=duration, response=args.response, **gain)
+        planned = simulate(
+            arm,
+            path,
+            args.algorithm,
+            q0=q0,
+            lockable=[joint],
+            dt=args.dt,
+            duration=duration,
+            response=args.response,
+            **gain,
+        )
         k = int(np.argmax(planned.jvj) if args.at == "max" else np.argmin(planned.jvj))
         t_lock = float(planned.t[k])
-        print(f"{args.at} jump of {joint} in the planned run at t = {t_lock:.3f} s (λ = {planned.jvj[k]:.4g})")
+        print(
+            f"{args.at} jump of {joint} in the planned run at t = {t_lock:.3f} s (λ = {planned.jvj[k]:.4g})"
+        )
     else:
         t_lock = float(_floats(args.at, "--at")[0])
     bar = _bar(int(round(duration / args.dt)) + 1, not args.no_progress, "lock")
-    run = simulate(arm, path, args.algorithm, q0=q0, lockable=lockable, dt=args.dt, duration=duration,
-                   lock_joint=joint, lock_time=t_lock, servo=servo, feedback_gain=feedback,
-                   response=args.response, progress=bar, **gain)
+    run = simulate(
+        arm,
+        path,
+        args.algorithm,
+        q0=q0,
+        lockable=lockable,
+        dt=args.dt,
+        duration=duration,
+        lock_joint=joint,
+        lock_time=t_lock,
+        servo=servo,
+        feedback_gain=feedback,
+        response=args.response,
+        progress=bar,
+        **gain,
+    )
     if bar:
         bar.close()
     s = run.summary()
     print(f"{joint} locks at t = {t_lock:.3f} s; servo: {servo.describe()}; K_p = {feedback} 1/s")
-    print(f"jump at the lock {s.get('jump_at_lock', 0.0):.4g} (rad/s)²; path error peak after the lock "
-          f"{1e3 * s['path_error_peak_after_lock']:.3f} mm (before: {1e3 * s['path_error_max_before_lock']:.3f} mm)")
+    print(
+        f"jump at the lock {s.get('jump_at_lock', 0.0):.4g} (rad/s)²; path error peak after the lock "
+        f"{1e3 * s['path_error_peak_after_lock']:.3f} mm (before: {1e3 * s['path_error_max_before_lock']:.3f} mm)"
+    )
     if args.out:
         out = Path(args.out)
         run.save(out)
@@ -322,17 +447,24 @@ def cmd_reproduce(args) -> int:
     cases = _names(args.cases)
     out = Path(args.out)
     try:
-        summary = reproduce(out, cases=cases, quick=args.quick, progress=not args.no_progress, html=args.html)
+        summary = reproduce(
+            out, cases=cases, quick=args.quick, progress=not args.no_progress, html=args.html
+        )
     except KeyboardInterrupt:
-        print(f"interrupted: finished cases are in {out}; see {out / 'summary.partial.json'} for what "
-              "was not finished (an earlier summary.json is left as it was)", file=sys.stderr)
+        print(
+            f"interrupted: finished cases are in {out}; see {out / 'summary.partial.json'} for what "
+            "was not finished (an earlier summary.json is left as it was)",
+            file=sys.stderr,
+        )
         return 130
-    print(f"wrote {out}/summary.json, {out}/REPORT.md and figures in {summary['meta']['seconds']} s")
+    print(
+        f"wrote {out}/summary.json, {out}/REPORT.md and figures in {summary['meta']['seconds']} s"
+    )
     return 0
 
 
 def cmd_replay(args) -> int:
-    """meshcat replay of a saved run."""
+    """Meshcat replay of a saved run."""
     from .viz import replay_main
 
     return replay_main(args.run, open=args.open, html=args.html, speed=args.speed)
@@ -359,9 +491,10 @@ def build_parser() -> argparse.ArgumentParser:
     """The argument parser of ``fault-tolerance``."""
     fmt = argparse.RawDescriptionHelpFormatter
     p = _Parser(
-        prog="fault-tolerance", formatter_class=fmt,
+        prog="fault-tolerance",
+        formatter_class=fmt,
         description="Minimum joint-velocity-jump redundancy resolution for locked-joint failures "
-                    "(Zhao & Li), on Pinocchio.",
+        "(Zhao & Li), on Pinocchio.",
         epilog=textwrap.dedent("""\
             examples:
               fault-tolerance reproduce --out reproduce_out
@@ -372,11 +505,20 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--debug", action="store_true", help="show tracebacks")
     sub = p.add_subparsers(dest="command", metavar="COMMAND")
 
-    s = sub.add_parser("robots", help="list shipped and example-robot-data arms", epilog=_epilog("robots"), formatter_class=fmt)
+    s = sub.add_parser(
+        "robots",
+        help="list shipped and example-robot-data arms",
+        epilog=_epilog("robots"),
+        formatter_class=fmt,
+    )
     s.set_defaults(func=cmd_robots)
 
-    s = sub.add_parser("inspect", help="kinematic tree, chosen chain and task, intolerable joints",
-                       epilog=_epilog("inspect"), formatter_class=fmt)
+    s = sub.add_parser(
+        "inspect",
+        help="kinematic tree, chosen chain and task, intolerable joints",
+        epilog=_epilog("inspect"),
+        formatter_class=fmt,
+    )
     s.add_argument("target", help="shipped / example-robot-data name or URDF path")
     s.add_argument("--tip", default=None)
     s.add_argument("--task", default=None)
@@ -384,32 +526,54 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--package-dir", action="append", default=[])
     s.set_defaults(func=cmd_inspect)
 
-    s = sub.add_parser("simulate", help="one task run with one or several algorithms",
-                       epilog=_epilog("simulate"), formatter_class=fmt)
+    s = sub.add_parser(
+        "simulate",
+        help="one task run with one or several algorithms",
+        epilog=_epilog("simulate"),
+        formatter_class=fmt,
+    )
     add_robot_options(s)
     add_path_options(s)
-    s.add_argument("--algorithms", default="lnva,jvja,mda", help="comma-separated among lnva,jvja,mda")
+    s.add_argument(
+        "--algorithms", default="lnva,jvja,mda", help="comma-separated among lnva,jvja,mda"
+    )
     s.add_argument("--out", default=None, help="output folder")
-    s.add_argument("--html", action="store_true", help="also write a self-contained replay.html per run")
+    s.add_argument(
+        "--html", action="store_true", help="also write a self-contained replay.html per run"
+    )
     s.add_argument("--no-progress", action="store_true")
     s.set_defaults(func=cmd_simulate)
 
-    s = sub.add_parser("lock", help="a run in which a joint locks (servo model on)",
-                       epilog=_epilog("lock"), formatter_class=fmt)
+    s = sub.add_parser(
+        "lock",
+        help="a run in which a joint locks (servo model on)",
+        epilog=_epilog("lock"),
+        formatter_class=fmt,
+    )
     add_robot_options(s)
     add_path_options(s)
     s.add_argument("--joint", required=True, help="the joint that locks")
-    s.add_argument("--at", default="max", help="lock time [s], or max / min: the moment of largest / smallest jump")
+    s.add_argument(
+        "--at",
+        default="max",
+        help="lock time [s], or max / min: the moment of largest / smallest jump",
+    )
     s.add_argument("--algorithm", default="lnva", choices=["lnva", "jvja", "mda"])
     s.add_argument("--tau", type=float, default=0.05, help="servo time constant [s] (default 0.05)")
-    s.add_argument("--accel-limit", type=float, default=float("inf"), help="servo acceleration limit [rad/s²]")
+    s.add_argument(
+        "--accel-limit", type=float, default=float("inf"), help="servo acceleration limit [rad/s²]"
+    )
     s.add_argument("--out", default=None)
     s.add_argument("--html", action="store_true", help="also write a self-contained replay.html")
     s.add_argument("--no-progress", action="store_true")
     s.set_defaults(func=cmd_lock)
 
-    s = sub.add_parser("reproduce", help="every case of the paper: figures, summary.json, REPORT.md",
-                       epilog=_epilog("reproduce"), formatter_class=fmt)
+    s = sub.add_parser(
+        "reproduce",
+        help="every case of the paper: figures, summary.json, REPORT.md",
+        epilog=_epilog("reproduce"),
+        formatter_class=fmt,
+    )
     s.add_argument("--out", default="reproduce_out", help="output folder (default reproduce_out)")
     s.add_argument("--cases", default=None, help="subset, e.g. fig2,fig4,experiment")
     s.add_argument("--quick", action="store_true", help="shortened runs (for tests)")
@@ -417,7 +581,12 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--no-progress", action="store_true")
     s.set_defaults(func=cmd_reproduce)
 
-    s = sub.add_parser("replay", help="meshcat replay of a saved run", epilog=_epilog("replay"), formatter_class=fmt)
+    s = sub.add_parser(
+        "replay",
+        help="meshcat replay of a saved run",
+        epilog=_epilog("replay"),
+        formatter_class=fmt,
+    )
     s.add_argument("run", help="folder of a saved run (with run.npz)")
     g = s.add_mutually_exclusive_group()
     g.add_argument("--open", action="store_true", help="serve it on 127.0.0.1 and print the URL")
@@ -425,7 +594,9 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--speed", type=float, default=1.0, help="playback speed factor (default 1)")
     s.set_defaults(func=cmd_replay)
 
-    s = sub.add_parser("bench", help="the performance benchmark", epilog=_epilog("bench"), formatter_class=fmt)
+    s = sub.add_parser(
+        "bench", help="the performance benchmark", epilog=_epilog("bench"), formatter_class=fmt
+    )
     try:
         from . import bench
 
@@ -459,8 +630,11 @@ def main(argv: list[str] | None = None) -> int:
     except Exception as err:  # noqa: BLE001 - the last line of defence
         if args.debug:
             raise
-        print(f"fault-tolerance {args.command}: unexpected error: {type(err).__name__}: "
-              f"{_one_line(err)} (run with --debug for the traceback)", file=sys.stderr)
+        print(
+            f"fault-tolerance {args.command}: unexpected error: {type(err).__name__}: "
+            f"{_one_line(err)} (run with --debug for the traceback)",
+            file=sys.stderr,
+        )
         return 1
     finally:
         warnings.showwarning = shown

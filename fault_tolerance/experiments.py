@@ -41,24 +41,71 @@ class Case:
 
     def path(self, duration: float | None = None) -> CirclePath:
         """The task path of the case."""
-        return CirclePath(np.array(self.x0), self.radius, self.omega, duration or self.duration,
-                          rows=self.rows, sign=self.sign, name=self.key)
+        return CirclePath(
+            np.array(self.x0),
+            self.radius,
+            self.omega,
+            duration or self.duration,
+            rows=self.rows,
+            sign=self.sign,
+            name=self.key,
+        )
 
 
 ALL3 = ("joint1", "joint2", "joint3")
 CASES: dict[str, Case] = {
     c.key: c
     for c in [
-        Case("fig2", "planar_3r", ALL3, (0.35, 0.0), 0.1, 2 * np.pi, (0, 1),
-             title="Fig. 2 — planar 3R, all joints lockable, start (0.35, 0) m"),
-        Case("fig3", "planar_3r", ALL3, (0.40, 0.0), 0.1, 2 * np.pi, (0, 1),
-             title="Fig. 3 — planar 3R, all joints lockable, start (0.40, 0) m"),
-        Case("fig4", "planar_3r", ("joint2", "joint3"), (0.35, 0.0), 0.1, 2 * np.pi, (0, 1),
-             title="Fig. 4 — planar 3R, joints 2 and 3 lockable, start (0.35, 0) m"),
-        Case("fig6", "spatial_4r", ALL3, (0.09, 0.21, 0.27), 0.075, 2 * np.pi, (1, 2),
-             title="Fig. 6 — spatial 4R, joints 1-3 lockable, start (0.09, 0.21, 0.27) m"),
-        Case("fig7", "spatial_4r", ALL3, (-0.21, 0.20, 0.35), 0.075, 2 * np.pi, (1, 2),
-             title="Fig. 7 — spatial 4R, joints 1-3 lockable, start (-0.21, 0.20, 0.35) m"),
+        Case(
+            "fig2",
+            "planar_3r",
+            ALL3,
+            (0.35, 0.0),
+            0.1,
+            2 * np.pi,
+            (0, 1),
+            title="Fig. 2 — planar 3R, all joints lockable, start (0.35, 0) m",
+        ),
+        Case(
+            "fig3",
+            "planar_3r",
+            ALL3,
+            (0.40, 0.0),
+            0.1,
+            2 * np.pi,
+            (0, 1),
+            title="Fig. 3 — planar 3R, all joints lockable, start (0.40, 0) m",
+        ),
+        Case(
+            "fig4",
+            "planar_3r",
+            ("joint2", "joint3"),
+            (0.35, 0.0),
+            0.1,
+            2 * np.pi,
+            (0, 1),
+            title="Fig. 4 — planar 3R, joints 2 and 3 lockable, start (0.35, 0) m",
+        ),
+        Case(
+            "fig6",
+            "spatial_4r",
+            ALL3,
+            (0.09, 0.21, 0.27),
+            0.075,
+            2 * np.pi,
+            (1, 2),
+            title="Fig. 6 — spatial 4R, joints 1-3 lockable, start (0.09, 0.21, 0.27) m",
+        ),
+        Case(
+            "fig7",
+            "spatial_4r",
+            ALL3,
+            (-0.21, 0.20, 0.35),
+            0.075,
+            2 * np.pi,
+            (1, 2),
+            title="Fig. 7 — spatial 4R, joints 1-3 lockable, start (-0.21, 0.20, 0.35) m",
+        ),
     ]
 }
 
@@ -82,8 +129,15 @@ class LockExperiment:
 
     def path(self, duration: float) -> CirclePath:
         """The Power-Cube task path (a circle travelled once in 6 s)."""
-        return CirclePath(np.array(self.x0), self.radius, self.omega, duration, rows=(0, 1),
-                          sign=-1.0, name="powercube")
+        return CirclePath(
+            np.array(self.x0),
+            self.radius,
+            self.omega,
+            duration,
+            rows=(0, 1),
+            sign=-1.0,
+            name="powercube",
+        )
 
 
 EXPERIMENT = LockExperiment()
@@ -121,7 +175,9 @@ class _Progress:
             self.bar.close()
 
 
-def run_case(case: Case, *, duration: float | None = None, progress=None, arm: Arm | None = None) -> dict:
+def run_case(
+    case: Case, *, duration: float | None = None, progress=None, arm: Arm | None = None
+) -> dict:
     """Sec. III.D planning, then one run per algorithm from the chosen start.
 
     Step (i) finds the minimum-RCN start; steps (ii)-(iii) run JVJA from it and accept it when the
@@ -133,16 +189,26 @@ def run_case(case: Case, *, duration: float | None = None, progress=None, arm: A
     lockable = list(case.lockable)
     posture = initial_posture(arm, np.array(case.x0), lockable)
     path = case.path(duration)
-    jvja_run, attempts = plan(arm, path, "jvja", lockable=lockable, posture=posture, progress=progress)
+    jvja_run, attempts = plan(
+        arm, path, "jvja", lockable=lockable, posture=posture, progress=progress
+    )
     if len(attempts) > 1 and hasattr(progress, "grow"):
         progress.grow((len(attempts) - 1) * len(jvja_run.t))
     q0 = np.array(jvja_run.meta["q0"])
     runs = {
-        alg: jvja_run if alg == "jvja" else
-        simulate(arm, path, alg, q0=q0, lockable=lockable, progress=progress)
+        alg: jvja_run
+        if alg == "jvja"
+        else simulate(arm, path, alg, q0=q0, lockable=lockable, progress=progress)
         for alg in ALGORITHMS
     }
-    return {"arm": arm, "posture": posture, "runs": runs, "path": path, "attempts": attempts, "q0": q0}
+    return {
+        "arm": arm,
+        "posture": posture,
+        "runs": runs,
+        "path": path,
+        "attempts": attempts,
+        "q0": q0,
+    }
 
 
 def case_summary(case: Case, result: dict) -> tuple[dict, dict]:
@@ -151,7 +217,9 @@ def case_summary(case: Case, result: dict) -> tuple[dict, dict]:
     algs = {}
     for alg, run in runs.items():
         s = run.summary()
-        algs[alg] = {k: s[k] for k in ("jvj_mean", "jvj_max", "rcn_mean", "rcn_max", "tracking_error_max")}
+        algs[alg] = {
+            k: s[k] for k in ("jvj_mean", "jvj_max", "rcn_mean", "rcn_max", "tracking_error_max")
+        }
     J0 = arm.jacobian(q0)
     xd0 = result["path"].xdot(0.0)
     red = jump_reduction(J0, xd0, list(case.lockable), joint_names=arm.joint_names)
@@ -162,42 +230,79 @@ def case_summary(case: Case, result: dict) -> tuple[dict, dict]:
         "near_singular_samples": {a: r.summary()["near_singular_samples"] for a, r in runs.items()},
         "planning": {
             "rcn_threshold": RCN_THRESHOLD,
-            "attempts": [{"q0": a.q0.tolist(), "K0": a.K0, "rcn_max": a.rcn_max,
-                          "accepted": a.accepted, "reason": a.reason} for a in result["attempts"]],
+            "attempts": [
+                {
+                    "q0": a.q0.tolist(),
+                    "K0": a.K0,
+                    "rcn_max": a.rcn_max,
+                    "accepted": a.accepted,
+                    "reason": a.reason,
+                }
+                for a in result["attempts"]
+            ],
         },
     }
     if arm.name == "spatial_4r":
-        extra["N44_max"] = float(max(abs(projection(arm.jacobian(q)).N[3, 3])
-                                     for q in runs["jvja"].q[::10]))
+        extra["N44_max"] = float(
+            max(abs(projection(arm.jacobian(q)).N[3, 3]) for q in runs["jvja"].q[::10])
+        )
     return {
-        "robot": case.robot, "lockable": list(case.lockable), "x0": list(case.x0),
-        "q0": q0.tolist(), "algorithms": algs,
+        "robot": case.robot,
+        "lockable": list(case.lockable),
+        "x0": list(case.x0),
+        "q0": q0.tolist(),
+        "algorithms": algs,
     }, extra
 
 
-def run_experiment(exp: LockExperiment = EXPERIMENT, *, duration: float | None = None,
-                   progress=None) -> dict:
+def run_experiment(
+    exp: LockExperiment = EXPERIMENT, *, duration: float | None = None, progress=None
+) -> dict:
     """Sec. V: planned LNVA run, lock moments of largest / smallest jump, two lock runs."""
     arm = load_arm(exp.robot)
     T = duration or exp.duration
     posture = initial_posture(arm, np.array(exp.x0), [exp.joint])
-    planned = simulate(arm, exp.path(T), "lnva", q0=posture.q, lockable=[exp.joint], progress=progress)
+    planned = simulate(
+        arm, exp.path(T), "lnva", q0=posture.q, lockable=[exp.joint], progress=progress
+    )
     t_max = float(planned.t[int(np.argmax(planned.jvj))])
     t_min = float(planned.t[int(np.argmin(planned.jvj))])
     runs = {}
     horizon = max(T, max(t_max, t_min) + exp.after_lock)
     if hasattr(progress, "grow"):  # the estimate assumed T + after_lock; correct it
         progress.grow(3 * (int(round(horizon / 1e-3)) - int(round((T + exp.after_lock) / 1e-3))))
-    baseline = simulate(arm, exp.path(horizon), "lnva", q0=posture.q, lockable=[exp.joint],
-                        servo=exp.servo, feedback_gain=exp.feedback_gain, progress=progress)
+    baseline = simulate(
+        arm,
+        exp.path(horizon),
+        "lnva",
+        q0=posture.q,
+        lockable=[exp.joint],
+        servo=exp.servo,
+        feedback_gain=exp.feedback_gain,
+        progress=progress,
+    )
     for label, t_lock in (("largest jump", t_max), ("smallest jump", t_min)):
         runs[label] = simulate(
-            arm, exp.path(horizon), "lnva", q0=posture.q, lockable=[exp.joint],
-            lock_joint=exp.joint, lock_time=t_lock, servo=exp.servo,
-            feedback_gain=exp.feedback_gain, progress=progress,
+            arm,
+            exp.path(horizon),
+            "lnva",
+            q0=posture.q,
+            lockable=[exp.joint],
+            lock_joint=exp.joint,
+            lock_time=t_lock,
+            servo=exp.servo,
+            feedback_gain=exp.feedback_gain,
+            progress=progress,
         )
-    return {"arm": arm, "posture": posture, "planned": planned, "baseline": baseline, "runs": runs,
-            "t_max": t_max, "t_min": t_min}
+    return {
+        "arm": arm,
+        "posture": posture,
+        "planned": planned,
+        "baseline": baseline,
+        "runs": runs,
+        "t_max": t_max,
+        "t_min": t_min,
+    }
 
 
 def experiment_summary(exp: LockExperiment, result: dict) -> tuple[dict, dict]:
@@ -210,8 +315,10 @@ def experiment_summary(exp: LockExperiment, result: dict) -> tuple[dict, dict]:
 
     s_max, s_min = runs["largest jump"].summary(), runs["smallest jump"].summary()
     contract = {
-        "robot": exp.robot, "joint": exp.joint,
-        "t_max_jump": result["t_max"], "t_min_jump": result["t_min"],
+        "robot": exp.robot,
+        "joint": exp.joint,
+        "t_max_jump": result["t_max"],
+        "t_min_jump": result["t_min"],
         "path_error_peak_at_max": s_max["path_error_peak_after_lock"],
         "path_error_peak_at_min": s_min["path_error_peak_after_lock"],
         "servo_model": exp.servo.describe() + f"; task feedback K_p = {exp.feedback_gain} 1/s",
@@ -222,8 +329,10 @@ def experiment_summary(exp: LockExperiment, result: dict) -> tuple[dict, dict]:
         "deviation_from_unlocked_at_max": deviation(runs["largest jump"]),
         "deviation_from_unlocked_at_min": deviation(runs["smallest jump"]),
         "path_error_max_without_lock": float(np.max(base.error)),
-        "x0": list(exp.x0), "q0": result["posture"].q.tolist(),
-        "paper_t_max_jump": exp.paper_t_max, "paper_t_min_jump": exp.paper_t_min,
+        "x0": list(exp.x0),
+        "q0": result["posture"].q.tolist(),
+        "paper_t_max_jump": exp.paper_t_max,
+        "paper_t_min_jump": exp.paper_t_min,
     }
 
 
@@ -233,8 +342,11 @@ def eq8_check(duration: float | None = None) -> dict:
     arm = load_arm(case.robot)
     posture = initial_posture(arm, np.array(case.x0), ["joint3"])
     run = simulate(arm, case.path(duration), "jvja", q0=posture.q, lockable=["joint3"])
-    return {"max_abs_rate_joint3": float(np.max(np.abs(run.qd[:, 2]))),
-            "jvj_max": float(np.max(run.jvj)), "tracking_error_max": float(np.max(run.error))}
+    return {
+        "max_abs_rate_joint3": float(np.max(np.abs(run.qd[:, 2]))),
+        "jvj_max": float(np.max(run.jvj)),
+        "tracking_error_max": float(np.max(run.error)),
+    }
 
 
 def step_timing(repeats: int = 2000) -> dict:
@@ -284,12 +396,15 @@ def reproduce(
     if unknown or not keys:
         from .errors import InvalidInput
 
-        raise InvalidInput(f"unknown case(s) {unknown or keys}; choose among "
-                           f"{list(CASES) + ['experiment']}")
+        raise InvalidInput(
+            f"unknown case(s) {unknown or keys}; choose among {list(CASES) + ['experiment']}"
+        )
     out = output_folder(out)
     case_T = 0.25 if quick else None
     exp_T = 3.0 if quick else None
-    total = sum(3 * int(round((case_T or CASES[k].duration) / 1e-3)) + 3 for k in keys if k in CASES)
+    total = sum(
+        3 * int(round((case_T or CASES[k].duration) / 1e-3)) + 3 for k in keys if k in CASES
+    )
     if "experiment" in keys:
         T = exp_T or EXPERIMENT.duration
         total += int(round(T / 1e-3)) + 1 + 3 * (int(round((T + EXPERIMENT.after_lock) / 1e-3)) + 1)
@@ -303,15 +418,23 @@ def reproduce(
             if key == "experiment":
                 res = run_experiment(duration=exp_T, progress=bar)
                 summary["experiment"], summary["details"]["experiment"] = experiment_summary(
-                    EXPERIMENT, res)
-                fig = plots.plot_lock(res["runs"], "Figs. 9-10 — Power-Cube 3R, LNVA, joint 3 locks "
-                                      "at the largest / smallest jump")
+                    EXPERIMENT, res
+                )
+                fig = plots.plot_lock(
+                    res["runs"],
+                    "Figs. 9-10 — Power-Cube 3R, LNVA, joint 3 locks "
+                    "at the largest / smallest jump",
+                )
                 plots.save_figure(fig, out / "fig9_10")
                 for label, run in res["runs"].items():
                     run.save(out / "runs" / "experiment" / label.replace(" ", "_"))
                 res["planned"].save(out / "runs" / "experiment" / "planned")
                 if html:
-                    _html(res["runs"]["largest jump"], res["arm"], out / "runs" / "experiment" / "largest_jump")
+                    _html(
+                        res["runs"]["largest jump"],
+                        res["arm"],
+                        out / "runs" / "experiment" / "largest_jump",
+                    )
             else:
                 case = CASES[key]
                 res = run_case(case, duration=case_T, progress=bar)
@@ -326,18 +449,23 @@ def reproduce(
     except BaseException as err:  # Ctrl-C or a failure: keep what is done, say what is not
         bar.close()
         partial = {
-            "stopped_by": "interrupted (Ctrl-C)" if isinstance(err, KeyboardInterrupt)
+            "stopped_by": "interrupted (Ctrl-C)"
+            if isinstance(err, KeyboardInterrupt)
             else f"{type(err).__name__}: {err}",
             "finished": done,
             "unfinished": [k for k in keys if k not in done] + ["checks"],
             **summary,
         }
-        write_atomic(out / "summary.partial.json", json.dumps(partial, indent=2, default=str) + "\n")
+        write_atomic(
+            out / "summary.partial.json", json.dumps(partial, indent=2, default=str) + "\n"
+        )
         raise
     bar.close()
     summary["meta"] = {
-        "quick": quick, "seconds": round(time.perf_counter() - started, 2),
-        "algorithms": list(ALGORITHMS), "dt": 1e-3,
+        "quick": quick,
+        "seconds": round(time.perf_counter() - started, 2),
+        "algorithms": list(ALGORITHMS),
+        "dt": 1e-3,
         "mda_gain": __import__("fault_tolerance.planner", fromlist=["MDA_GAIN"]).MDA_GAIN,
     }
     write_atomic(out / "summary.json", json.dumps(summary, indent=2) + "\n")

@@ -28,7 +28,9 @@ class Scenarios:
 
     def __post_init__(self) -> None:
         if not self.sets:
-            raise InvalidScenario("the lockable set is empty; name at least one joint that may lock")
+            raise InvalidScenario(
+                "the lockable set is empty; name at least one joint that may lock"
+            )
         if len(self.weights) != len(self.sets):
             raise InvalidScenario(
                 f"{len(self.weights)} weights for {len(self.sets)} scenarios; give one weight each"

@@ -28,8 +28,13 @@ def _scenarios(J: np.ndarray, lockable, weights=None, joint_names=()) -> Scenari
 
 
 def post_failure_rates(
-    a: np.ndarray, N: np.ndarray, sc: Scenarios, qd: np.ndarray | None = None,
-    response: str = "least_norm", *, damp: bool = False,
+    a: np.ndarray,
+    N: np.ndarray,
+    sc: Scenarios,
+    qd: np.ndarray | None = None,
+    response: str = "least_norm",
+    *,
+    damp: bool = False,
 ) -> np.ndarray:
     """Rates of the reduced robot for every scenario, shape (f, n).
 

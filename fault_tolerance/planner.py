@@ -76,12 +76,12 @@ def jvja(
             return a - N @ c / sc.weights.sum()
         shift = sum(
             w * N[:, list(S)] @ np.linalg.solve(pivot_block(N, S, tolerate), a[list(S)])
-            for S, w in zip(sc.sets, sc.weights)
+            for S, w in zip(sc.sets, sc.weights, strict=True)
         )
         return a - shift / sc.weights.sum()
     if response == "continuation":
         W = np.zeros_like(N)
-        for S, w in zip(sc.sets, sc.weights):
+        for S, w in zip(sc.sets, sc.weights, strict=True):
             W[np.ix_(S, S)] += w * np.linalg.inv(pivot_block(N, S, tolerate))
         z = -np.linalg.pinv(N @ W @ N, rcond=1e-10, hermitian=True) @ (N @ W @ a)
         return a + N @ z

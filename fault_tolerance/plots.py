@@ -16,7 +16,11 @@ import numpy as np
 from .simulation import Run, write_atomic
 
 COLORS = {"lnva": "#1f77b4", "jvja": "#d62728", "mda": "#2ca02c"}
-LABELS = {"lnva": "LNVA (least norm)", "jvja": "JVJA (minimum jump)", "mda": "MDA (maximum dexterity)"}
+LABELS = {
+    "lnva": "LNVA (least norm)",
+    "jvja": "JVJA (minimum jump)",
+    "mda": "MDA (maximum dexterity)",
+}
 
 
 def _subplots(nrows: int, ncols: int, figsize, **kw):
@@ -67,7 +71,7 @@ def plot_lock(runs: Mapping[str, Run], title: str = ""):
     first = next(iter(runs.values()))
     ax1.plot(first.x_des[:, 0], first.x_des[:, 1], "k--", lw=1.2, label="desired path")
     colors = ["#d62728", "#1f77b4", "#2ca02c", "#9467bd"]
-    for (label, run), c in zip(runs.items(), colors):
+    for (label, run), c in zip(runs.items(), colors, strict=False):
         lock = run.meta.get("lock") or {}
         ax1.plot(run.x[:, 0], run.x[:, 1], color=c, lw=1.4, label=f"actual, {label}")
         ax2.plot(run.t, 1e3 * run.error, color=c, lw=1.4, label=label)
@@ -113,6 +117,8 @@ def plot_run(run: Run, title: str = ""):
             ax.axvline(lock["time"], color="0.4", ls=":", lw=1.2)
     for ax in axes[1]:
         ax.set_xlabel("time t [s]")
-    fig.suptitle(title or f"{run.meta.get('robot', '')} — {run.meta.get('algorithm', '')}", fontsize=11)
+    fig.suptitle(
+        title or f"{run.meta.get('robot', '')} — {run.meta.get('algorithm', '')}", fontsize=11
+    )
     fig.tight_layout()
     return fig

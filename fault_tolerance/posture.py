@@ -22,7 +22,7 @@ import numpy as np
 from .arm import Arm
 from .errors import InvalidInput
 from .failures import Scenarios, scenarios
-from .indices import condition_numbers, reduced_singular_values, rcn_gradient
+from .indices import condition_numbers, rcn_gradient, reduced_singular_values
 from .linalg import projection
 
 #: Largest reduced condition number k_S accepted along a planned run (step iii).
@@ -130,7 +130,9 @@ class Posture:
 
     q: np.ndarray  # best configuration, shape (n,)
     K: float  # its square-sum RCN
-    candidates: list[tuple[float, np.ndarray]] = field(default_factory=list)  # local minima, best first
+    candidates: list[tuple[float, np.ndarray]] = field(
+        default_factory=list
+    )  # local minima, best first
     curves: list[np.ndarray] = field(default_factory=list)  # traced self-motion curves (r = 1)
     method: str = ""
 
@@ -166,12 +168,18 @@ def initial_posture(
     """
     x0 = np.asarray(x0, dtype=float)
     if x0.shape != (arm.m,) or not np.all(np.isfinite(x0)):
-        raise InvalidInput(f"x0 must be {arm.m} finite numbers for task {'/'.join(arm.task)}, got {x0.tolist()}")
+        raise InvalidInput(
+            f"x0 must be {arm.m} finite numbers for task {'/'.join(arm.task)}, got {x0.tolist()}"
+        )
     rng = rng or np.random.default_rng(0)
     if seeds is None:  # a global search needs many seeds; descent from each is costlier
         seeds = 24 if arm.redundancy == 1 else 8
-    sc = scenarios(arm.default_lockable if lockable is None else lockable, arm.n,
-                   r=arm.redundancy, joint_names=arm.joint_names)
+    sc = scenarios(
+        arm.default_lockable if lockable is None else lockable,
+        arm.n,
+        r=arm.redundancy,
+        joint_names=arm.joint_names,
+    )
     starts = [arm.q_reference, arm.neutral()] + [arm.random_q(rng) for _ in range(seeds)]
     sols = [s for s in (inverse_kinematics(arm, x0, q) for q in starts) if s is not None]
     sols = [s for s in sols if np.all(_wrappable(arm) | ((s >= arm.lower) & (s <= arm.upper)))]
@@ -294,8 +302,11 @@ def plan(
         run = simulate(arm, path, algorithm, q0=q0, lockable=lockable, **sim_options)
         worst = float(np.max(run.rcn))
         ok = worst <= threshold
-        reason = (f"largest RCN {worst:.3g} <= threshold {threshold:g}" if ok else
-                  f"largest RCN {worst:.3g} > threshold {threshold:g}; trying the next start")
+        reason = (
+            f"largest RCN {worst:.3g} <= threshold {threshold:g}"
+            if ok
+            else f"largest RCN {worst:.3g} > threshold {threshold:g}; trying the next start"
+        )
         tried.append((PlanAttempt(q0, K0, worst, ok, reason), run))
         if ok:
             break
@@ -308,5 +319,9 @@ def plan(
 
 def lockable_scenarios(arm: Arm, lockable: Sequence | None) -> Scenarios:
     """The arm's scenarios for ``lockable`` (default: its default lockable joints)."""
-    return scenarios(arm.default_lockable if lockable is None else lockable, arm.n,
-                     r=arm.redundancy, joint_names=arm.joint_names)
+    return scenarios(
+        arm.default_lockable if lockable is None else lockable,
+        arm.n,
+        r=arm.redundancy,
+        joint_names=arm.joint_names,
+    )

@@ -100,8 +100,9 @@ def _numpy_linalg() -> SimpleNamespace:
     def dgemm(alpha, a, b, beta, c):
         return beta * c + alpha * (a @ b)
 
-    def dgemv(alpha, a, x, beta=0.0, y=None, offx=0, incx=1, offy=0, incy=1, trans=0,
-              overwrite_y=0):
+    def dgemv(
+        alpha, a, x, beta=0.0, y=None, offx=0, incx=1, offy=0, incy=1, trans=0, overwrite_y=0
+    ):
         r = alpha * ((a.T if trans else a) @ x)
         if y is None:
             return r
@@ -112,8 +113,9 @@ def _numpy_linalg() -> SimpleNamespace:
     def ddot(x, y):
         return float(np.vdot(x, y))
 
-    return SimpleNamespace(name="numpy", dsyrk=dsyrk, dposv=dposv, dtrtri=dtrtri, dgemm=dgemm,
-                           dgemv=dgemv, ddot=ddot)
+    return SimpleNamespace(
+        name="numpy", dsyrk=dsyrk, dposv=dposv, dtrtri=dtrtri, dgemm=dgemm, dgemv=dgemv, ddot=ddot
+    )
 
 
 def _lapack_linalg() -> SimpleNamespace:
@@ -121,8 +123,13 @@ def _lapack_linalg() -> SimpleNamespace:
     from scipy.linalg import blas, lapack
 
     return SimpleNamespace(
-        name="lapack", dsyrk=blas.dsyrk, dposv=lapack.dposv, dtrtri=lapack.dtrtri,
-        dgemm=blas.dgemm, dgemv=blas.dgemv, ddot=blas.ddot,
+        name="lapack",
+        dsyrk=blas.dsyrk,
+        dposv=lapack.dposv,
+        dtrtri=lapack.dtrtri,
+        dgemm=blas.dgemm,
+        dgemv=blas.dgemv,
+        ddot=blas.ddot,
     )
 
 
@@ -493,7 +500,11 @@ class Controller:
             qd = planner.jvja(J, xdot, self.scenarios, tolerate=self.tolerate)
         else:
             qd = planner.mda(
-                J, xdot, self.scenarios, dJ=self.jacobian_derivatives(q), gain=self.gain,
+                J,
+                xdot,
+                self.scenarios,
+                dJ=self.jacobian_derivatives(q),
+                gain=self.gain,
                 max_step=self.max_step,
             )
         out[...] = qd
@@ -509,7 +520,9 @@ class Controller:
                     f"{name} has shape {np.shape(value)}; {self.arm.name} needs shape {shape}"
                 )
         if out is not None and not (
-            isinstance(out, np.ndarray) and out.shape == (self.n,) and out.dtype == np.float64
+            isinstance(out, np.ndarray)
+            and out.shape == (self.n,)
+            and out.dtype == np.float64
             and out.flags.c_contiguous
         ):
             return InvalidInput(f"out must be a C-contiguous float64 array of shape ({self.n},)")
@@ -554,9 +567,21 @@ class Controller:
         n, m = self.n, self.m
         la = self._la
         dsyrk, dposv, dtrtri, dgemm, dgemv, ddot = (
-            la.dsyrk, la.dposv, la.dtrtri, la.dgemm, la.dgemv, la.ddot)
+            la.dsyrk,
+            la.dposv,
+            la.dtrtri,
+            la.dgemm,
+            la.dgemv,
+            la.ddot,
+        )
         cfj, dot, empty, divide, multiply, add = (
-            pin.computeFrameJacobian, np.dot, np.empty, np.divide, np.multiply, np.add)
+            pin.computeFrameJacobian,
+            np.dot,
+            np.empty,
+            np.divide,
+            np.multiply,
+            np.add,
+        )
         GT = np.zeros((m, m), order="F")
         eye = np.asfortranarray(np.eye(n))
         c = np.empty(n)
@@ -682,7 +707,8 @@ class Controller:
         step.__name__ = name
         step.__doc__ = (
             "JVJA, minimum square-sum jump rates, eq. (5) in closed form (G2); compiled."
-            if jvja else "LNVA, least-norm rates ``q̇ = J⁺ẋ``; compiled."
+            if jvja
+            else "LNVA, least-norm rates ``q̇ = J⁺ẋ``; compiled."
         )
         return step
 
@@ -769,7 +795,13 @@ class Controller:
         n, m = self.n, self.m
         la = self._la
         dsyrk, dposv, dtrtri, dgemm, dgemv, ddot = (
-            la.dsyrk, la.dposv, la.dtrtri, la.dgemm, la.dgemv, la.ddot)
+            la.dsyrk,
+            la.dposv,
+            la.dtrtri,
+            la.dgemm,
+            la.dgemv,
+            la.ddot,
+        )
         GT = np.zeros((m, m), order="F")
         eye = np.asfortranarray(np.eye(n))
         fallback, bad_call = self._fallback, self._bad_call

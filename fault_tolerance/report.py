@@ -22,8 +22,10 @@ def _verdict(ok_count: int, total: int) -> str:
 
 
 def _claim_jvja_smallest(cases: dict) -> tuple[str, list[str]]:
-    rows = ["| case | λ mean LNVA | λ mean JVJA | λ mean MDA | λ max LNVA | λ max JVJA | λ max MDA | JVJA smallest (mean / max) |",
-            "|---|---|---|---|---|---|---|---|"]
+    rows = [
+        "| case | λ mean LNVA | λ mean JVJA | λ mean MDA | λ max LNVA | λ max JVJA | λ max MDA | JVJA smallest (mean / max) |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
     ok = 0
     for key, c in cases.items():
         a = c["algorithms"]
@@ -39,14 +41,19 @@ def _claim_jvja_smallest(cases: dict) -> tuple[str, list[str]]:
 
 
 def _claim_mda_dexterity(cases: dict) -> tuple[str, list[str]]:
-    rows = ["| case | K mean LNVA | K mean JVJA | K mean MDA | MDA smallest |", "|---|---|---|---|---|"]
+    rows = [
+        "| case | K mean LNVA | K mean JVJA | K mean MDA | MDA smallest |",
+        "|---|---|---|---|---|",
+    ]
     ok = 0
     for key, c in cases.items():
         a = c["algorithms"]
         good = a["mda"]["rcn_mean"] <= min(a["lnva"]["rcn_mean"], a["jvja"]["rcn_mean"])
         ok += good
-        rows.append(f"| {key} | {_f(a['lnva']['rcn_mean'])} | {_f(a['jvja']['rcn_mean'])} "
-                    f"| {_f(a['mda']['rcn_mean'])} | {'yes' if good else 'no'} |")
+        rows.append(
+            f"| {key} | {_f(a['lnva']['rcn_mean'])} | {_f(a['jvja']['rcn_mean'])} "
+            f"| {_f(a['mda']['rcn_mean'])} | {'yes' if good else 'no'} |"
+        )
     return _verdict(ok, len(cases)), rows
 
 
@@ -70,43 +77,68 @@ def write_report(summary: dict) -> str:
         "",
     ]
     if meta.get("quick"):
-        out += ["**Quick mode**: the runs were shortened (0.25 s cases, 3 s experiment); the "
-                "verdicts below speak for the shortened runs only.", ""]
-    out += ["## Limits of this replication", "",
-            "* The spatial 4R's figure (Fig. 5) is not in the text: its geometry is reconstructed "
-            "from the D-H values (see `robots/spatial_4r.urdf`). Its joint 4 is non-redundant, as "
-            "the paper says, which supports the reconstruction but does not prove it.",
-            "* The paper states the start points x0 but not the start configurations; we use "
-            "step (i) of its own planning procedure (the global minimum of K on the self-motion "
-            "curve). Where the paper's start differs, absolute numbers differ.",
-            "* The Power-Cube start point is not given; we use x0 = "
-            f"{exp.get('x0', details.get('experiment', {}).get('x0', '?'))} m, and the module masses in "
-            "the URDF are representative, not measured.",
-            f"* MDA's gain is ours (α = {meta.get('mda_gain', '?')}); the paper does not give it.",
-            ""]
+        out += [
+            "**Quick mode**: the runs were shortened (0.25 s cases, 3 s experiment); the "
+            "verdicts below speak for the shortened runs only.",
+            "",
+        ]
+    out += [
+        "## Limits of this replication",
+        "",
+        "* The spatial 4R's figure (Fig. 5) is not in the text: its geometry is reconstructed "
+        "from the D-H values (see `robots/spatial_4r.urdf`). Its joint 4 is non-redundant, as "
+        "the paper says, which supports the reconstruction but does not prove it.",
+        "* The paper states the start points x0 but not the start configurations; we use "
+        "step (i) of its own planning procedure (the global minimum of K on the self-motion "
+        "curve). Where the paper's start differs, absolute numbers differ.",
+        "* The Power-Cube start point is not given; we use x0 = "
+        f"{exp.get('x0', details.get('experiment', {}).get('x0', '?'))} m, and the module masses in "
+        "the URDF are representative, not measured.",
+        f"* MDA's gain is ours (α = {meta.get('mda_gain', '?')}); the paper does not give it.",
+        "",
+    ]
     out += ["## Claims", ""]
 
     if cases:
         verdict, rows = _claim_jvja_smallest(cases)
-        out += ["### 1. JVJA gives the smallest joint velocity jump along the task (Sec. IV, Figs. 2, 3, 4, 6, 7)", "",
-                f"**Verdict: {verdict}** (judged on the time-mean of λ; the max is shown too).", ""]
+        out += [
+            "### 1. JVJA gives the smallest joint velocity jump along the task (Sec. IV, Figs. 2, 3, 4, 6, 7)",
+            "",
+            f"**Verdict: {verdict}** (judged on the time-mean of λ; the max is shown too).",
+            "",
+        ]
         out += rows + [""]
-        out += ["At one shared configuration JVJA's jump is never above LNVA's (eq. 14, claim 4). "
-                "Along a task, though, each algorithm integrates its own trajectory, and a "
-                "trajectory that minimises the jump now can lead to configurations where the jump "
-                "is larger later; where the table says *no*, that is what happened.", ""]
+        out += [
+            "At one shared configuration JVJA's jump is never above LNVA's (eq. 14, claim 4). "
+            "Along a task, though, each algorithm integrates its own trajectory, and a "
+            "trajectory that minimises the jump now can lead to configurations where the jump "
+            "is larger later; where the table says *no*, that is what happened.",
+            "",
+        ]
 
         verdict, rows = _claim_mda_dexterity(cases)
-        out += ["### 2. MDA keeps the best dexterity, JVJA's stays comparable (Sec. IV)", "",
-                f"**Verdict: {verdict}** (time-mean of K).", ""] + rows + [""]
+        out += (
+            [
+                "### 2. MDA keeps the best dexterity, JVJA's stays comparable (Sec. IV)",
+                "",
+                f"**Verdict: {verdict}** (time-mean of K).",
+                "",
+            ]
+            + rows
+            + [""]
+        )
 
         if "fig2" in cases and "fig4" in cases:
             r2, r4 = _reduction(cases["fig2"]), _reduction(cases["fig4"])
             ok = r4 > r2
-            out += ["### 3. Fewer lockable joints, larger advantage of JVJA (Fig. 4 vs Fig. 2)", "",
-                    f"**Verdict: {REPRODUCED if ok else NOT_REPRODUCED}**. Reduction of the mean "
-                    f"jump, 1 − λ̄_JVJA/λ̄_LNVA: {100 * r2:.1f} % with all three joints lockable "
-                    f"(fig2), {100 * r4:.1f} % with joints 2 and 3 (fig4).", ""]
+            out += [
+                "### 3. Fewer lockable joints, larger advantage of JVJA (Fig. 4 vs Fig. 2)",
+                "",
+                f"**Verdict: {REPRODUCED if ok else NOT_REPRODUCED}**. Reduction of the mean "
+                f"jump, 1 − λ̄_JVJA/λ̄_LNVA: {100 * r2:.1f} % with all three joints lockable "
+                f"(fig2), {100 * r4:.1f} % with joints 2 and 3 (fig4).",
+                "",
+            ]
 
         rows = ["| case | δ = λ(LN) − λ(OPT) | f‖q̇_H‖² | δ ≥ 0 |", "|---|---|---|---|"]
         ok = 0
@@ -114,70 +146,113 @@ def write_report(summary: dict) -> str:
             e = details.get(key, {}).get("eq14_at_start")
             if e is None:
                 continue
-            good = e["delta"] >= -1e-12 and abs(e["delta"] - e["f_qh2"]) <= 1e-9 * max(1.0, e["f_qh2"])
+            good = e["delta"] >= -1e-12 and abs(e["delta"] - e["f_qh2"]) <= 1e-9 * max(
+                1.0, e["f_qh2"]
+            )
             ok += good
-            rows.append(f"| {key} | {_f(e['delta'], 8)} | {_f(e['f_qh2'], 8)} | {'yes' if good else 'no'} |")
-        out += ["### 4. δ = f‖q̇_H‖² ≥ 0 at a shared configuration (eqs. 11-14)", "",
-                f"**Verdict: {_verdict(ok, len(rows) - 2)}** (at each case's start, with ẋ(0)).", ""]
+            rows.append(
+                f"| {key} | {_f(e['delta'], 8)} | {_f(e['f_qh2'], 8)} | {'yes' if good else 'no'} |"
+            )
+        out += [
+            "### 4. δ = f‖q̇_H‖² ≥ 0 at a shared configuration (eqs. 11-14)",
+            "",
+            f"**Verdict: {_verdict(ok, len(rows) - 2)}** (at each case's start, with ẋ(0)).",
+            "",
+        ]
         out += rows + [""]
 
     eq8 = summary.get("checks", {}).get("eq8")
     if eq8:
         ok = eq8["max_abs_rate_joint3"] < 1e-9 and eq8["jvj_max"] < 1e-12
-        out += ["### 5. If only joint k may lock, JVJA holds it still and the jump is zero (eq. 8)", "",
-                f"**Verdict: {REPRODUCED if ok else NOT_REPRODUCED}**. Planar 3R, Fig. 2 path, only "
-                f"joint 3 lockable: max |q̇₃| = {_f(eq8['max_abs_rate_joint3'])} rad/s, max λ = "
-                f"{_f(eq8['jvj_max'])}, tracking error {_f(eq8['tracking_error_max'])} m.", ""]
+        out += [
+            "### 5. If only joint k may lock, JVJA holds it still and the jump is zero (eq. 8)",
+            "",
+            f"**Verdict: {REPRODUCED if ok else NOT_REPRODUCED}**. Planar 3R, Fig. 2 path, only "
+            f"joint 3 lockable: max |q̇₃| = {_f(eq8['max_abs_rate_joint3'])} rad/s, max λ = "
+            f"{_f(eq8['jvj_max'])}, tracking error {_f(eq8['tracking_error_max'])} m.",
+            "",
+        ]
 
     n44 = [details[k]["N44_max"] for k in ("fig6", "fig7") if "N44_max" in details.get(k, {})]
     if n44:
         ok = max(n44) < 1e-9
-        out += ["### 6. The spatial 4R's joint 4 is non-redundant (Sec. IV.B)", "",
-                f"**Verdict: {REPRODUCED if ok else NOT_REPRODUCED}**. Largest N₄₄ along the JVJA "
-                f"runs: {_f(max(n44))} (zero means locking joint 4 loses the task).", ""]
+        out += [
+            "### 6. The spatial 4R's joint 4 is non-redundant (Sec. IV.B)",
+            "",
+            f"**Verdict: {REPRODUCED if ok else NOT_REPRODUCED}**. Largest N₄₄ along the JVJA "
+            f"runs: {_f(max(n44))} (zero means locking joint 4 loses the task).",
+            "",
+        ]
 
     if exp:
         d = details.get("experiment", {})
-        close = (abs(exp["t_max_jump"] - d.get("paper_t_max_jump", 3.1)) < 0.2
-                 and abs(exp["t_min_jump"] - d.get("paper_t_min_jump", 4.5)) < 0.2)
-        out += ["### 7. Lock moments of largest and smallest jump (Sec. V: t = 3.1 s and 4.5 s)", "",
-                f"**Verdict: {REPRODUCED if close else NOT_REPRODUCED}**. We find the largest jump "
-                f"of joint 3 at t = {exp['t_max_jump']:.3f} s (λ = {_f(d.get('jump_at_max', float('nan')))}) "
-                f"and the smallest at t = {exp['t_min_jump']:.3f} s (λ = {_f(d.get('jump_at_min', float('nan')))}). "
-                + ("" if close else "The moments depend on the start configuration, which the paper "
-                   "does not give (nor its start point); with ours they fall elsewhere. Under LNVA the "
-                   "smallest jump is where joint 3's least-norm rate crosses zero, so it is ~0."), ""]
+        close = (
+            abs(exp["t_max_jump"] - d.get("paper_t_max_jump", 3.1)) < 0.2
+            and abs(exp["t_min_jump"] - d.get("paper_t_min_jump", 4.5)) < 0.2
+        )
+        out += [
+            "### 7. Lock moments of largest and smallest jump (Sec. V: t = 3.1 s and 4.5 s)",
+            "",
+            f"**Verdict: {REPRODUCED if close else NOT_REPRODUCED}**. We find the largest jump "
+            f"of joint 3 at t = {exp['t_max_jump']:.3f} s (λ = {_f(d.get('jump_at_max', float('nan')))}) "
+            f"and the smallest at t = {exp['t_min_jump']:.3f} s (λ = {_f(d.get('jump_at_min', float('nan')))}). "
+            + (
+                ""
+                if close
+                else "The moments depend on the start configuration, which the paper "
+                "does not give (nor its start point); with ours they fall elsewhere. Under LNVA the "
+                "smallest jump is where joint 3's least-norm rate crosses zero, so it is ~0."
+            ),
+            "",
+        ]
         ok = exp["path_error_peak_at_min"] < exp["path_error_peak_at_max"]
-        out += ["### 8. Locking at the smallest jump gives a smaller path error (Sec. V, Figs. 9-10)", "",
-                f"**Verdict: {REPRODUCED if ok else NOT_REPRODUCED}**. Servo model: {exp['servo_model']}. "
-                f"Peak path error after the lock: {1e3 * exp['path_error_peak_at_max']:.3f} mm when "
-                f"joint 3 locks at the largest jump, {1e3 * exp['path_error_peak_at_min']:.3f} mm at "
-                f"the smallest (without any lock the servo lag alone gives "
-                f"{1e3 * d.get('path_error_max_without_lock', float('nan')):.3f} mm). Deviation from "
-                f"the unlocked run: {1e3 * d.get('deviation_from_unlocked_at_max', float('nan')):.3f} mm vs "
-                f"{1e3 * d.get('deviation_from_unlocked_at_min', float('nan')):.3f} mm.", ""]
+        out += [
+            "### 8. Locking at the smallest jump gives a smaller path error (Sec. V, Figs. 9-10)",
+            "",
+            f"**Verdict: {REPRODUCED if ok else NOT_REPRODUCED}**. Servo model: {exp['servo_model']}. "
+            f"Peak path error after the lock: {1e3 * exp['path_error_peak_at_max']:.3f} mm when "
+            f"joint 3 locks at the largest jump, {1e3 * exp['path_error_peak_at_min']:.3f} mm at "
+            f"the smallest (without any lock the servo lag alone gives "
+            f"{1e3 * d.get('path_error_max_without_lock', float('nan')):.3f} mm). Deviation from "
+            f"the unlocked run: {1e3 * d.get('deviation_from_unlocked_at_max', float('nan')):.3f} mm vs "
+            f"{1e3 * d.get('deviation_from_unlocked_at_min', float('nan')):.3f} mm.",
+            "",
+        ]
 
     timing = summary.get("checks", {}).get("step_time_us")
     if timing:
-        out += ["### 9. The analytical algorithm suits real-time control (Sec. VI)", "",
-                f"**Verdict: {REPRODUCED if timing['jvja'] < 1000 else NOT_REPRODUCED}** for a 1 kHz "
-                f"loop. Plain `ft.resolve` on the planar 3R: LNVA {timing['lnva']:.1f} µs, JVJA "
-                f"{timing['jvja']:.1f} µs, MDA {timing['mda']:.1f} µs per step (mean of 2000 calls, this "
-                "machine). `fault-tolerance bench` measures the fast path and the explicit and "
-                "generic-solver routes.", ""]
+        out += [
+            "### 9. The analytical algorithm suits real-time control (Sec. VI)",
+            "",
+            f"**Verdict: {REPRODUCED if timing['jvja'] < 1000 else NOT_REPRODUCED}** for a 1 kHz "
+            f"loop. Plain `ft.resolve` on the planar 3R: LNVA {timing['lnva']:.1f} µs, JVJA "
+            f"{timing['jvja']:.1f} µs, MDA {timing['mda']:.1f} µs per step (mean of 2000 calls, this "
+            "machine). `fault-tolerance bench` measures the fast path and the explicit and "
+            "generic-solver routes.",
+            "",
+        ]
 
     plans = {k: details[k]["planning"] for k in cases if "planning" in details.get(k, {})}
     if plans:
-        out += ["## Planning loop (Sec. III.D, steps ii-iii)", "",
-                "Each case starts at the global minimum of K on the self-motion manifold; JVJA is run "
-                "from it and the start is kept when no reduced condition number along the run exceeds "
-                "the threshold, else the next local minimum of K is tried.", "",
-                "| case | starts tried | chosen start K | largest RCN on the run | why |",
-                "|---|---|---|---|---|"]
+        out += [
+            "## Planning loop (Sec. III.D, steps ii-iii)",
+            "",
+            "Each case starts at the global minimum of K on the self-motion manifold; JVJA is run "
+            "from it and the start is kept when no reduced condition number along the run exceeds "
+            "the threshold, else the next local minimum of K is tried.",
+            "",
+            "| case | starts tried | chosen start K | largest RCN on the run | why |",
+            "|---|---|---|---|---|",
+        ]
         for key, p in plans.items():
-            chosen = next((a for a in p["attempts"] if a["accepted"]), min(p["attempts"], key=lambda a: a["rcn_max"]))
-            out.append(f"| {key} | {len(p['attempts'])} | {_f(chosen['K0'])} | {_f(chosen['rcn_max'])} "
-                       f"| {chosen['reason']} |")
+            chosen = next(
+                (a for a in p["attempts"] if a["accepted"]),
+                min(p["attempts"], key=lambda a: a["rcn_max"]),
+            )
+            out.append(
+                f"| {key} | {len(p['attempts'])} | {_f(chosen['K0'])} | {_f(chosen['rcn_max'])} "
+                f"| {chosen['reason']} |"
+            )
         out.append("")
 
     out += ["## Figures", ""]

@@ -24,7 +24,7 @@ import numpy as np
 
 from .arm import Arm
 from .errors import InvalidInput
-from .failures import Scenarios, scenarios
+from .failures import scenarios
 from .indices import RESPONSES, condition_numbers, post_failure_rates, reduced_singular_values
 from .linalg import PIVOT_EPS, SIGMA_EPS, projection
 from .planner import MDA_GAIN, RESOLVERS, resolve
@@ -92,12 +92,25 @@ def _to_builtin(o):
 # -- the run --------------------------------------------------------------------------------
 
 ARRAYS = (
-    "t", "q", "qd", "x", "x_des", "error", "jvj", "jvj_parts", "rcn", "K", "sigma_min", "flags",
+    "t",
+    "q",
+    "qd",
+    "x",
+    "x_des",
+    "error",
+    "jvj",
+    "jvj_parts",
+    "rcn",
+    "K",
+    "sigma_min",
+    "flags",
 )
 OPTIONAL_ARRAYS = ("qd_cmd",)
 
 #: Bits of ``Run.flags``.
-FLAG_NEAR_SINGULAR = 1  # σ_min(J) (after a lock: of the remaining columns) < SIGMA_EPS: rates damped
+FLAG_NEAR_SINGULAR = (
+    1  # σ_min(J) (after a lock: of the remaining columns) < SIGMA_EPS: rates damped
+)
 FLAG_NEAR_INTOLERABLE = 2  # a scenario's N[S, S] pivot < NEAR_INTOLERABLE: pivots damped
 FLAG_LOCKED = 4  # the arm runs with a locked joint
 FLAG_STEP_LIMITED = 8  # MDA's null-space step was capped at MDA_MAX_ANGLE / dt
@@ -165,8 +178,12 @@ class Run:
         if lock:
             after = self.t >= lock["time"]
             before = ~after
-            s["path_error_peak_after_lock"] = float(np.max(self.error[after])) if after.any() else 0.0
-            s["path_error_max_before_lock"] = float(np.max(self.error[before])) if before.any() else 0.0
+            s["path_error_peak_after_lock"] = (
+                float(np.max(self.error[after])) if after.any() else 0.0
+            )
+            s["path_error_max_before_lock"] = (
+                float(np.max(self.error[before])) if before.any() else 0.0
+            )
             s["jump_at_lock"] = lock.get("jump")
         return s
 
@@ -175,7 +192,9 @@ class Run:
         """Write ``run.npz``, ``run.csv`` and ``summary.json`` into ``folder`` (atomically)."""
         folder = output_folder(folder)
         arrays = {k: getattr(self, k) for k in ARRAYS}
-        arrays.update({k: getattr(self, k) for k in OPTIONAL_ARRAYS if getattr(self, k) is not None})
+        arrays.update(
+            {k: getattr(self, k) for k in OPTIONAL_ARRAYS if getattr(self, k) is not None}
+        )
         buf = io.BytesIO()
         np.savez_compressed(buf, meta=np.array(_json(self.meta)), **arrays)
         write_atomic(folder / "run.npz", buf.getvalue())
@@ -207,8 +226,11 @@ class Run:
         joints = self.meta.get("joint_names") or [f"j{i}" for i in range(self.q.shape[1])]
         rows = self.meta.get("task") or [f"x{i}" for i in range(self.x.shape[1])]
         header = (
-            ["t"] + [f"q_{j}" for j in joints] + [f"qd_{j}" for j in joints]
-            + [f"x_{r}" for r in rows] + [f"xdes_{r}" for r in rows]
+            ["t"]
+            + [f"q_{j}" for j in joints]
+            + [f"qd_{j}" for j in joints]
+            + [f"x_{r}" for r in rows]
+            + [f"xdes_{r}" for r in rows]
             + ["error", "jvj", "K", "flags"]
         )
         table = np.column_stack(
@@ -264,7 +286,9 @@ def _check_time(dt: float, duration: float) -> int:
         raise InvalidInput(f"duration must be a finite number > 0, got {duration}")
     steps = int(round(duration / dt))
     if steps < 1:
-        raise InvalidInput(f"dt = {dt} s is longer than the run ({duration} s); choose dt <= duration")
+        raise InvalidInput(
+            f"dt = {dt} s is longer than the run ({duration} s); choose dt <= duration"
+        )
     return steps
 
 
@@ -310,15 +334,20 @@ def simulate(
     if algorithm not in RESOLVERS:
         raise InvalidInput(f"algorithm '{algorithm}' is not one of {sorted(RESOLVERS)}")
     if path.m != arm.m:
-        raise InvalidInput(f"the path has {path.m} coordinates, the task {'/'.join(arm.task)} has {arm.m}")
+        raise InvalidInput(
+            f"the path has {path.m} coordinates, the task {'/'.join(arm.task)} has {arm.m}"
+        )
     duration = path.duration if duration is None else float(duration)
     steps = _check_time(dt, duration)
     if not (np.isfinite(feedback_gain) and feedback_gain >= 0):
         raise InvalidInput(f"feedback gain must be finite and >= 0, got {feedback_gain}")
     q = arm.check_q(q0).copy()
     sc = scenarios(
-        arm.default_lockable if lockable is None else lockable, arm.n, r=arm.redundancy,
-        weights=weights, joint_names=arm.joint_names,
+        arm.default_lockable if lockable is None else lockable,
+        arm.n,
+        r=arm.redundancy,
+        weights=weights,
+        joint_names=arm.joint_names,
     )
     lock_col = None
     if lock_joint is not None:
@@ -338,10 +367,18 @@ def simulate(
     vmax = np.where(np.isfinite(vmax) & (vmax > 0), vmax, np.inf)  # 0 or inf: no limit given
     K1 = steps + 1
     rec = {
-        "t": np.arange(K1) * dt, "q": np.zeros((K1, n)), "qd": np.zeros((K1, n)),
-        "qd_cmd": np.zeros((K1, n)), "x": np.zeros((K1, m)), "x_des": np.zeros((K1, m)),
-        "error": np.zeros(K1), "jvj": np.zeros(K1), "jvj_parts": np.zeros((K1, f)),
-        "rcn": np.zeros((K1, f)), "K": np.zeros(K1), "sigma_min": np.zeros(K1),
+        "t": np.arange(K1) * dt,
+        "q": np.zeros((K1, n)),
+        "qd": np.zeros((K1, n)),
+        "qd_cmd": np.zeros((K1, n)),
+        "x": np.zeros((K1, m)),
+        "x_des": np.zeros((K1, m)),
+        "error": np.zeros(K1),
+        "jvj": np.zeros(K1),
+        "jvj_parts": np.zeros((K1, f)),
+        "rcn": np.zeros((K1, f)),
+        "K": np.zeros(K1),
+        "sigma_min": np.zeros(K1),
         "flags": np.zeros(K1, dtype=np.int64),
     }
     qd = np.zeros(n)
@@ -358,9 +395,13 @@ def simulate(
         x = arm.fk(q)
         x_des = path.x(t)
         xd_des = np.asarray(path.xdot(t), dtype=float)
-        if not (np.all(np.isfinite(x_des)) and xd_des.shape == (m,) and np.all(np.isfinite(xd_des))):
-            raise InvalidInput(f"the path gives x = {np.asarray(x_des).tolist()}, ẋ = {xd_des.tolist()} "
-                               f"at t = {t:.6g} s; it must give {m} finite numbers each")
+        if not (
+            np.all(np.isfinite(x_des)) and xd_des.shape == (m,) and np.all(np.isfinite(xd_des))
+        ):
+            raise InvalidInput(
+                f"the path gives x = {np.asarray(x_des).tolist()}, ẋ = {xd_des.tolist()} "
+                f"at t = {t:.6g} s; it must give {m} finite numbers each"
+            )
         err = arm.task_error(x_des, q)
         xd_cmd = xd_des + feedback_gain * err
         proj = projection(J)
@@ -371,13 +412,37 @@ def simulate(
             qd_cmd[keep] = reduced.Jpinv @ xd_cmd
             flag = FLAG_LOCKED | (FLAG_NEAR_SINGULAR if reduced.sigma_min < SIGMA_EPS else 0)
             if lock_jump is None:  # the jump the lock causes: reduced rates minus planned rates
-                planned = resolve(algorithm, J, xd_cmd, sc, response=response, arm=arm, q=q,
-                                  gain=gain, tolerate=True, max_step=max_step)
+                planned = resolve(
+                    algorithm,
+                    J,
+                    xd_cmd,
+                    sc,
+                    response=response,
+                    arm=arm,
+                    q=q,
+                    gain=gain,
+                    tolerate=True,
+                    max_step=max_step,
+                )
                 lock_jump = float(np.sum((qd_cmd - planned) ** 2))
         else:
-            qd_cmd = resolve(algorithm, J, xd_cmd, sc, weights=None, response=response,
-                             arm=arm, q=q, gain=gain, tolerate=True, max_step=max_step)
-            if algorithm == "mda" and np.linalg.norm(qd_cmd - proj.Jpinv @ xd_cmd) >= 0.999 * max_step:
+            qd_cmd = resolve(
+                algorithm,
+                J,
+                xd_cmd,
+                sc,
+                weights=None,
+                response=response,
+                arm=arm,
+                q=q,
+                gain=gain,
+                tolerate=True,
+                max_step=max_step,
+            )
+            if (
+                algorithm == "mda"
+                and np.linalg.norm(qd_cmd - proj.Jpinv @ xd_cmd) >= 0.999 * max_step
+            ):
                 flag |= FLAG_STEP_LIMITED
         if np.any(np.abs(qd_cmd) > vmax):
             flag |= FLAG_OVER_SPEED
@@ -408,18 +473,33 @@ def simulate(
         q = q + qd * dt
         _tick(progress, k, K1)
     meta = {
-        "robot": arm.name, "source": arm.source, "package_dirs": arm.package_dirs,
-        "tip": arm.tip, "task": list(arm.task),
-        "joint_names": arm.joint_names, "algorithm": algorithm,
+        "robot": arm.name,
+        "source": arm.source,
+        "package_dirs": arm.package_dirs,
+        "tip": arm.tip,
+        "task": list(arm.task),
+        "joint_names": arm.joint_names,
+        "algorithm": algorithm,
         "lockable": [[arm.joint_names[i] for i in S] for S in sc.sets],
-        "weights": sc.weights.tolist(), "response": response, "dt": dt, "duration": duration,
-        "feedback_gain": feedback_gain, "mda_gain": gain if algorithm == "mda" else None,
-        "q0": np.asarray(q0, dtype=float).tolist(), "path": path.spec(),
-        "servo": servo.describe() if (lock_col is not None or servo.tau > 0) else "perfect rate tracking",
+        "weights": sc.weights.tolist(),
+        "response": response,
+        "dt": dt,
+        "duration": duration,
+        "feedback_gain": feedback_gain,
+        "mda_gain": gain if algorithm == "mda" else None,
+        "q0": np.asarray(q0, dtype=float).tolist(),
+        "path": path.spec(),
+        "servo": servo.describe()
+        if (lock_col is not None or servo.tau > 0)
+        else "perfect rate tracking",
     }
     if lock_col is not None:
-        meta["lock"] = {"joint": arm.joint_names[lock_col], "index": lock_col,
-                        "time": float(lock_time), "jump": lock_jump}
+        meta["lock"] = {
+            "joint": arm.joint_names[lock_col],
+            "index": lock_col,
+            "time": float(lock_time),
+            "jump": lock_jump,
+        }
     qd_cmd_arr = rec.pop("qd_cmd") if (lock_col is not None or servo.tau > 0) else None
     rec.pop("qd_cmd", None)
     return Run(meta=meta, qd_cmd=qd_cmd_arr, **rec)

@@ -66,10 +66,14 @@ class CirclePath(TaskPath):
             raise InvalidInput(f"x0 must be a vector of finite numbers, got {self.x0.tolist()}")
         for key in ("radius", "omega", "sign"):
             if not np.isfinite(getattr(self, key)):
-                raise InvalidInput(f"circle {key} must be a finite number, got {getattr(self, key)}")
+                raise InvalidInput(
+                    f"circle {key} must be a finite number, got {getattr(self, key)}"
+                )
         i, j = self.rows
         if not (0 <= i < len(self.x0) and 0 <= j < len(self.x0)) or i == j:
-            raise InvalidInput(f"rows {self.rows} must be two distinct rows of x0 (m={len(self.x0)})")
+            raise InvalidInput(
+                f"rows {self.rows} must be two distinct rows of x0 (m={len(self.x0)})"
+            )
 
     def x(self, t: float) -> np.ndarray:
         """Desired position at ``t``."""
@@ -90,9 +94,14 @@ class CirclePath(TaskPath):
     def spec(self) -> dict:
         """JSON-able description."""
         return {
-            "kind": "circle", "x0": self.x0.tolist(), "radius": self.radius,
-            "omega": self.omega, "duration": self.duration, "rows": list(self.rows),
-            "sign": self.sign, "name": self.name,
+            "kind": "circle",
+            "x0": self.x0.tolist(),
+            "radius": self.radius,
+            "omega": self.omega,
+            "duration": self.duration,
+            "rows": list(self.rows),
+            "sign": self.sign,
+            "name": self.name,
         }
 
 
@@ -114,12 +123,16 @@ class SampledPath(TaskPath):
         if xs.ndim == 1:
             xs = xs[:, None]
         if t.ndim != 1 or len(t) < 2 or xs.shape[0] != len(t):
-            raise InvalidInput(f"a sampled path needs >= 2 samples with one time each; got t {t.shape}, x {xs.shape}")
+            raise InvalidInput(
+                f"a sampled path needs >= 2 samples with one time each; got t {t.shape}, x {xs.shape}"
+            )
         if not (np.all(np.isfinite(t)) and np.all(np.isfinite(xs))):
             raise InvalidInput("a sampled path must have finite times and positions")
         if np.any(np.diff(t) <= 0):
             k = int(np.argmax(np.diff(t) <= 0)) + 1
-            raise InvalidInput(f"times must increase strictly; sample {k} has t = {t[k]} after {t[k - 1]}")
+            raise InvalidInput(
+                f"times must increase strictly; sample {k} has t = {t[k]} after {t[k - 1]}"
+            )
         v = np.gradient(xs, t, axis=0) if self.v is None else np.asarray(self.v, dtype=float)
         if v.shape != xs.shape:
             raise InvalidInput(f"velocities have shape {v.shape}, positions {xs.shape}")
@@ -150,8 +163,13 @@ class SampledPath(TaskPath):
 
     def spec(self) -> dict:
         """JSON-able description."""
-        return {"kind": "sampled", "source": self.source, "duration": self.duration,
-                "x0": self.x0.tolist(), "samples": len(self.t)}
+        return {
+            "kind": "sampled",
+            "source": self.source,
+            "duration": self.duration,
+            "x0": self.x0.tolist(),
+            "samples": len(self.t),
+        }
 
 
 @dataclass(frozen=True)
@@ -200,7 +218,9 @@ def load_csv(path: str | Path, rows: Sequence[str] | None = None) -> SampledPath
     try:
         header, data = _read_csv_rows(path)
     except UnicodeDecodeError as err:
-        raise InvalidInput(f"{path}: not UTF-8 text (byte {err.start}); a CSV path must be UTF-8") from None
+        raise InvalidInput(
+            f"{path}: not UTF-8 text (byte {err.start}); a CSV path must be UTF-8"
+        ) from None
     except csv.Error as err:
         raise InvalidInput(f"{path}: not a readable CSV file ({err})") from None
     coords = list(rows) if rows else [h for h in header[1:] if not h.startswith("v")]
@@ -224,7 +244,9 @@ def _read_csv_rows(path: Path) -> tuple[list[str], list[tuple[int, list[float]]]
         try:
             header = [h.strip() for h in next(reader)]
         except StopIteration:
-            raise InvalidInput(f"{path}: the file is empty; expected a header 't,x,y,...'") from None
+            raise InvalidInput(
+                f"{path}: the file is empty; expected a header 't,x,y,...'"
+            ) from None
         if not header or header[0] != "t":
             raise InvalidInput(f"{path}: the first column must be 't', the header is {header}")
         twice = sorted({h for h in header if header.count(h) > 1})
@@ -235,7 +257,9 @@ def _read_csv_rows(path: Path) -> tuple[list[str], list[tuple[int, list[float]]]
             if not row or all(not c.strip() for c in row):
                 continue
             if len(row) != len(header):
-                raise InvalidInput(f"{path}:{lineno}: {len(row)} fields, the header has {len(header)}")
+                raise InvalidInput(
+                    f"{path}:{lineno}: {len(row)} fields, the header has {len(header)}"
+                )
             try:
                 values = [float(c) for c in row]
             except ValueError:
@@ -243,7 +267,9 @@ def _read_csv_rows(path: Path) -> tuple[list[str], list[tuple[int, list[float]]]
             if not all(np.isfinite(values)):
                 raise InvalidInput(f"{path}:{lineno}: fields must be finite numbers, got {row}")
             if data and values[0] <= data[-1][1][0]:
-                raise InvalidInput(f"{path}:{lineno}: t = {values[0]} does not increase (line "
-                                   f"{data[-1][0]} has t = {data[-1][1][0]}); times must increase strictly")
+                raise InvalidInput(
+                    f"{path}:{lineno}: t = {values[0]} does not increase (line "
+                    f"{data[-1][0]} has t = {data[-1][1][0]}); times must increase strictly"
+                )
             data.append((lineno, values))
     return header, data

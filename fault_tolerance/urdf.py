@@ -72,8 +72,9 @@ def _checked(path: Path):
     try:
         data.decode("utf-8")
     except UnicodeDecodeError as err:
-        raise URDFError(f"{path}: not UTF-8 text (invalid byte at offset {err.start}); "
-                        "a URDF must be UTF-8") from None
+        raise URDFError(
+            f"{path}: not UTF-8 text (invalid byte at offset {err.start}); a URDF must be UTF-8"
+        ) from None
     if _DTD.search(data):
         raise URDFError(_DTD_MESSAGE.format(path=path))
     root = _parse_safely(path, data)
@@ -96,8 +97,13 @@ def _parse_safely(path: Path, data: bytes):
     from lxml import etree
 
     parser = etree.XMLParser(
-        resolve_entities=False, no_network=True, huge_tree=False, load_dtd=False,
-        dtd_validation=False, remove_comments=True, remove_pis=True,
+        resolve_entities=False,
+        no_network=True,
+        huge_tree=False,
+        load_dtd=False,
+        dtd_validation=False,
+        remove_comments=True,
+        remove_pis=True,
     )
     try:
         return etree.fromstring(data, parser)
@@ -133,13 +139,13 @@ def read_urdf(path: str | Path) -> URDFDescription:
     data, root = _checked(path)
     where = str(path)
     if not root.get("name"):
-        raise URDFError(f"{where}: <robot> has no name; a URDF starts with <robot name=\"...\">")
+        raise URDFError(f'{where}: <robot> has no name; a URDF starts with <robot name="...">')
     n_joints = len(root.findall("joint"))
     if n_joints > MAX_URDF_JOINTS:
         raise URDFError(f"{where}: {n_joints} joints; at most {MAX_URDF_JOINTS} are accepted")
     links = [lk.get("name") for lk in root.findall("link")]
     if any(not name for name in links):
-        raise URDFError(f"{where}: a <link> has no name; every link needs name=\"...\"")
+        raise URDFError(f'{where}: a <link> has no name; every link needs name="..."')
     dup = sorted(n for n, k in Counter(links).items() if k > 1)
     if dup:
         raise URDFError(f"{where}: link(s) {dup} defined more than once; link names must be unique")
@@ -153,13 +159,17 @@ def read_urdf(path: str | Path) -> URDFDescription:
     for joint in root.findall("joint"):
         name = joint.get("name")
         if not name:
-            raise URDFError(f"{where}: a <joint> has no name; every joint needs name=\"...\"")
+            raise URDFError(f'{where}: a <joint> has no name; every joint needs name="..."')
         if name in types:
-            raise URDFError(f"{where}: joint '{name}' is defined more than once; joint names must be unique")
+            raise URDFError(
+                f"{where}: joint '{name}' is defined more than once; joint names must be unique"
+            )
         jtype = joint.get("type")
         if jtype not in URDF_JOINT_TYPES:
-            raise URDFError(f"{where}: joint '{name}' has type {jtype!r}; URDF joint types are "
-                            f"{list(URDF_JOINT_TYPES)}")
+            raise URDFError(
+                f"{where}: joint '{name}' has type {jtype!r}; URDF joint types are "
+                f"{list(URDF_JOINT_TYPES)}"
+            )
         types[name] = jtype
         ends = {}
         for end in ("parent", "child"):
@@ -168,12 +178,16 @@ def read_urdf(path: str | Path) -> URDFDescription:
             if not ends[end]:
                 raise URDFError(f"{where}: joint '{name}' has no <{end} link=\"...\"/>")
             if ends[end] not in link_set:
-                raise URDFError(f"{where}: joint '{name}' names {end} link '{ends[end]}', which is "
-                                f"not a <link> of the file; its links are {links}")
+                raise URDFError(
+                    f"{where}: joint '{name}' names {end} link '{ends[end]}', which is "
+                    f"not a <link> of the file; its links are {links}"
+                )
         child = ends["child"]
         if child in parent_of:
-            raise URDFError(f"{where}: link '{child}' is the child of two joints ('{parent_of[child]}' "
-                            f"and '{name}'); a URDF is a tree: every link has at most one parent joint")
+            raise URDFError(
+                f"{where}: link '{child}' is the child of two joints ('{parent_of[child]}' "
+                f"and '{name}'); a URDF is a tree: every link has at most one parent joint"
+            )
         if child == ends["parent"]:
             raise URDFError(f"{where}: joint '{name}' connects link '{child}' to itself")
         parent_of[child] = name
@@ -191,8 +205,10 @@ def read_urdf(path: str | Path) -> URDFDescription:
     if not links:
         raise URDFError(f"{where}: the robot has no <link>; a URDF needs at least one")
     if len(roots) > 1:
-        raise URDFError(f"{where}: the tree is not connected: links {roots} have no parent joint; "
-                        "a URDF has exactly one root link, every other link is the child of a joint")
+        raise URDFError(
+            f"{where}: the tree is not connected: links {roots} have no parent joint; "
+            "a URDF has exactly one root link, every other link is the child of a joint"
+        )
     if not roots:
         raise URDFError(f"{where}: no root link: the joints form a cycle; a URDF must be a tree")
     _check_reachable(where, roots[0], links, parent_of, root)
@@ -200,7 +216,9 @@ def read_urdf(path: str | Path) -> URDFDescription:
 
     xml = etree.tostring(root, encoding="unicode")
     leaves = tuple(lk for lk in links if lk not in parents)
-    return URDFDescription(path, data, xml, types, leaves, mimic, tuple(continuous), tuple(unlimited))
+    return URDFDescription(
+        path, data, xml, types, leaves, mimic, tuple(continuous), tuple(unlimited)
+    )
 
 
 def _check_axis(where: str, name: str, axis) -> None:
@@ -211,17 +229,23 @@ def _check_axis(where: str, name: str, axis) -> None:
     except ValueError:
         xyz = []
     if len(xyz) != 3 or not all(math.isfinite(v) for v in xyz):
-        raise URDFError(f"{where}: joint '{name}' has axis xyz=\"{axis.get('xyz')}\"; an axis is "
-                        "three finite numbers")
+        raise URDFError(
+            f"{where}: joint '{name}' has axis xyz=\"{axis.get('xyz')}\"; an axis is "
+            "three finite numbers"
+        )
     if math.hypot(*xyz) < 1e-9:
-        raise URDFError(f"{where}: joint '{name}' has a zero axis; a moving joint needs a non-zero axis")
+        raise URDFError(
+            f"{where}: joint '{name}' has a zero axis; a moving joint needs a non-zero axis"
+        )
 
 
 def _check_reachable(where, root_link, links, parent_of, root) -> None:
     """Every link hangs from the root (no cycle detached from the tree)."""
     child_of = {}
     for joint in root.findall("joint"):
-        child_of.setdefault(joint.find("parent").get("link"), []).append(joint.find("child").get("link"))
+        child_of.setdefault(joint.find("parent").get("link"), []).append(
+            joint.find("child").get("link")
+        )
     seen, stack = {root_link}, [root_link]
     while stack:
         for c in child_of.get(stack.pop(), []):
@@ -230,8 +254,10 @@ def _check_reachable(where, root_link, links, parent_of, root) -> None:
                 stack.append(c)
     lost = [lk for lk in links if lk not in seen]
     if lost:
-        raise URDFError(f"{where}: links {lost} are not connected to the root link '{root_link}' "
-                        "(their joints form a cycle); a URDF must be a tree")
+        raise URDFError(
+            f"{where}: links {lost} are not connected to the root link '{root_link}' "
+            "(their joints form a cycle); a URDF must be a tree"
+        )
 
 
 def _as_revolute(joint) -> bool:
@@ -247,7 +273,9 @@ def _as_revolute(joint) -> bool:
     limit.set("upper", repr(math.pi))
     for key in ("velocity", "effort"):
         if limit.get(key) is None:
-            limit.set(key, "0")  # set to infinity after Pinocchio has read it (urdfdom needs a number)
+            limit.set(
+                key, "0"
+            )  # set to infinity after Pinocchio has read it (urdfdom needs a number)
     return unlimited
 
 
@@ -286,7 +314,9 @@ def native_stderr() -> Iterator[list[str]]:
             os.dup2(saved, 2)
             os.close(saved)
             tmp.seek(0)
-            lines.extend(s.strip() for s in tmp.read().decode("utf-8", "replace").splitlines() if s.strip())
+            lines.extend(
+                s.strip() for s in tmp.read().decode("utf-8", "replace").splitlines() if s.strip()
+            )
 
 
 def native_reason(lines: list[str]) -> str:
@@ -333,48 +363,75 @@ def inspect_text(
     named = target in catalog() or target in example_robot_names()
     choose_tip = tip is None and not named and len(desc.leaves) > 1
     # Pinocchio's checks first (their messages are the clearer), then the tree from yourdfpy
-    arm = None if choose_tip else load_arm(target, tip=tip, task=task, joints=joints,
-                                           package_dirs=package_dirs)
+    arm = (
+        None
+        if choose_tip
+        else load_arm(target, tip=tip, task=task, joints=joints, package_dirs=package_dirs)
+    )
     import yourdfpy  # after the checks: a hostile file is refused without this import's cost
 
     try:  # yourdfpy parses the checked bytes, never the file itself
-        urdf = yourdfpy.URDF.load(io.BytesIO(desc.data), load_meshes=False, build_scene_graph=False,
-                                  build_collision_scene_graph=False)
+        urdf = yourdfpy.URDF.load(
+            io.BytesIO(desc.data),
+            load_meshes=False,
+            build_scene_graph=False,
+            build_collision_scene_graph=False,
+        )
     except Exception as err:  # yourdfpy raises many types
         raise URDFError(f"{path}: yourdfpy could not read it: {err}") from err
-    lines = [f"{target}: {path}", f"robot '{urdf.robot.name}': {len(urdf.robot.links)} links, "
-             f"{len(urdf.robot.joints)} joints", "", "joints (parent -> child):"]
+    lines = [
+        f"{target}: {path}",
+        f"robot '{urdf.robot.name}': {len(urdf.robot.links)} links, "
+        f"{len(urdf.robot.joints)} joints",
+        "",
+        "joints (parent -> child):",
+    ]
     for j in urdf.robot.joints:
         lim = ""
         if j.limit is not None and j.type in ("revolute", "prismatic"):
-            lim = f"  limits [{j.limit.lower:.4g}, {j.limit.upper:.4g}], velocity {j.limit.velocity}"
-        axis = "" if j.type == "fixed" or j.axis is None else f"  axis {np.round(j.axis, 3).tolist()}"
+            lim = (
+                f"  limits [{j.limit.lower:.4g}, {j.limit.upper:.4g}], velocity {j.limit.velocity}"
+            )
+        axis = (
+            "" if j.type == "fixed" or j.axis is None else f"  axis {np.round(j.axis, 3).tolist()}"
+        )
         lines.append(f"  {j.name:28s} {j.type:10s} {j.parent} -> {j.child}{axis}{lim}")
     if desc.continuous:
-        lines.append(f"continuous joints, read as revolute with limits ±π: {', '.join(desc.continuous)}")
+        lines.append(
+            f"continuous joints, read as revolute with limits ±π: {', '.join(desc.continuous)}"
+        )
     if desc.mimic:
-        lines.append("mimic joints (held fixed; they cannot be active joints): "
-                     + ", ".join(f"{a} follows {b}" for a, b in desc.mimic.items()))
+        lines.append(
+            "mimic joints (held fixed; they cannot be active joints): "
+            + ", ".join(f"{a} follows {b}" for a, b in desc.mimic.items())
+        )
     lines += ["", f"candidate tip frames (leaf links): {', '.join(desc.leaves)}"]
     if arm is None:
-        lines.append("no tip frame given and there are several leaf links: name one with --tip to "
-                     "see the chain")
+        lines.append(
+            "no tip frame given and there are several leaf links: name one with --tip to "
+            "see the chain"
+        )
         return "\n".join(lines)
     lines += [
-        "", f"chain to tip '{arm.tip}': {' -> '.join(arm.joint_names)}",
+        "",
+        f"chain to tip '{arm.tip}': {' -> '.join(arm.joint_names)}",
         f"task {'/'.join(arm.task)}: n = {arm.n}, m = {arm.m}, redundancy r = {arm.redundancy}",
     ]
     q = arm.q_reference
     J = arm.jacobian(q)
     proj = projection(J)
     label = "reference" if np.any(q != arm.neutral()) else "neutral"
-    lines.append(f"at the {label} configuration {np.round(q, 4).tolist()}: "
-                 f"σ_min(J) = {proj.sigma_min:.3g}" + ("  (singular)" if proj.sigma_min < 1e-6 else ""))
+    lines.append(
+        f"at the {label} configuration {np.round(q, 4).tolist()}: "
+        f"σ_min(J) = {proj.sigma_min:.3g}" + ("  (singular)" if proj.sigma_min < 1e-6 else "")
+    )
     if arm.redundancy >= 1:
         sc = scenarios("all", arm.n, r=arm.redundancy, joint_names=arm.joint_names)
         bad = [arm.joint_names[i] for i in sc.columns if proj.N[i, i] < PIVOT_TOL]
-        lines.append("intolerable joints there (locking one loses the task): "
-                     + (", ".join(bad) if bad else "none"))
+        lines.append(
+            "intolerable joints there (locking one loses the task): "
+            + (", ".join(bad) if bad else "none")
+        )
     else:
         lines.append("not redundant for this task: any locked joint loses it")
     return "\n".join(lines)

@@ -40,8 +40,18 @@ def test_json_structure(tiny_run):
     res = data["results"]["planar_3r"]
     assert (res["n"], res["m"], res["r"]) == (3, 2, 1)
     assert res["lockable"] == [["joint1"], ["joint2"], ["joint3"]]
-    for op in ("jacobian", "lnva", "jvja", "rcn", "mda", "jvja_explicit", "lnva_resolve",
-               "jvja_resolve", "mda_resolve", "rcn_resolve"):
+    for op in (
+        "jacobian",
+        "lnva",
+        "jvja",
+        "rcn",
+        "mda",
+        "jvja_explicit",
+        "lnva_resolve",
+        "jvja_resolve",
+        "mda_resolve",
+        "rcn_resolve",
+    ):
         st = res["ops"][op]
         assert 0 < st["min_us"] <= st["median_us"] <= st["p99_us"] <= st["max_us"]
         assert st["steps"] >= 1 and st["description"]
@@ -116,7 +126,9 @@ def test_script_runs(tmp_path):
     out = tmp_path / "s.json"
     proc = subprocess.run(
         [sys.executable, str(ROOT / "scripts" / "benchmark.py"), *TINY, "--json", str(out)],
-        capture_output=True, text=True, timeout=300,
+        capture_output=True,
+        text=True,
+        timeout=300,
     )
     assert proc.returncode == 0, proc.stderr
     assert json.loads(out.read_text())["results"]["planar_3r"]["ops"]["jvja"]["steps"] == 4

@@ -14,8 +14,12 @@ COMMANDS = ["robots", "inspect", "simulate", "lock", "reproduce", "replay", "ben
 
 
 def _run(*args, check=True):
-    p = subprocess.run([sys.executable, "-m", "fault_tolerance", *args], capture_output=True, text=True,
-                       timeout=300)
+    p = subprocess.run(
+        [sys.executable, "-m", "fault_tolerance", *args],
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
     if check:
         assert p.returncode == 0, p.stderr
     return p
@@ -58,8 +62,23 @@ def test_inspect_names_the_intolerable_joint(capsys):
 def test_simulate_writes_runs_and_plots(tmp_path, capsys):
     """`simulate --out` writes run.npz, run.csv, summary.json per algorithm and a comparison plot."""
     out = tmp_path / "sim"
-    assert main(["simulate", "--robot", "spatial_4r", "--duration", "0.1", "--no-progress",
-                 "--algorithms", "lnva,jvja", "--out", str(out)]) == 0
+    assert (
+        main(
+            [
+                "simulate",
+                "--robot",
+                "spatial_4r",
+                "--duration",
+                "0.1",
+                "--no-progress",
+                "--algorithms",
+                "lnva,jvja",
+                "--out",
+                str(out),
+            ]
+        )
+        == 0
+    )
     for alg in ("lnva", "jvja"):
         for f in ("run.npz", "run.csv", "summary.json", "run.png"):
             assert (out / alg / f).exists()
@@ -75,16 +94,50 @@ def test_simulate_a_user_urdf_from_a_csv_path(tmp_path, capsys):
     urdf = Path(__file__).resolve().parents[1] / "robots" / "planar_3r.urdf"
     csv = tmp_path / "p.csv"
     csv.write_text("t,x,y\n0,0.35,0\n0.1,0.36,0.01\n0.2,0.37,0.0\n")
-    assert main(["simulate", "--urdf", str(urdf), "--tip", "tool", "--task", "planar", "--csv", str(csv),
-                 "--algorithms", "jvja", "--no-progress"]) == 0
+    assert (
+        main(
+            [
+                "simulate",
+                "--urdf",
+                str(urdf),
+                "--tip",
+                "tool",
+                "--task",
+                "planar",
+                "--csv",
+                str(csv),
+                "--algorithms",
+                "jvja",
+                "--no-progress",
+            ]
+        )
+        == 0
+    )
     assert "jvja" in capsys.readouterr().out
 
 
 def test_lock_at_the_largest_jump(tmp_path, capsys):
     """`lock --at max` finds the moment of largest jump and reports the path error."""
     out = tmp_path / "lock"
-    assert main(["lock", "--robot", "planar_3r", "--joint", "joint2", "--at", "max", "--duration", "0.3",
-                 "--no-progress", "--out", str(out)]) == 0
+    assert (
+        main(
+            [
+                "lock",
+                "--robot",
+                "planar_3r",
+                "--joint",
+                "joint2",
+                "--at",
+                "max",
+                "--duration",
+                "0.3",
+                "--no-progress",
+                "--out",
+                str(out),
+            ]
+        )
+        == 0
+    )
     text = capsys.readouterr().out
     assert "max jump of joint2" in text and "path error peak" in text
     assert (out / "lock.png").exists() and (out / "run.npz").exists()
@@ -104,7 +157,22 @@ def test_reproduce_script_runs_quick(tmp_path):
     from pathlib import Path
 
     script = Path(__file__).resolve().parents[1] / "scripts" / "reproduce.py"
-    p = subprocess.run([sys.executable, str(script), "--out", str(tmp_path), "--quick", "--cases", "fig4",
-                        "--no-progress"], capture_output=True, text=True, timeout=300)
+    p = subprocess.run(
+        [
+            sys.executable,
+            str(script),
+            "--out",
+            str(tmp_path),
+            "--quick",
+            "--cases",
+            "fig4",
+            "--no-progress",
+        ],
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
     assert p.returncode == 0, p.stderr
-    assert json.loads((tmp_path / "summary.json").read_text())["cases"]["fig4"]["robot"] == "planar_3r"
+    assert (
+        json.loads((tmp_path / "summary.json").read_text())["cases"]["fig4"]["robot"] == "planar_3r"
+    )

@@ -11,7 +11,6 @@ import sys
 from pathlib import Path
 
 import pytest
-
 from test_urdf_safety import billion_laughs, chain3, joint, robot
 
 
@@ -20,15 +19,26 @@ def _files(root: Path) -> dict[str, str]:
     files = {
         "bomb": ("bomb.urdf", billion_laughs()),
         "tree": ("tree.urdf", robot(*chain3(), joint("jx", "base", "l2"))),
-        "gripper": ("gripper.urdf", robot(
-            *chain3("palm"), joint("fa", "palm", "a", kind="fixed", extra="", axis=None),
-            '<link name="a"/>', joint("fb", "palm", "b", kind="fixed", extra="", axis=None),
-            '<link name="b"/>')),
+        "gripper": (
+            "gripper.urdf",
+            robot(
+                *chain3("palm"),
+                joint("fa", "palm", "a", kind="fixed", extra="", axis=None),
+                '<link name="a"/>',
+                joint("fb", "palm", "b", kind="fixed", extra="", axis=None),
+                '<link name="b"/>',
+            ),
+        ),
         "bad_csv": ("bad.csv", "t,x,y\n0,0.35,0\n0.1,abc,0\n"),
         "a_file": ("a_file", "not a folder"),
-        "meshy": ("meshy.urdf", robot(*chain3()).replace(
-            '<link name="base"/>', '<link name="base"><visual><geometry><mesh filename='
-            '"package://no_pkg/base.stl"/></geometry></visual></link>')),
+        "meshy": (
+            "meshy.urdf",
+            robot(*chain3()).replace(
+                '<link name="base"/>',
+                '<link name="base"><visual><geometry><mesh filename='
+                '"package://no_pkg/base.stl"/></geometry></visual></link>',
+            ),
+        ),
     }
     for name, text in files.values():
         (root / name).write_text(text)
@@ -51,8 +61,10 @@ CASES = {
     "duplicate_lockable": (SIM + ["--lockable", "joint1,joint1"], "listed twice"),
     "empty_lockable": (SIM + ["--lockable", ","], "--lockable is empty"),
     "too_many_locked": (SIM + ["--lockable", "joint1+joint2"], "r = 1"),
-    "intolerable": (["simulate", "--no-progress", "--robot", "spatial_4r", "--lockable", "joint4"],
-                    "locking joint4 loses the task"),
+    "intolerable": (
+        ["simulate", "--no-progress", "--robot", "spatial_4r", "--lockable", "joint4"],
+        "locking joint4 loses the task",
+    ),
     "bad_task_row": (SIM + ["--task", "x,y,yaw"], "task 'x,y,yaw' is not allowed"),
     "dt_zero": (SIM + ["--dt", "0"], "--dt must be a finite number > 0"),
     "dt_negative": (SIM + ["--dt", "-0.001"], "--dt must be a finite number > 0"),
@@ -63,10 +75,14 @@ CASES = {
     "csv_bad_row": (SIM + ["--csv", "{bad_csv}"], "bad.csv:3: a field is not a number"),
     "out_is_a_file": (SIM + ["--out", "{a_file}"], "exists and is not a folder"),
     "unknown_algorithm": (SIM + ["--algorithms", "lnva,fast"], "choose among"),
-    "lock_unknown_joint": (["lock", "--no-progress", "--robot", "planar_3r", "--joint", "joint9"],
-                           "joint 'joint9' is not in the model"),
-    "lock_time_outside": (["lock", "--no-progress", "--robot", "planar_3r", "--joint", "joint2",
-                           "--at", "7"], "lock time must be within"),
+    "lock_unknown_joint": (
+        ["lock", "--no-progress", "--robot", "planar_3r", "--joint", "joint9"],
+        "joint 'joint9' is not in the model",
+    ),
+    "lock_time_outside": (
+        ["lock", "--no-progress", "--robot", "planar_3r", "--joint", "joint2", "--at", "7"],
+        "lock time must be within",
+    ),
     "unknown_case": (["reproduce", "--cases", "fig5", "--out", "{dir}/rep"], "unknown case(s)"),
     "unknown_command": (["simulat"], "invalid choice: 'simulat'"),
 }
@@ -81,8 +97,13 @@ def results(tmp_path_factory) -> dict[str, subprocess.CompletedProcess]:
     cases["debug"] = ["--debug", "simulate", "--robot", "plannar_3r"]
     cases["warning"] = ["inspect", "{meshy}", "--task", "planar"]
     procs = {
-        key: subprocess.Popen([sys.executable, "-m", "fault_tolerance", *(a.format(**keys) for a in args)],
-                              cwd=root, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        key: subprocess.Popen(
+            [sys.executable, "-m", "fault_tolerance", *(a.format(**keys) for a in args)],
+            cwd=root,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+        )
         for key, args in cases.items()
     }
     out = {}

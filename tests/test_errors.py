@@ -65,7 +65,10 @@ def test_unknown_lock_joint_lists_the_joints(planar_3r):
         (["joint2", "joint2"], "listed twice"),
         (["joint2", 1], "listed twice"),  # the same joint by name and by index
         ([("joint1", "joint1")], "names a joint twice"),
-        (["shoulder"], r"'shoulder' is not an active joint; they are \['joint1', 'joint2', 'joint3'\]"),
+        (
+            ["shoulder"],
+            r"'shoulder' is not an active joint; they are \['joint1', 'joint2', 'joint3'\]",
+        ),
         ([("joint1", "joint2")], r"locks 2 joints.*r = 1"),
         ([5], "out of range"),
     ],
@@ -85,8 +88,13 @@ def test_no_redundancy_means_no_joint_may_lock():
     """A task with as many rows as joints (r = 0): any lockable joint is refused, saying why."""
     arm = ft.load_arm("planar_3r", task=["x", "y", "rz"])
     with pytest.raises(ft.InvalidScenario, match=r"no redundancy for this task \(r = n - m = 0\)"):
-        ft.resolve("jvja", arm.jacobian(Q), np.array([0.1, 0.0, 0.0]), ["joint1"],
-                   joint_names=arm.joint_names)
+        ft.resolve(
+            "jvja",
+            arm.jacobian(Q),
+            np.array([0.1, 0.0, 0.0]),
+            ["joint1"],
+            joint_names=arm.joint_names,
+        )
 
 
 def test_intolerable_scenario_is_refused_before_any_step(spatial_4r):
@@ -95,24 +103,42 @@ def test_intolerable_scenario_is_refused_before_any_step(spatial_4r):
     arm = spatial_4r.arm
     q = np.array([0.3, 0.5, 0.2, 1.0])
     with pytest.raises(ft.IntolerableFailure, match="joint4") as err:
-        ft.resolve("jvja", arm.jacobian(q), np.array([0.0, 0.1, 0.0]), ["joint4"],
-                   joint_names=arm.joint_names)
+        ft.resolve(
+            "jvja",
+            arm.jacobian(q),
+            np.array([0.0, 0.1, 0.0]),
+            ["joint4"],
+            joint_names=arm.joint_names,
+        )
     assert err.value.joints == ["joint4"]
     ticks = []
     path = CirclePath(arm.fk(q), 0.05, 2 * np.pi, 0.05, rows=(1, 2))
     for alg in ("lnva", "jvja", "mda"):
         with pytest.raises(ft.IntolerableFailure, match="remove joint4 from the lockable joints"):
-            simulate(arm, path, alg, q0=q, lockable=["joint1", "joint4"],
-                     progress=lambda k, n: ticks.append(k))
+            simulate(
+                arm,
+                path,
+                alg,
+                q0=q,
+                lockable=["joint1", "joint4"],
+                progress=lambda k, n: ticks.append(k),
+            )
     assert ticks == []
 
 
 # -- numbers ------------------------------------------------------------------------------------
 
 
-@pytest.mark.parametrize("dt, match", [(0.0, "dt must be"), (-1e-3, "dt must be"),
-                                       (np.nan, "dt must be"), (np.inf, "dt must be"),
-                                       (1.0, "longer than the run")])
+@pytest.mark.parametrize(
+    "dt, match",
+    [
+        (0.0, "dt must be"),
+        (-1e-3, "dt must be"),
+        (np.nan, "dt must be"),
+        (np.inf, "dt must be"),
+        (1.0, "longer than the run"),
+    ],
+)
 def test_bad_time_step_is_refused(planar_3r, dt, match):
     """dt <= 0, not finite, or longer than the run: InvalidInput."""
     with pytest.raises(ft.InvalidInput, match=match):
@@ -128,14 +154,19 @@ def test_bad_duration_is_refused(planar_3r, duration):
         circle(duration=duration)
 
 
-@pytest.mark.parametrize("q0", [[0.3, 1.2], [0.3, 1.2, 1.0, 0.0], [0.3, np.nan, 1.0],
-                                [np.inf, 0.0, 0.0], [[0.3, 1.2, 1.0]]])
+@pytest.mark.parametrize(
+    "q0",
+    [[0.3, 1.2], [0.3, 1.2, 1.0, 0.0], [0.3, np.nan, 1.0], [np.inf, 0.0, 0.0], [[0.3, 1.2, 1.0]]],
+)
 def test_bad_configuration_is_refused(planar_3r, q0):
     """A q of the wrong length or with non-finite entries: InvalidInput naming the expected shape
     and joints (simulate, fk, jacobian)."""
     arm = planar_3r.arm
-    for call in (lambda: simulate(arm, circle(), "lnva", q0=q0), lambda: arm.fk(q0),
-                 lambda: arm.jacobian(q0)):
+    for call in (
+        lambda: simulate(arm, circle(), "lnva", q0=q0),
+        lambda: arm.fk(q0),
+        lambda: arm.jacobian(q0),
+    ):
         with pytest.raises(ft.InvalidInput, match=r"shape \(3,\)|finite"):
             call()
 
@@ -185,8 +216,15 @@ def test_lock_time_outside_the_run_is_refused(planar_3r):
             simulate(planar_3r.arm, circle(), "lnva", q0=Q, lock_joint="joint2", lock_time=t)
 
 
-@pytest.mark.parametrize("x0, match", [((3.0, 0.0), "out of reach"), ((1.5, 0.0), "edge"),
-                                       ((0.35,), "2 finite numbers"), ((np.nan, 0.0), "finite")])
+@pytest.mark.parametrize(
+    "x0, match",
+    [
+        ((3.0, 0.0), "out of reach"),
+        ((1.5, 0.0), "edge"),
+        ((0.35,), "2 finite numbers"),
+        ((np.nan, 0.0), "finite"),
+    ],
+)
 def test_start_point_out_of_reach_is_refused(planar_3r, x0, match):
     """x0 outside the workspace, on its edge (reached only at a singular configuration), of the
     wrong size or not finite: InvalidInput."""
@@ -268,7 +306,15 @@ def test_loading_a_run_that_is_not_there_is_refused(tmp_path):
 
 def test_every_error_is_a_fault_tolerance_error():
     """The toolkit's exceptions share one base; InvalidInput is also a ValueError."""
-    for cls in (ft.RobotNotFound, ft.JointNotFound, ft.FrameNotFound, ft.URDFError, ft.InvalidTask,
-                ft.InvalidScenario, ft.IntolerableFailure, ft.InvalidInput):
+    for cls in (
+        ft.RobotNotFound,
+        ft.JointNotFound,
+        ft.FrameNotFound,
+        ft.URDFError,
+        ft.InvalidTask,
+        ft.InvalidScenario,
+        ft.IntolerableFailure,
+        ft.InvalidInput,
+    ):
         assert issubclass(cls, ft.FaultToleranceError)
     assert issubclass(ft.InvalidInput, ValueError)

@@ -12,8 +12,15 @@ from fault_tolerance.report import write_report
 
 ALG_KEYS = {"jvj_mean", "jvj_max", "rcn_mean", "rcn_max", "tracking_error_max"}
 CASE_KEYS = {"robot", "lockable", "x0", "q0", "algorithms"}
-EXP_KEYS = {"robot", "joint", "t_max_jump", "t_min_jump", "path_error_peak_at_max",
-            "path_error_peak_at_min", "servo_model"}
+EXP_KEYS = {
+    "robot",
+    "joint",
+    "t_max_jump",
+    "t_min_jump",
+    "path_error_peak_at_max",
+    "path_error_peak_at_min",
+    "servo_model",
+}
 
 
 @pytest.fixture(scope="module")
@@ -29,9 +36,13 @@ def test_cases_match_the_table_of_math_md():
     assert CASES["fig4"].lockable == ("joint2", "joint3")
     assert CASES["fig7"].x0 == (-0.21, 0.20, 0.35)
     v = CASES["fig6"].path().xdot(0.1)
-    np.testing.assert_allclose(v, [0, 0.15 * np.pi * np.sin(0.2 * np.pi), 0.15 * np.pi * np.cos(0.2 * np.pi)])
+    np.testing.assert_allclose(
+        v, [0, 0.15 * np.pi * np.sin(0.2 * np.pi), 0.15 * np.pi * np.cos(0.2 * np.pi)]
+    )
     v = EXPERIMENT.path(6.0).xdot(1.0)
-    np.testing.assert_allclose(v, [-(np.pi / 30) * np.sin(np.pi / 3), (np.pi / 30) * np.cos(np.pi / 3)])
+    np.testing.assert_allclose(
+        v, [-(np.pi / 30) * np.sin(np.pi / 3), (np.pi / 30) * np.cos(np.pi / 3)]
+    )
 
 
 def test_summary_json_keeps_the_contract(quick):
@@ -76,9 +87,27 @@ def test_eq14_holds_at_every_case_start(quick):
 
 def test_report_verdicts_follow_the_numbers():
     """A claim's verdict flips when the measured numbers flip (no hard-coded verdicts)."""
-    alg = {"jvj_mean": 1.0, "jvj_max": 2.0, "rcn_mean": 5.0, "rcn_max": 6.0, "tracking_error_max": 0.0}
-    good = {"algorithms": {"lnva": dict(alg, jvj_mean=2.0), "jvja": dict(alg), "mda": dict(alg, jvj_mean=3.0)}}
-    bad = {"algorithms": {"lnva": dict(alg, jvj_mean=0.5), "jvja": dict(alg), "mda": dict(alg, jvj_mean=3.0)}}
+    alg = {
+        "jvj_mean": 1.0,
+        "jvj_max": 2.0,
+        "rcn_mean": 5.0,
+        "rcn_max": 6.0,
+        "tracking_error_max": 0.0,
+    }
+    good = {
+        "algorithms": {
+            "lnva": dict(alg, jvj_mean=2.0),
+            "jvja": dict(alg),
+            "mda": dict(alg, jvj_mean=3.0),
+        }
+    }
+    bad = {
+        "algorithms": {
+            "lnva": dict(alg, jvj_mean=0.5),
+            "jvja": dict(alg),
+            "mda": dict(alg, jvj_mean=3.0),
+        }
+    }
     assert "Verdict: reproduced** (judged" in write_report({"cases": {"fig2": good}})
     assert "Verdict: not reproduced** (judged" in write_report({"cases": {"fig2": bad}})
 

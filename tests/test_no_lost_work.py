@@ -47,8 +47,11 @@ class _HalfWriter:
         self.fh.close()
 
 
-@pytest.mark.parametrize("exc", [OSError(28, "No space left on device"), KeyboardInterrupt()],
-                         ids=["disk_full", "ctrl_c"])
+@pytest.mark.parametrize(
+    "exc",
+    [OSError(28, "No space left on device"), KeyboardInterrupt()],
+    ids=["disk_full", "ctrl_c"],
+)
 @pytest.mark.parametrize("existing", [True, False])
 def test_write_failing_midway_leaves_no_partial_file(tmp_path, monkeypatch, exc, existing):
     """A write that fails halfway (disk full, Ctrl-C) leaves the old file as it was (or no file),
@@ -94,8 +97,9 @@ def test_write_atomic_replaces_the_whole_file(tmp_path):
 def test_run_save_failing_on_the_last_file_keeps_the_earlier_ones(tmp_path, planar_3r, monkeypatch):
     """A save that fails on summary.json (the last file): run.npz and run.csv are complete, the
     previous summary.json is intact."""
-    run = simulation.simulate(planar_3r.arm, experiments.CASES["fig2"].path(0.02), "lnva",
-                              q0=np.array([0.3, 1.2, 1.0]))
+    run = simulation.simulate(
+        planar_3r.arm, experiments.CASES["fig2"].path(0.02), "lnva", q0=np.array([0.3, 1.2, 1.0])
+    )
     folder = tmp_path / "run"
     folder.mkdir()
     (folder / "summary.json").write_bytes(OLD)
@@ -116,9 +120,12 @@ def test_run_save_failing_on_the_last_file_keeps_the_earlier_ones(tmp_path, plan
     assert (folder / "summary.json").read_bytes() == OLD
 
 
-@pytest.mark.parametrize("stop", [KeyboardInterrupt(), ft.IntolerableFailure(["joint3"], 0.0)],
-                         ids=["ctrl_c", "error"])
-def test_reproduce_stopped_keeps_finished_cases_and_says_what_is_missing(tmp_path, monkeypatch, stop):
+@pytest.mark.parametrize(
+    "stop", [KeyboardInterrupt(), ft.IntolerableFailure(["joint3"], 0.0)], ids=["ctrl_c", "error"]
+)
+def test_reproduce_stopped_keeps_finished_cases_and_says_what_is_missing(
+    tmp_path, monkeypatch, stop
+):
     """reproduce stopped in its second case (Ctrl-C or an error): the first case's files are
     complete, summary.partial.json lists finished / unfinished cases and what stopped it, an
     earlier summary.json is unchanged, and the exception goes on."""
@@ -132,8 +139,9 @@ def test_reproduce_stopped_keeps_finished_cases_and_says_what_is_missing(tmp_pat
 
     monkeypatch.setattr(experiments, "run_case", run_case)
     with pytest.raises(type(stop)):
-        experiments.reproduce(tmp_path, cases=["fig2", "fig4", "experiment"], quick=True,
-                              progress=False)
+        experiments.reproduce(
+            tmp_path, cases=["fig2", "fig4", "experiment"], quick=True, progress=False
+        )
     partial = json.loads((tmp_path / "summary.partial.json").read_text())
     assert partial["finished"] == ["fig2"]
     assert partial["unfinished"] == ["fig4", "experiment", "checks"]
@@ -149,8 +157,13 @@ def test_reproduce_stopped_keeps_finished_cases_and_says_what_is_missing(tmp_pat
 
 
 def _start(args: list[str], cwd: Path) -> subprocess.Popen:
-    return subprocess.Popen([sys.executable, "-m", "fault_tolerance", *args], cwd=cwd,
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    return subprocess.Popen(
+        [sys.executable, "-m", "fault_tolerance", *args],
+        cwd=cwd,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
 
 
 def _wait_for(path: Path, proc: subprocess.Popen, timeout: float = 90.0) -> None:
@@ -170,8 +183,10 @@ def test_ctrl_c_during_reproduce(tmp_path):
     out = tmp_path / "out"
     out.mkdir()
     (out / "summary.json").write_bytes(OLD)
-    proc = _start(["reproduce", "--quick", "--no-progress", "--out", str(out),
-                   "--cases", "fig2,experiment"], tmp_path)
+    proc = _start(
+        ["reproduce", "--quick", "--no-progress", "--out", str(out), "--cases", "fig2,experiment"],
+        tmp_path,
+    )
     _wait_for(out / "runs" / "fig2" / "mda" / "summary.json", proc)
     time.sleep(0.3)  # well inside the experiment's runs (several seconds)
     proc.send_signal(signal.SIGINT)
@@ -193,8 +208,21 @@ def test_ctrl_c_during_simulate(tmp_path):
     """SIGINT during the second algorithm of `simulate`: exit code 130, one line naming the
     finished and unfinished runs; the finished run is complete on disk."""
     out = tmp_path / "sim"
-    proc = _start(["simulate", "--robot", "planar_3r", "--algorithms", "lnva,mda", "--duration",
-                   "20", "--no-progress", "--out", str(out)], tmp_path)
+    proc = _start(
+        [
+            "simulate",
+            "--robot",
+            "planar_3r",
+            "--algorithms",
+            "lnva,mda",
+            "--duration",
+            "20",
+            "--no-progress",
+            "--out",
+            str(out),
+        ],
+        tmp_path,
+    )
     _wait_for(out / "lnva" / "summary.json", proc)
     time.sleep(0.2)
     proc.send_signal(signal.SIGINT)

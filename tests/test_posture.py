@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 import fault_tolerance as ft
+from fault_tolerance.failures import scenarios
 from fault_tolerance.posture import (
     initial_posture,
     inverse_kinematics,
@@ -13,7 +14,6 @@ from fault_tolerance.posture import (
     self_motion_curve,
     square_sum_rcn_at,
 )
-from fault_tolerance.failures import scenarios
 from fault_tolerance.trajectories import CirclePath
 
 

@@ -116,8 +116,9 @@ def test_rcn_matches_indices(robot, draw_q, rng):
     ctrl = _controllers(robot, "auto")
     for q in _configs(robot, draw_q, rng, 5):
         k = ctrl.rcn(q)
-        np.testing.assert_allclose(k, ft.rcn(robot.arm.jacobian(q), list(robot.lockable)),
-                                   rtol=1e-9, atol=0)
+        np.testing.assert_allclose(
+            k, ft.rcn(robot.arm.jacobian(q), list(robot.lockable)), rtol=1e-9, atol=0
+        )
         assert np.all(k >= 1.0)
 
 
@@ -125,8 +126,9 @@ def test_jacobian_derivatives_match_arm(robot, draw_q, rng):
     """The vectorised kinematic Hessian equals Arm.jacobian_derivatives (atol 1e-12)."""
     ctrl = _controllers(robot, "auto")
     for q in _configs(robot, draw_q, rng, 4):
-        np.testing.assert_allclose(ctrl.jacobian_derivatives(q), robot.arm.jacobian_derivatives(q),
-                                   rtol=0, atol=1e-12)
+        np.testing.assert_allclose(
+            ctrl.jacobian_derivatives(q), robot.arm.jacobian_derivatives(q), rtol=0, atol=1e-12
+        )
 
 
 def test_rcn_gradient_matches_indices(robot, draw_q, rng):
@@ -136,18 +138,27 @@ def test_rcn_gradient_matches_indices(robot, draw_q, rng):
         J, dJ = robot.arm.jacobian(q), robot.arm.jacobian_derivatives(q)
         ref = rcn_gradient(J, dJ, list(robot.lockable))
         # eigh of J_S J_Sᵀ (squared singular values) against SVDs: relative, not absolute, accuracy
-        np.testing.assert_allclose(ctrl.rcn_gradient(J, dJ), ref, rtol=0,
-                                   atol=1e-8 * max(1.0, np.abs(ref).max()))
+        np.testing.assert_allclose(
+            ctrl.rcn_gradient(J, dJ), ref, rtol=0, atol=1e-8 * max(1.0, np.abs(ref).max())
+        )
 
 
 def test_mda_matches_resolve(robot, draw_q, draw_xdot, rng):
     """MDA steps equal ft.resolve('mda', arm=, q=) with the same gain."""
     ctrl = _controllers(robot, "auto", gain=2e-3)
     for q, xd in _samples(robot, draw_q, draw_xdot, rng, k=4):
-        ref = ft.resolve("mda", robot.arm.jacobian(q), xd, lockable=list(robot.lockable),
-                         arm=robot.arm, q=q, gain=2e-3)
-        np.testing.assert_allclose(ctrl.mda(q, xd), ref, rtol=0,
-                                   atol=1e-8 * max(1.0, np.abs(ref).max()))
+        ref = ft.resolve(
+            "mda",
+            robot.arm.jacobian(q),
+            xd,
+            lockable=list(robot.lockable),
+            arm=robot.arm,
+            q=q,
+            gain=2e-3,
+        )
+        np.testing.assert_allclose(
+            ctrl.mda(q, xd), ref, rtol=0, atol=1e-8 * max(1.0, np.abs(ref).max())
+        )
 
 
 def test_kernel_as_plain_python(robot, draw_q, draw_xdot, rng):
@@ -159,8 +170,10 @@ def test_kernel_as_plain_python(robot, draw_q, draw_xdot, rng):
     for q, xd in _samples(robot, draw_q, draw_xdot, rng, k=3):
         J = robot.arm.jacobian(q)
         out = np.empty(n)
-        for jvja, ref in ((0, ft.resolve("lnva", J, xd)),
-                          (1, ft.resolve("jvja", J, xd, lockable=list(robot.lockable)))):
+        for jvja, ref in (
+            (0, ft.resolve("lnva", J, xd)),
+            (1, ft.resolve("jvja", J, xd, lockable=list(robot.lockable))),
+        ):
             assert realtime._step_kernel(J, xd, out, G, B, N, c, ctrl._fw, params, jvja) == 0
             assert_close(out, ref)
 
@@ -201,8 +214,15 @@ SINGULAR = {
     "powercube_3r": [0.3, 0.0, 0.0],
     "spatial_4r": [0.3, 0.2, 0.1, 0.0],
     "panda_pose": [0.0] * 7,
-    "panda_position": [-0.23914944926027326, 1.1778029750135073, 0.4616453332837751,
-                       -0.4670024236530157, 0.0, 2.957079179955638, -0.5882414567459997],
+    "panda_position": [
+        -0.23914944926027326,
+        1.1778029750135073,
+        0.4616453332837751,
+        -0.4670024236530157,
+        0.0,
+        2.957079179955638,
+        -0.5882414567459997,
+    ],
 }
 
 
@@ -216,8 +236,9 @@ def test_singular_configurations_give_finite_damped_rates(robot, backend, draw_x
         xd = draw_xdot(rng, robot.m)
         assert_close(ctrl.lnva(q, xd), ft.resolve("lnva", J, xd))
         try:
-            ref = ft.resolve("jvja", J, xd, lockable=list(robot.lockable),
-                             joint_names=robot.arm.joint_names)
+            ref = ft.resolve(
+                "jvja", J, xd, lockable=list(robot.lockable), joint_names=robot.arm.joint_names
+            )
         except ft.IntolerableFailure as err:
             with pytest.raises(ft.IntolerableFailure) as got:
                 ctrl.jvja(q, xd)
@@ -251,8 +272,13 @@ def test_intolerable_scenario_raises_like_the_planner(spatial_4r, backend, draw_
     q = np.array([0.3, -0.4, 0.5, 1.1])
     xd = draw_xdot(rng, 3)
     with pytest.raises(ft.IntolerableFailure) as ref:
-        ft.resolve("jvja", spatial_4r.arm.jacobian(q), xd, lockable="all",
-                   joint_names=spatial_4r.arm.joint_names)
+        ft.resolve(
+            "jvja",
+            spatial_4r.arm.jacobian(q),
+            xd,
+            lockable="all",
+            joint_names=spatial_4r.arm.joint_names,
+        )
     with pytest.raises(ft.IntolerableFailure) as got:
         ctrl.jvja(q, xd)
     assert got.value.joints == ref.value.joints == ["joint4"]
@@ -280,8 +306,9 @@ def test_mda_step_is_capped_like_the_planner(robot, draw_q, draw_xdot, rng):
     """A huge MDA gain is capped at max_step, as planner.mda caps it."""
     ctrl = _controllers(robot, "auto", gain=1e3, max_step=0.25)
     q, xd = draw_q(robot, rng), draw_xdot(rng, robot.m)
-    ref = planner.mda(robot.arm.jacobian(q), xd, list(robot.lockable), arm=robot.arm, q=q,
-                      gain=1e3, max_step=0.25)
+    ref = planner.mda(
+        robot.arm.jacobian(q), xd, list(robot.lockable), arm=robot.arm, q=q, gain=1e3, max_step=0.25
+    )
     qd = ctrl.mda(q, xd)
     assert_close(qd, ref, atol=1e-9)
     assert np.linalg.norm(qd - ctrl.lnva(q, xd)) <= 0.25 + 1e-12

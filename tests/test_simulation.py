@@ -29,10 +29,29 @@ def test_run_reproduces_its_saved_file_exactly(setup3, tmp_path):
     run.save(tmp_path / "r")
     loaded = Run.load(tmp_path / "r")
     meta = loaded.meta
-    again = simulate(arm_from_meta(meta), CirclePath(**{k: v for k, v in meta["path"].items() if k != "kind"}),
-                     meta["algorithm"], q0=np.array(meta["q0"]), lockable=[j for (j,) in meta["lockable"]],
-                     dt=meta["dt"], duration=meta["duration"])
-    for name in ("t", "q", "qd", "x", "x_des", "error", "jvj", "jvj_parts", "rcn", "K", "sigma_min", "flags"):
+    again = simulate(
+        arm_from_meta(meta),
+        CirclePath(**{k: v for k, v in meta["path"].items() if k != "kind"}),
+        meta["algorithm"],
+        q0=np.array(meta["q0"]),
+        lockable=[j for (j,) in meta["lockable"]],
+        dt=meta["dt"],
+        duration=meta["duration"],
+    )
+    for name in (
+        "t",
+        "q",
+        "qd",
+        "x",
+        "x_des",
+        "error",
+        "jvj",
+        "jvj_parts",
+        "rcn",
+        "K",
+        "sigma_min",
+        "flags",
+    ):
         assert np.array_equal(getattr(loaded, name), getattr(run, name)), name
         assert np.array_equal(getattr(again, name), getattr(run, name)), name
     assert loaded.meta == json.loads(json.dumps(run.meta))
@@ -65,7 +84,9 @@ def test_jvja_rates_satisfy_the_task_along_the_run(setup3):
     arm, q0, path = setup3
     run = simulate(arm, path, "jvja", q0=q0, duration=0.2)
     for k in range(0, len(run.t), 50):
-        np.testing.assert_allclose(arm.jacobian(run.q[k]) @ run.qd[k], path.xdot(run.t[k]), atol=1e-10)
+        np.testing.assert_allclose(
+            arm.jacobian(run.q[k]) @ run.qd[k], path.xdot(run.t[k]), atol=1e-10
+        )
 
 
 def test_locking_a_joint_held_still_in_advance_costs_nothing(setup3):
@@ -75,8 +96,17 @@ def test_locking_a_joint_held_still_in_advance_costs_nothing(setup3):
     free = simulate(arm, path, "jvja", q0=q0, lockable=["joint3"], servo=servo, feedback_gain=10.0)
     assert np.max(np.abs(free.qd[:, 2])) < 1e-12
     assert np.max(free.jvj) < 1e-20
-    locked = simulate(arm, path, "jvja", q0=q0, lockable=["joint3"], servo=servo, feedback_gain=10.0,
-                      lock_joint="joint3", lock_time=0.4)
+    locked = simulate(
+        arm,
+        path,
+        "jvja",
+        q0=q0,
+        lockable=["joint3"],
+        servo=servo,
+        feedback_gain=10.0,
+        lock_joint="joint3",
+        lock_time=0.4,
+    )
     np.testing.assert_allclose(locked.error, free.error, atol=1e-10)
     assert locked.summary()["jump_at_lock"] < 1e-16
     assert np.all(locked.flags[locked.t >= 0.4] & FLAG_LOCKED)
@@ -87,8 +117,16 @@ def test_a_lock_with_a_jump_shows_up_as_path_error(setup3):
     arm, q0, path = setup3
     servo = ServoModel(tau=0.05)
     base = simulate(arm, path, "lnva", q0=q0, servo=servo, feedback_gain=10.0)
-    run = simulate(arm, path, "lnva", q0=q0, servo=servo, feedback_gain=10.0,
-                   lock_joint="joint2", lock_time=0.3)
+    run = simulate(
+        arm,
+        path,
+        "lnva",
+        q0=q0,
+        servo=servo,
+        feedback_gain=10.0,
+        lock_joint="joint2",
+        lock_time=0.3,
+    )
     s = run.summary()
     assert s["jump_at_lock"] > 1e-2
     after = run.t >= 0.3
@@ -97,7 +135,10 @@ def test_a_lock_with_a_jump_shows_up_as_path_error(setup3):
     assert deviation.max() > 1e-3  # [m]
     assert np.all(run.qd[after, 1] == 0.0)
     assert {k: run.meta["lock"][k] for k in ("joint", "index", "time")} == {
-        "joint": "joint2", "index": 1, "time": 0.3}
+        "joint": "joint2",
+        "index": 1,
+        "time": 0.3,
+    }
 
 
 def test_servo_lag_is_exact_first_order():
@@ -111,11 +152,17 @@ def test_servo_lag_is_exact_first_order():
     assert lim.follow(np.zeros(1), np.ones(1), 1e-3)[0] == pytest.approx(0.01)
 
 
-@pytest.mark.parametrize("kwargs, match", [
-    ({"dt": 0.0}, "dt must be"), ({"dt": -1e-3}, "dt must be"), ({"duration": np.inf}, "duration"),
-    ({"lock_joint": "joint2", "lock_time": 5.0}, "lock time"), ({"lock_joint": "joint9", "lock_time": 0.1}, "joint9"),
-    ({"feedback_gain": -1.0}, "feedback"),
-])
+@pytest.mark.parametrize(
+    "kwargs, match",
+    [
+        ({"dt": 0.0}, "dt must be"),
+        ({"dt": -1e-3}, "dt must be"),
+        ({"duration": np.inf}, "duration"),
+        ({"lock_joint": "joint2", "lock_time": 5.0}, "lock time"),
+        ({"lock_joint": "joint9", "lock_time": 0.1}, "joint9"),
+        ({"feedback_gain": -1.0}, "feedback"),
+    ],
+)
 def test_bad_simulation_options_are_refused(setup3, kwargs, match):
     """Bad time steps, durations, lock settings and gains raise the toolkit's errors."""
     arm, q0, path = setup3

@@ -72,8 +72,11 @@ def check_rates(alg: str, J: np.ndarray, xd: np.ndarray, qd: np.ndarray) -> None
     bound_a = np.linalg.norm(xd) / SIGMA_EPS * (1 + 1e-9)
     assert np.linalg.norm(a) <= bound_a
     assert np.linalg.norm(J @ qd - xd) <= np.linalg.norm(xd) * (1 + 1e-6) + 1e-9
-    extra = {"lnva": 1e-12, "jvja": np.abs(a).max() / np.sqrt(PIVOT_EPS) * (1 + 1e-9),
-             "mda": MDA_MAX_STEP * (1 + 1e-9)}[alg]
+    extra = {
+        "lnva": 1e-12,
+        "jvja": np.abs(a).max() / np.sqrt(PIVOT_EPS) * (1 + 1e-9),
+        "mda": MDA_MAX_STEP * (1 + 1e-9),
+    }[alg]
     assert np.linalg.norm(qd - a) <= extra + 1e-12
 
 
@@ -118,8 +121,12 @@ def test_exactly_intolerable_configuration_is_named_unless_tolerated(singular, r
 
 
 @PROPS
-@given(log_eps=st.floats(-12.0, -1.0), seed=st.integers(0, 2**32 - 1),
-       alg=st.sampled_from(ALGS), which=st.sampled_from(sorted(SINGULAR)))
+@given(
+    log_eps=st.floats(-12.0, -1.0),
+    seed=st.integers(0, 2**32 - 1),
+    alg=st.sampled_from(ALGS),
+    which=st.sampled_from(sorted(SINGULAR)),
+)
 def test_rates_near_singular_configurations_are_finite_and_bounded(
     request, log_eps, seed, alg, which
 ):
@@ -151,7 +158,8 @@ def test_damping_leaves_regular_configurations_alone(robot, seed):
     for response in ("least_norm", "continuation"):
         np.testing.assert_array_equal(
             ft.jvja(J, xd, list(robot.lockable), response=response, tolerate=True),
-            ft.jvja(J, xd, list(robot.lockable), response=response))
+            ft.jvja(J, xd, list(robot.lockable), response=response),
+        )
 
 
 @PROPS
@@ -172,8 +180,10 @@ def test_damped_pivots_are_bounded_below_and_exact_above_the_threshold(p):
 
 def finite_run(run) -> bool:
     """Every recorded array is finite."""
-    return all(np.all(np.isfinite(getattr(run, k))) for k in
-               ("q", "qd", "x", "error", "jvj", "jvj_parts", "rcn", "K", "sigma_min"))
+    return all(
+        np.all(np.isfinite(getattr(run, k)))
+        for k in ("q", "qd", "x", "error", "jvj", "jvj_parts", "rcn", "K", "sigma_min")
+    )
 
 
 @pytest.mark.parametrize("alg", ALGS)
@@ -192,7 +202,10 @@ def test_run_past_the_edge_of_the_workspace_is_finite_and_flagged(planar_3r, alg
         assert s["near_singular_samples"] > 0
         assert np.all(run.sigma_min[run.flags & FLAG_NEAR_SINGULAR > 0] < SIGMA_EPS)
     assert s["over_speed_samples"] == np.count_nonzero(
-        np.any(np.abs(run.qd_cmd if run.qd_cmd is not None else run.qd) > arm.velocity_limit, axis=1))
+        np.any(
+            np.abs(run.qd_cmd if run.qd_cmd is not None else run.qd) > arm.velocity_limit, axis=1
+        )
+    )
 
 
 @pytest.mark.parametrize("alg", ["lnva", "jvja"])
@@ -243,8 +256,9 @@ def test_lock_near_a_singularity_keeps_the_reduced_robot_finite(planar_3r):
     arm = planar_3r.arm
     q0 = np.array([0.3, 1.0, 5e-4])
     path = CirclePath(arm.fk(q0), 0.05, 2 * np.pi, 0.1, rows=(0, 1))
-    run = simulate(arm, path, "lnva", q0=q0, lockable=["joint2"], lock_joint="joint1",
-                   lock_time=0.0)
+    run = simulate(
+        arm, path, "lnva", q0=q0, lockable=["joint2"], lock_joint="joint1", lock_time=0.0
+    )
     assert finite_run(run)
     assert np.all(run.qd[:, 0] == 0.0)
     assert run.flags[0] & FLAG_NEAR_SINGULAR

@@ -13,8 +13,11 @@ def test_fig2_circle_velocity_matches_the_paper():
     """The Fig. 2 circle has ẋ = [0.2π sin 2πt, 0.2π cos 2πt] and starts at x0."""
     p = CirclePath([0.35, 0.0], 0.1, 2 * np.pi, 1.0)
     for t in np.linspace(0, 1, 7):
-        np.testing.assert_allclose(p.xdot(t), [0.2 * np.pi * np.sin(2 * np.pi * t),
-                                               0.2 * np.pi * np.cos(2 * np.pi * t)], atol=1e-14)
+        np.testing.assert_allclose(
+            p.xdot(t),
+            [0.2 * np.pi * np.sin(2 * np.pi * t), 0.2 * np.pi * np.cos(2 * np.pi * t)],
+            atol=1e-14,
+        )
     np.testing.assert_allclose(p.x(0.0), [0.35, 0.0], atol=1e-15)
     np.testing.assert_allclose(p.x(1.0), [0.35, 0.0], atol=1e-14)
 
@@ -23,8 +26,11 @@ def test_powercube_circle_velocity_matches_the_paper():
     """The Sec. V path has ẋ = [−(π/30) sin(πt/3), (π/30) cos(πt/3)]."""
     p = CirclePath([0.5, 0.0], 0.1, np.pi / 3, 6.0, sign=-1.0)
     t = 1.3
-    np.testing.assert_allclose(p.xdot(t), [-(np.pi / 30) * np.sin(np.pi * t / 3),
-                                           (np.pi / 30) * np.cos(np.pi * t / 3)], atol=1e-14)
+    np.testing.assert_allclose(
+        p.xdot(t),
+        [-(np.pi / 30) * np.sin(np.pi * t / 3), (np.pi / 30) * np.cos(np.pi * t / 3)],
+        atol=1e-14,
+    )
 
 
 def test_circle_position_is_the_integral_of_its_velocity():
@@ -42,7 +48,7 @@ def test_csv_path_with_and_without_velocities(tmp_path):
     ts = np.linspace(0, 1, 201)
     x, y = 0.3 + 0.1 * ts**2, 0.2 * ts
     f = tmp_path / "p.csv"
-    f.write_text("t,x,y\n" + "".join(f"{a},{b},{c}\n" for a, b, c in zip(ts, x, y)))
+    f.write_text("t,x,y\n" + "".join(f"{a},{b},{c}\n" for a, b, c in zip(ts, x, y, strict=True)))
     p = load_csv(f)
     assert p.duration == pytest.approx(1.0)
     np.testing.assert_allclose(p.x(0.5), [0.325, 0.1], atol=1e-6)
