@@ -406,32 +406,13 @@ def simulate(
         xd_cmd = xd_des + feedback_gain * err
         proj = projection(J)
         flag = FLAG_NEAR_SINGULAR if proj.sigma_min < SIGMA_EPS else 0
-        if locked:
-            qd_cmd = np.zeros(n)
-            reduced = projection(J[:, keep])
-            qd_cmd[keep] = reduced.Jpinv @ xd_cmd
-            flag = FLAG_LOCKED | (FLAG_NEAR_SINGULAR if reduced.sigma_min < SIGMA_EPS else 0)
-            if lock_jump is None:  # the jump the lock causes: reduced rates minus planned rates
-                planned = resolve(
-                    algorithm,
-                    J,
-                    xd_cmd,
-                    sc,
-                    response=response,
-                    arm=arm,
-                    q=q,
-                    gain=gain,
-                    tolerate=True,
-                    max_step=max_step,
-                )
-                lock_jump = float(np.sum((qd_cmd - planned) ** 2))
-        else:
-            qd_cmd = resolve(
+        planned = None
+        if not locked or lock_jump is None:
+            planned = resolve(
                 algorithm,
                 J,
                 xd_cmd,
                 sc,
-                weights=None,
                 response=response,
                 arm=arm,
                 q=q,
@@ -439,6 +420,15 @@ def simulate(
                 tolerate=True,
                 max_step=max_step,
             )
+        if locked:
+            qd_cmd = np.zeros(n)
+            reduced = projection(J[:, keep])
+            qd_cmd[keep] = reduced.Jpinv @ xd_cmd
+            flag = FLAG_LOCKED | (FLAG_NEAR_SINGULAR if reduced.sigma_min < SIGMA_EPS else 0)
+            if lock_jump is None:  # the jump the lock causes: reduced rates minus planned rates
+                lock_jump = float(np.sum((qd_cmd - planned) ** 2))
+        else:
+            qd_cmd = planned
             if (
                 algorithm == "mda"
                 and np.linalg.norm(qd_cmd - proj.Jpinv @ xd_cmd) >= 0.999 * max_step
