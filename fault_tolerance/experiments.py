@@ -17,6 +17,7 @@ import numpy as np
 from .arm import Arm, load_arm
 from .indices import jump_reduction
 from .linalg import projection
+from .planner import MDA_GAIN
 from .posture import RCN_THRESHOLD, initial_posture, plan
 from .simulation import Run, ServoModel, output_folder, simulate, write_atomic
 from .trajectories import CirclePath
@@ -466,7 +467,7 @@ def reproduce(
         "seconds": round(time.perf_counter() - started, 2),
         "algorithms": list(ALGORITHMS),
         "dt": 1e-3,
-        "mda_gain": __import__("fault_tolerance.planner", fromlist=["MDA_GAIN"]).MDA_GAIN,
+        "mda_gain": MDA_GAIN,
     }
     write_atomic(out / "summary.json", json.dumps(summary, indent=2) + "\n")
     from .report import write_report
