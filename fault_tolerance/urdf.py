@@ -428,10 +428,42 @@ def inspect_text(
     if arm.redundancy >= 1:
         sc = scenarios("all", arm.n, r=arm.redundancy, joint_names=arm.joint_names)
         bad = [arm.joint_names[i] for i in sc.columns if proj.N[i, i] < PIVOT_TOL]
+        note = "  (J is singular there, so this says little)" if proj.sigma_min < 1e-6 else ""
         lines.append(
             "intolerable joints there (locking one loses the task): "
             + (", ".join(bad) if bad else "none")
+            + note
+        )
+        always = _always_intolerable(arm, sc.columns)
+        lines.append(
+            f"intolerable at all of {STRUCTURAL_SAMPLES} random regular configurations "
+            "(structurally; leave them out of the lockable set): "
+            + (", ".join(arm.joint_names[i] for i in always) if always else "none")
         )
     else:
         lines.append("not redundant for this task: any locked joint loses it")
     return "\n".join(lines)
+
+
+#: Random configurations ``inspect`` draws to find structurally intolerable joints.
+STRUCTURAL_SAMPLES = 50
+
+
+def _always_intolerable(arm, columns) -> list[int]:
+    """Joints whose pivot ``N_ii`` vanishes at every sampled regular configuration (seeded)."""
+    import numpy as np
+
+    from .linalg import PIVOT_TOL, projection
+
+    rng = np.random.default_rng(0)
+    always = set(int(i) for i in columns)
+    seen = 0
+    for _ in range(20 * STRUCTURAL_SAMPLES):
+        proj = projection(arm.jacobian(arm.random_q(rng)))
+        if proj.sigma_min < 1e-3:
+            continue
+        always &= {i for i in always if proj.N[i, i] < 1e3 * PIVOT_TOL}
+        seen += 1
+        if seen == STRUCTURAL_SAMPLES or not always:
+            break
+    return sorted(always)

@@ -57,6 +57,10 @@ def test_inspect_names_the_intolerable_joint(capsys):
     assert main(["inspect", "planar_3r"]) == 0
     out = capsys.readouterr().out
     assert "joint1 -> joint2 -> joint3" in out and "candidate tip frames" in out
+    assert main(["inspect", "spatial_4r"]) == 0
+    out = capsys.readouterr().out
+    structural = next(ln for ln in out.splitlines() if "random regular configurations" in ln)
+    assert structural.endswith(": joint4")
 
 
 def test_simulate_writes_runs_and_plots(tmp_path, capsys):
