@@ -33,7 +33,9 @@ Backends for the LNVA and single-joint JVJA steps (``backend=``):
 * ``"numpy"``: the same code with NumPy in place of the LAPACK wrappers (no extra dependency);
 * ``"auto"`` (default): the first of these that is installed.
 
-MDA, the RCN and multi-joint JVJA always use the lapack (or numpy) code.
+MDA, the RCN and multi-joint JVJA always use the lapack (or numpy) code. The step kernels (the
+LAPACK/NumPy calls, the numba kernel and its compilation) are in :mod:`fault_tolerance.kernels`;
+this module builds the workspace they run in and hands singular steps to the planner.
 
 Example:
     >>> import numpy as np, fault_tolerance as ft
@@ -48,19 +50,18 @@ Example:
 
 from __future__ import annotations
 
-import math
 from collections.abc import Callable, Sequence
-from types import SimpleNamespace
 
 import numpy as np
 import pinocchio as pin
 
-from . import planner
+from . import kernels, planner
 from .arm import Arm
-from .errors import FaultToleranceError, InvalidInput
+from .errors import InvalidInput
 from .failures import Scenarios, scenarios
 from .indices import RCN_MAX
-from .linalg import PIVOT_EPS, PIVOT_TOL, RANK_RTOL, SIGMA_EPS
+from .kernels import TRACE_MAX
+from .linalg import PIVOT_EPS, PIVOT_TOL, RANK_RTOL
 
 __all__ = ["BACKENDS", "Controller", "METHODS", "TRACE_MAX", "available_backends"]
 
@@ -69,75 +70,9 @@ METHODS = ("lnva", "jvja", "mda")
 #: Backends of the LNVA / JVJA steps, fastest first.
 BACKENDS = ("numba", "lapack", "numpy")
 
-#: ``trace((J Jᵀ)⁻¹)`` up to which ``σ_min(J) ≥ SIGMA_EPS`` is certain, so no damping is needed.
-TRACE_MAX = 1.0 / SIGMA_EPS**2
-
 _LWA = pin.LOCAL_WORLD_ALIGNED
 _WORLD = pin.WORLD
 _INF = float("inf")
-_STEP_ERRORS = (ValueError, TypeError, RuntimeError, AttributeError, IndexError)
-
-
-# -- linear algebra backends -----------------------------------------------------------------
-
-
-def _numpy_linalg() -> SimpleNamespace:
-    """The LAPACK/BLAS calls of a step, with scipy's signatures and results, done by NumPy."""
-
-    def dsyrk(alpha, a, beta=0.0, c=None, trans=0, lower=0, overwrite_c=0):
-        return alpha * (a.T @ a if trans else a @ a.T)
-
-    def dposv(a, b, lower=0, overwrite_a=0):
-        try:
-            U = np.linalg.cholesky(a).T  # upper factor, G = UᵀU; raises unless G is PD
-        except np.linalg.LinAlgError:
-            return a, b, 1
-        return U, np.linalg.solve(a, b), 0
-
-    def dtrtri(c, lower=0, unitdiag=0, overwrite_c=0):
-        return np.triu(np.linalg.inv(c)), 0
-
-    def dgemm(alpha, a, b, beta, c):
-        return beta * c + alpha * (a @ b)
-
-    def dgemv(
-        alpha, a, x, beta=0.0, y=None, offx=0, incx=1, offy=0, incy=1, trans=0, overwrite_y=0
-    ):
-        r = alpha * ((a.T if trans else a) @ x)
-        if y is None:
-            return r
-        y *= beta
-        y += r
-        return y
-
-    def ddot(x, y):
-        return float(np.vdot(x, y))
-
-    return SimpleNamespace(
-        name="numpy", dsyrk=dsyrk, dposv=dposv, dtrtri=dtrtri, dgemm=dgemm, dgemv=dgemv, ddot=ddot
-    )
-
-
-def _lapack_linalg() -> SimpleNamespace:
-    """The same calls from scipy.linalg's LAPACK/BLAS wrappers."""
-    from scipy.linalg import blas, lapack
-
-    return SimpleNamespace(
-        name="lapack",
-        dsyrk=blas.dsyrk,
-        dposv=lapack.dposv,
-        dtrtri=lapack.dtrtri,
-        dgemm=blas.dgemm,
-        dgemv=blas.dgemv,
-        ddot=blas.ddot,
-    )
-
-
-def _lapack_linalg_or_numpy() -> SimpleNamespace:
-    try:
-        return _lapack_linalg()
-    except ImportError:
-        return _numpy_linalg()
 
 
 def available_backends() -> list[str]:
@@ -150,133 +85,6 @@ def available_backends() -> list[str]:
         except ImportError:
             pass
     return out + ["numpy"]
-
-
-# Eqn. (5) in closed form (G2), one step after the Jacobian; compiled by numba.
-def _step_kernel(J, xdot, out, G, B, N, c, fw, params, jvja):  # pragma: no cover - numba
-    """LNVA (``jvja=0``) or single-joint JVJA (``jvja=1``) rates into ``out``; returns a status.
-
-    ``params = [TRACE_MAX, pivot threshold, rank coefficient, alpha]``; ``fw[0]`` is 0 on lockable
-    columns and +inf elsewhere, ``fw[1]`` the weight ``w_i/W`` (or 1 with uniform weights, then
-    ``alpha = -1/f``). Status 0: done; 1: no certificate of ``σ_min ≥ SIGMA_EPS`` (or non-finite
-    numbers), the caller falls back to the planner; 2: a pivot ``N_ii`` is below the threshold
-    (``PIVOT_TOL``: intolerable; ``PIVOT_EPS`` with ``tolerate``: to be damped by the planner).
-    Plain Python (valid without numba, and tested so): only scalar loops.
-    """
-    m, n = J.shape
-    # G = J Jᵀ (lower triangle) and its Cholesky factor L, in place.
-    for i in range(m):
-        for j in range(i + 1):
-            s = 0.0
-            for k in range(n):
-                s += J[i, k] * J[j, k]
-            G[i, j] = s
-    for j in range(m):
-        s = G[j, j]
-        for k in range(j):
-            s -= G[j, k] * G[j, k]
-        if not s > 0.0:
-            return 1
-        s = math.sqrt(s)
-        G[j, j] = s
-        for i in range(j + 1, m):
-            t = G[i, j]
-            for k in range(j):
-                t -= G[i, k] * G[j, k]
-            G[i, j] = t / s
-    # trace(G⁻¹) = ‖L⁻¹‖_F², column by column of L⁻¹ (c as scratch): the certificate.
-    tr = 0.0
-    for j in range(m):
-        for i in range(j, m):
-            t = 1.0 if i == j else 0.0
-            for k in range(j, i):
-                t -= G[i, k] * c[k]
-            c[i] = t / G[i, i]
-            tr += c[i] * c[i]
-    if not tr <= params[0]:
-        return 1
-    if not jvja:
-        # LNVA: y = G⁻¹ ẋ (L z = ẋ, Lᵀ y = z, in c), a = Jᵀ y.
-        for i in range(m):
-            t = xdot[i]
-            for k in range(i):
-                t -= G[i, k] * c[k]
-            c[i] = t / G[i, i]
-        for i in range(m - 1, -1, -1):
-            t = c[i]
-            for k in range(i + 1, m):
-                t -= G[k, i] * c[k]
-            c[i] = t / G[i, i]
-        s = 0.0
-        for col in range(n):
-            t = 0.0
-            for i in range(m):
-                t += J[i, col] * c[i]
-            out[col] = t
-            s += t * t
-        if not s < _INF:
-            return 1
-        return 0
-    # JVJA: B = G⁻¹ J (L Y = J, Lᵀ B = Y); a = Bᵀ ẋ.
-    for col in range(n):
-        for i in range(m):
-            t = J[i, col]
-            for k in range(i):
-                t -= G[i, k] * B[k, col]
-            B[i, col] = t / G[i, i]
-        for i in range(m - 1, -1, -1):
-            t = B[i, col]
-            for k in range(i + 1, m):
-                t -= G[k, i] * B[k, col]
-            B[i, col] = t / G[i, i]
-        s = 0.0
-        for i in range(m):
-            s += B[i, col] * xdot[i]
-        out[col] = s
-    if params[2] > 0.0:  # rank certificate (linalg.RANK_RTOL) for arms without a static bound
-        s = 0.0
-        for i in range(m):
-            for k in range(n):
-                s += J[i, k] * J[i, k]
-        if not params[2] * s * tr < 1.0:
-            return 1
-    # N = I - Jᵀ B; c_i = (w_i / W) a_i / N_ii on lockable columns; out = a + alpha N c.
-    for r in range(n):
-        for col in range(n):
-            s = 0.0
-            for i in range(m):
-                s -= J[i, r] * B[i, col]
-            N[r, col] = s
-        N[r, r] += 1.0
-    for i in range(n):
-        d = N[i, i] + fw[0, i]
-        if d < params[1]:
-            return 2
-        c[i] = out[i] / d * fw[1, i]
-    alpha = params[3]
-    for r in range(n):
-        s = 0.0
-        for col in range(n):
-            s += N[r, col] * c[col]
-        out[r] += alpha * s
-    s = 0.0
-    for i in range(n):
-        s += out[i] * out[i]
-    if not s < _INF:
-        return 1
-    return 0
-
-
-_COMPILED: dict[str, Callable] = {}
-
-
-def _compiled_kernel() -> Callable:
-    """:func:`_step_kernel` compiled by numba (once per process; cached on disk)."""
-    if "step" not in _COMPILED:
-        import numba
-
-        _COMPILED["step"] = numba.njit(cache=True, nogil=True, error_model="numpy")(_step_kernel)
-    return _COMPILED["step"]
 
 
 # -- kinematic Hessian helpers ----------------------------------------------------------------
@@ -423,15 +231,20 @@ class Controller:
         # bounded far below that skip the per-step test (rank coefficient 0).
         bounded = _jacobian_norm2_bound(arm) * RANK_RTOL**2 * TRACE_MAX < 0.5
         self._rank_coef = 0.0 if bounded else RANK_RTOL**2
-        self._la = _numpy_linalg() if backend == "numpy" else _lapack_linalg_or_numpy()
+        # The steps are closures over this workspace, built by the backend's kernels.
+        self._la = (
+            kernels.numpy_linalg() if backend == "numpy" else kernels.lapack_linalg_or_numpy()
+        )
         self._init_scenario_tables()
         if backend == "numba":
-            self.lnva = self._build_kernel_step(0)
-            self.jvja = self._build_kernel_step(1) if self._singletons else self._build_jvja()
+            self.lnva = kernels.compiled_step(self, 0)
+            self.jvja = (
+                kernels.compiled_step(self, 1) if self._singletons else kernels.lapack_jvja(self)
+            )
         else:
-            self.lnva = self._build_lnva()
-            self.jvja = self._build_jvja()
-        self.mda = self._build_mda()
+            self.lnva = kernels.lapack_lnva(self)
+            self.jvja = kernels.lapack_jvja(self)
+        self.mda = kernels.lapack_mda(self)
         self.step = {"lnva": self.lnva, "jvja": self.jvja, "mda": self.mda}[method]
 
     # -- helpers ----------------------------------------------------------------------------
@@ -528,120 +341,7 @@ class Controller:
             return InvalidInput(f"out must be a C-contiguous float64 array of shape ({self.n},)")
         return InvalidInput(f"step failed: {err}")
 
-    # -- LNVA / JVJA with LAPACK calls ----------------------------------------------------------
-    def _build_lnva(self) -> Callable[..., np.ndarray]:
-        model, data, fid, rows = self.model, self.data, self.frame_id, self._rows
-        n, m = self.n, self.m
-        la = self._la
-        dsyrk, dposv, dtrtri, ddot = la.dsyrk, la.dposv, la.dtrtri, la.ddot
-        cfj, dot, empty = pin.computeFrameJacobian, np.dot, np.empty
-        GT = np.zeros((m, m), order="F")  # LAPACK works in its upper triangle; the rest stays 0
-        fallback, bad_call = self._fallback, self._bad_call
-
-        def lnva(q: np.ndarray, xdot: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
-            """LNVA, least-norm rates ``q̇ = J⁺ẋ`` (damped near singularities as in linalg)."""
-            if out is None:
-                out = empty(n)
-            try:
-                J = cfj(model, data, q, fid, _LWA)[rows]
-                G = dsyrk(1.0, J.T, 0.0, GT, 1, 0, 1)  # G = J Jᵀ
-                U, y, info = dposv(G, xdot, 0, 1)  # G = UᵀU, y = G⁻¹ẋ: one factorisation
-                if info:
-                    return fallback("lnva", J, xdot, out)
-                Ui, info = dtrtri(U, 0, 0, 1)
-                if info or not ddot(Ui, Ui) <= TRACE_MAX:  # ‖U⁻¹‖² = trace(G⁻¹); NaN fails too
-                    return fallback("lnva", J, xdot, out)
-                dot(y, J, out=out)  # a = J⁺ẋ = Jᵀy
-            except FaultToleranceError:
-                raise
-            except _STEP_ERRORS as err:
-                raise bad_call(err, q, xdot, out) from err
-            if not ddot(out, out) < _INF:
-                return fallback("lnva", J, xdot, out)
-            return out
-
-        return lnva
-
-    def _build_jvja(self) -> Callable[..., np.ndarray]:
-        model, data, fid, rows = self.model, self.data, self.frame_id, self._rows
-        n, m = self.n, self.m
-        la = self._la
-        dsyrk, dposv, dtrtri, dgemm, dgemv, ddot = (
-            la.dsyrk,
-            la.dposv,
-            la.dtrtri,
-            la.dgemm,
-            la.dgemv,
-            la.ddot,
-        )
-        cfj, dot, empty, divide, multiply, add = (
-            pin.computeFrameJacobian,
-            np.dot,
-            np.empty,
-            np.divide,
-            np.multiply,
-            np.add,
-        )
-        GT = np.zeros((m, m), order="F")
-        eye = np.asfortranarray(np.eye(n))
-        c = np.empty(n)
-        dF = np.empty(n)
-        off, wrel = self._fw[0], self._fw[1]
-        rank_coef, alpha = self._rank_coef, self._alpha
-        fallback, bad_call, general = self._fallback, self._bad_call, self._shift_general
-        tol, tolerate = self._pivot_threshold, self.tolerate
-        check_tolerable = self.scenarios.check_tolerable
-        mode = ("all" if self._all_uniform else "singletons") if self._singletons else "general"
-        weighted = not self._uniform
-
-        def jvja(q: np.ndarray, xdot: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
-            """JVJA, minimum square-sum jump rates, eq. (5) in closed form (G1, G2)."""
-            if out is None:
-                out = empty(n)
-            try:
-                J = cfj(model, data, q, fid, _LWA)[rows]
-                G = dsyrk(1.0, J.T, 0.0, GT, 1, 0, 1)
-                U, B, info = dposv(G, J, 0, 1)
-                if info:
-                    return fallback("jvja", J, xdot, out)
-                Ui, info = dtrtri(U, 0, 0, 1)
-                tr = ddot(Ui, Ui)
-                rank_ok = not rank_coef or rank_coef * ddot(J, J) * tr < 1.0
-                if info or not tr <= TRACE_MAX or not rank_ok:  # NaN fails too
-                    return fallback("jvja", J, xdot, out)
-                dot(xdot, B, out=out)  # a
-                N = dgemm(-1.0, J.T, B, 1.0, eye)  # N = I - JᵀG⁻¹J
-                d = N.diagonal()
-                if mode == "all":  # c_i = a_i / N_ii, alpha = -1/f
-                    if min(d.tolist()) < tol:
-                        if not tolerate:
-                            check_tolerable(N)  # raises IntolerableFailure naming the joint
-                        return fallback("jvja", J, xdot, out)  # pivots damped by the planner
-                    divide(out, d, out=c)
-                elif mode == "singletons":
-                    add(d, off, out=dF)
-                    if min(dF.tolist()) < tol:
-                        if not tolerate:
-                            check_tolerable(N)
-                        return fallback("jvja", J, xdot, out)
-                    divide(out, dF, out=c)
-                    if weighted:
-                        multiply(c, wrel, out=c)
-                elif not general(N, out, c):
-                    return fallback("jvja", J, xdot, out)
-                r = dgemv(alpha, N, c, 1.0, out, 0, 1, 0, 1, 0, 1)  # a + alpha N c, in place
-            except FaultToleranceError:
-                raise
-            except _STEP_ERRORS as err:
-                raise bad_call(err, q, xdot, out) from err
-            if r is not out:  # pragma: no cover - BLAS wrote a copy (np.dot accepted out)
-                out[...] = r
-            if not ddot(out, out) < _INF:
-                return fallback("jvja", J, xdot, out)
-            return out
-
-        return jvja
-
+    # -- multi-joint JVJA (G1), called by kernels.lapack_jvja ---------------------------------
     def _shift_general(self, N: np.ndarray, a: np.ndarray, c: np.ndarray) -> bool:
         """``c = Σ_S (w_S/W) E_S N[S,S]⁻¹ a[S]`` (G1), one batched solve per scenario size.
 
@@ -665,52 +365,6 @@ class Controller:
             sol = np.linalg.solve(NSS, a[idx][:, :, None])[:, :, 0]  # (k, s)
             np.add.at(c, idx.ravel(), (wrel[:, None] * sol).ravel())
         return True
-
-    # -- LNVA / JVJA in one compiled kernel -----------------------------------------------------
-    def _build_kernel_step(self, jvja: int) -> Callable[..., np.ndarray]:
-        model, data, fid, rows = self.model, self.data, self.frame_id, self._rows
-        n, m = self.n, self.m
-        kernel = _compiled_kernel()
-        cfj, empty, ndarray, f64 = pin.computeFrameJacobian, np.empty, np.ndarray, np.float64
-        G, B, N, c = np.empty((m, m)), np.empty((m, n)), np.empty((n, n)), np.empty(n)
-        fw = self._fw
-        params = np.array([TRACE_MAX, self._pivot_threshold, self._rank_coef, self._alpha])
-        tolerate = self.tolerate
-        shape_n, shape_m = (n,), (m,)
-        fallback, bad_call = self._fallback, self._bad_call
-        check_tolerable = self.scenarios.check_tolerable
-        name = "jvja" if jvja else "lnva"
-        kernel(np.zeros((m, n)), np.zeros(m), np.zeros(n), G, B, N, c, fw, params, jvja)  # compile
-
-        def step(q: np.ndarray, xdot: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
-            if out is None:
-                out = empty(n)
-            elif type(out) is not ndarray or out.shape != shape_n or out.dtype != f64:
-                raise bad_call(ValueError("out"), q, xdot, out)
-            if type(xdot) is not ndarray or xdot.shape != shape_m or xdot.dtype != f64:
-                xdot = np.asarray(xdot, dtype=float)
-                if xdot.shape != shape_m:
-                    raise bad_call(ValueError("xdot"), q, xdot, out)
-            try:
-                J = cfj(model, data, q, fid, _LWA)[rows]
-                status = kernel(J, xdot, out, G, B, N, c, fw, params, jvja)
-            except FaultToleranceError:
-                raise
-            except _STEP_ERRORS as err:
-                raise bad_call(err, q, xdot, out) from err
-            if status:
-                if status == 2 and not tolerate:
-                    check_tolerable(N)  # raises IntolerableFailure naming the joint
-                return fallback(name, J, xdot, out)
-            return out
-
-        step.__name__ = name
-        step.__doc__ = (
-            "JVJA, minimum square-sum jump rates, eq. (5) in closed form (G2); compiled."
-            if jvja
-            else "LNVA, least-norm rates ``q̇ = J⁺ẋ``; compiled."
-        )
-        return step
 
     # -- indices: RCN and its gradient --------------------------------------------------------
     def _reduced_gram(self, J: np.ndarray) -> np.ndarray:
@@ -788,65 +442,3 @@ class Controller:
         D = np.einsum("fjms,fms->fjs", X, Ue)  # (f, n, 2): ∂σ_max/∂q_j, ∂σ_min/∂q_j
         k = smax / smin
         return (2.0 * k / smin) @ D[:, :, 0] - (2.0 * k * smax / smin**2) @ D[:, :, 1]
-
-    # -- MDA --------------------------------------------------------------------------------
-    def _build_mda(self) -> Callable[..., np.ndarray]:
-        model, data, fid, rows = self.model, self.data, self.frame_id, self._rows
-        n, m = self.n, self.m
-        la = self._la
-        dsyrk, dposv, dtrtri, dgemm, dgemv, ddot = (
-            la.dsyrk,
-            la.dposv,
-            la.dtrtri,
-            la.dgemm,
-            la.dgemv,
-            la.ddot,
-        )
-        GT = np.zeros((m, m), order="F")
-        eye = np.asfortranarray(np.eye(n))
-        fallback, bad_call = self._fallback, self._bad_call
-        djac, grad_of = self._djac, self.rcn_gradient
-        rank_coef = self._rank_coef
-        gain, max_step = self.gain, self.max_step
-        oMf = data.oMf
-
-        def mda(q: np.ndarray, xdot: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
-            """MDA, maximum-dexterity rates ``q̇ = J⁺ẋ - α N ∇K``."""
-            if out is None:
-                out = np.empty(n)
-            try:
-                pin.computeJointJacobians(model, data, q)
-                Jw = pin.getFrameJacobian(model, data, fid, _WORLD)
-                Jl = pin.getFrameJacobian(model, data, fid, _LWA)
-                J = Jl[rows]
-                G = dsyrk(1.0, J.T, 0.0, GT, 1, 0, 1)
-                U, B, info = dposv(G, J, 0, 1)
-                if info:
-                    return fallback("mda", J, xdot, out, q)
-                Ui, info = dtrtri(U, 0, 0, 1)
-                tr = ddot(Ui, Ui)
-                rank_ok = not rank_coef or rank_coef * ddot(J, J) * tr < 1.0
-                if info or not tr <= TRACE_MAX or not rank_ok:  # NaN fails too
-                    return fallback("mda", J, xdot, out, q)
-                np.dot(xdot, B, out=out)
-                N = dgemm(-1.0, J.T, B, 1.0, eye)
-                grad = grad_of(J, djac(Jw, Jl, oMf[fid].translation))
-                step = dgemv(gain, N, grad)  # α N ∇K [rad/s], capped as planner.mda does
-                size = math.sqrt(ddot(step, step))
-                if not size < _INF:  # ∇K overflowed at a reduced singularity: no direction
-                    step = 0.0
-                elif size > max_step:
-                    step *= max_step / size
-                r = out
-                np.subtract(out, step, out=out)
-            except FaultToleranceError:
-                raise
-            except _STEP_ERRORS as err:
-                raise bad_call(err, q, xdot, out) from err
-            if r is not out:  # pragma: no cover
-                out[...] = r
-            if not ddot(out, out) < _INF:
-                return fallback("mda", J, xdot, out, q)
-            return out
-
-        return mda

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 import fault_tolerance as ft
-from fault_tolerance import planner, realtime
+from fault_tolerance import kernels, planner, realtime
 from fault_tolerance.indices import rcn_gradient
 from fault_tolerance.linalg import PIVOT_TOL, SIGMA_EPS
 from fault_tolerance.planner import jvja_explicit
@@ -174,7 +174,7 @@ def test_kernel_as_plain_python(robot, draw_q, draw_xdot, rng):
             (0, ft.resolve("lnva", J, xd)),
             (1, ft.resolve("jvja", J, xd, lockable=list(robot.lockable))),
         ):
-            assert realtime._step_kernel(J, xd, out, G, B, N, c, ctrl._fw, params, jvja) == 0
+            assert kernels.step_kernel(J, xd, out, G, B, N, c, ctrl._fw, params, jvja) == 0
             assert_close(out, ref)
 
 

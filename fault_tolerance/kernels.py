@@ -1,0 +1,459 @@
+"""Backend kernels of :class:`~fault_tolerance.realtime.Controller`: each step, per backend.
+
+* The LAPACK/BLAS calls of a step from ``scipy.linalg`` (:func:`lapack_linalg`), or done by
+  NumPy with the same signatures and results (:func:`numpy_linalg`).
+* :func:`step_kernel`: the whole LNVA / single-joint JVJA step after the Jacobian, as scalar
+  loops; :func:`compiled_kernel`: that kernel compiled by numba (imported then; cached on disk).
+* The step builders :func:`lapack_lnva`, :func:`lapack_jvja`, :func:`lapack_mda` and
+  :func:`compiled_step`: each reads a built controller's workspace (scenario tables, thresholds,
+  linear-algebra calls ``_la``) and returns its ``step(q, xdot, out=None) -> qd`` closure.
+
+Every step certifies ``σ_min(J) ≥ SIGMA_EPS`` by ``trace((J Jᵀ)⁻¹) ≤ TRACE_MAX``, or hands the
+step to the controller's ``_fallback`` (the planner, damped): see :mod:`fault_tolerance.realtime`.
+Importing this module imports neither numba nor scipy.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from types import SimpleNamespace
+from typing import TYPE_CHECKING
+
+import numpy as np
+import pinocchio as pin
+
+from .errors import FaultToleranceError
+from .linalg import SIGMA_EPS
+
+if TYPE_CHECKING:  # pragma: no cover
+    from .realtime import Controller
+
+__all__ = [
+    "TRACE_MAX",
+    "compiled_kernel",
+    "compiled_step",
+    "lapack_jvja",
+    "lapack_linalg",
+    "lapack_linalg_or_numpy",
+    "lapack_lnva",
+    "lapack_mda",
+    "numpy_linalg",
+    "step_kernel",
+]
+
+#: ``trace((J Jᵀ)⁻¹)`` up to which ``σ_min(J) ≥ SIGMA_EPS`` is certain, so no damping is needed.
+TRACE_MAX = 1.0 / SIGMA_EPS**2
+
+_LWA = pin.LOCAL_WORLD_ALIGNED
+_WORLD = pin.WORLD
+_INF = float("inf")
+_STEP_ERRORS = (ValueError, TypeError, RuntimeError, AttributeError, IndexError)
+
+
+# -- linear algebra backends -----------------------------------------------------------------
+
+
+def numpy_linalg() -> SimpleNamespace:
+    """The LAPACK/BLAS calls of a step, with scipy's signatures and results, done by NumPy."""
+
+    def dsyrk(alpha, a, beta=0.0, c=None, trans=0, lower=0, overwrite_c=0):
+        return alpha * (a.T @ a if trans else a @ a.T)
+
+    def dposv(a, b, lower=0, overwrite_a=0):
+        try:
+            U = np.linalg.cholesky(a).T  # upper factor, G = UᵀU; raises unless G is PD
+        except np.linalg.LinAlgError:
+            return a, b, 1
+        return U, np.linalg.solve(a, b), 0
+
+    def dtrtri(c, lower=0, unitdiag=0, overwrite_c=0):
+        return np.triu(np.linalg.inv(c)), 0
+
+    def dgemm(alpha, a, b, beta, c):
+        return beta * c + alpha * (a @ b)
+
+    def dgemv(
+        alpha, a, x, beta=0.0, y=None, offx=0, incx=1, offy=0, incy=1, trans=0, overwrite_y=0
+    ):
+        r = alpha * ((a.T if trans else a) @ x)
+        if y is None:
+            return r
+        y *= beta
+        y += r
+        return y
+
+    def ddot(x, y):
+        return float(np.vdot(x, y))
+
+    return SimpleNamespace(
+        name="numpy", dsyrk=dsyrk, dposv=dposv, dtrtri=dtrtri, dgemm=dgemm, dgemv=dgemv, ddot=ddot
+    )
+
+
+def lapack_linalg() -> SimpleNamespace:
+    """The same calls from scipy.linalg's LAPACK/BLAS wrappers."""
+    from scipy.linalg import blas, lapack
+
+    return SimpleNamespace(
+        name="lapack",
+        dsyrk=blas.dsyrk,
+        dposv=lapack.dposv,
+        dtrtri=lapack.dtrtri,
+        dgemm=blas.dgemm,
+        dgemv=blas.dgemv,
+        ddot=blas.ddot,
+    )
+
+
+def lapack_linalg_or_numpy() -> SimpleNamespace:
+    """:func:`lapack_linalg`, or :func:`numpy_linalg` where scipy is not installed."""
+    try:
+        return lapack_linalg()
+    except ImportError:
+        return numpy_linalg()
+
+
+# Eqn. (5) in closed form (G2), one step after the Jacobian; compiled by numba.
+def step_kernel(J, xdot, out, G, B, N, c, fw, params, jvja):  # pragma: no cover - numba
+    """LNVA (``jvja=0``) or single-joint JVJA (``jvja=1``) rates into ``out``; returns a status.
+
+    ``params = [TRACE_MAX, pivot threshold, rank coefficient, alpha]``; ``fw[0]`` is 0 on lockable
+    columns and +inf elsewhere, ``fw[1]`` the weight ``w_i/W`` (or 1 with uniform weights, then
+    ``alpha = -1/f``). Status 0: done; 1: no certificate of ``σ_min ≥ SIGMA_EPS`` (or non-finite
+    numbers), the caller falls back to the planner; 2: a pivot ``N_ii`` is below the threshold
+    (``PIVOT_TOL``: intolerable; ``PIVOT_EPS`` with ``tolerate``: to be damped by the planner).
+    Plain Python (valid without numba, and tested so): only scalar loops.
+    """
+    m, n = J.shape
+    # G = J Jᵀ (lower triangle) and its Cholesky factor L, in place.
+    for i in range(m):
+        for j in range(i + 1):
+            s = 0.0
+            for k in range(n):
+                s += J[i, k] * J[j, k]
+            G[i, j] = s
+    for j in range(m):
+        s = G[j, j]
+        for k in range(j):
+            s -= G[j, k] * G[j, k]
+        if not s > 0.0:
+            return 1
+        s = math.sqrt(s)
+        G[j, j] = s
+        for i in range(j + 1, m):
+            t = G[i, j]
+            for k in range(j):
+                t -= G[i, k] * G[j, k]
+            G[i, j] = t / s
+    # trace(G⁻¹) = ‖L⁻¹‖_F², column by column of L⁻¹ (c as scratch): the certificate.
+    tr = 0.0
+    for j in range(m):
+        for i in range(j, m):
+            t = 1.0 if i == j else 0.0
+            for k in range(j, i):
+                t -= G[i, k] * c[k]
+            c[i] = t / G[i, i]
+            tr += c[i] * c[i]
+    if not tr <= params[0]:
+        return 1
+    if not jvja:
+        # LNVA: y = G⁻¹ ẋ (L z = ẋ, Lᵀ y = z, in c), a = Jᵀ y.
+        for i in range(m):
+            t = xdot[i]
+            for k in range(i):
+                t -= G[i, k] * c[k]
+            c[i] = t / G[i, i]
+        for i in range(m - 1, -1, -1):
+            t = c[i]
+            for k in range(i + 1, m):
+                t -= G[k, i] * c[k]
+            c[i] = t / G[i, i]
+        s = 0.0
+        for col in range(n):
+            t = 0.0
+            for i in range(m):
+                t += J[i, col] * c[i]
+            out[col] = t
+            s += t * t
+        if not s < _INF:
+            return 1
+        return 0
+    # JVJA: B = G⁻¹ J (L Y = J, Lᵀ B = Y); a = Bᵀ ẋ.
+    for col in range(n):
+        for i in range(m):
+            t = J[i, col]
+            for k in range(i):
+                t -= G[i, k] * B[k, col]
+            B[i, col] = t / G[i, i]
+        for i in range(m - 1, -1, -1):
+            t = B[i, col]
+            for k in range(i + 1, m):
+                t -= G[k, i] * B[k, col]
+            B[i, col] = t / G[i, i]
+        s = 0.0
+        for i in range(m):
+            s += B[i, col] * xdot[i]
+        out[col] = s
+    if params[2] > 0.0:  # rank certificate (linalg.RANK_RTOL) for arms without a static bound
+        s = 0.0
+        for i in range(m):
+            for k in range(n):
+                s += J[i, k] * J[i, k]
+        if not params[2] * s * tr < 1.0:
+            return 1
+    # N = I - Jᵀ B; c_i = (w_i / W) a_i / N_ii on lockable columns; out = a + alpha N c.
+    for r in range(n):
+        for col in range(n):
+            s = 0.0
+            for i in range(m):
+                s -= J[i, r] * B[i, col]
+            N[r, col] = s
+        N[r, r] += 1.0
+    for i in range(n):
+        d = N[i, i] + fw[0, i]
+        if d < params[1]:
+            return 2
+        c[i] = out[i] / d * fw[1, i]
+    alpha = params[3]
+    for r in range(n):
+        s = 0.0
+        for col in range(n):
+            s += N[r, col] * c[col]
+        out[r] += alpha * s
+    s = 0.0
+    for i in range(n):
+        s += out[i] * out[i]
+    if not s < _INF:
+        return 1
+    return 0
+
+
+_COMPILED: dict[str, Callable] = {}
+
+
+def compiled_kernel() -> Callable:
+    """:func:`step_kernel` compiled by numba (once per process; cached on disk)."""
+    if "step" not in _COMPILED:
+        import numba
+
+        _COMPILED["step"] = numba.njit(cache=True, nogil=True, error_model="numpy")(step_kernel)
+    return _COMPILED["step"]
+
+
+# -- LNVA / JVJA / MDA with LAPACK (or NumPy) calls --------------------------------------------
+
+
+def lapack_lnva(ctrl: Controller) -> Callable[..., np.ndarray]:
+    """The LNVA step of ``ctrl`` with its LAPACK (or NumPy) calls: ``lnva(q, xdot, out=None)``."""
+    model, data, fid, rows = ctrl.model, ctrl.data, ctrl.frame_id, ctrl._rows
+    n, m = ctrl.n, ctrl.m
+    la = ctrl._la
+    dsyrk, dposv, dtrtri, ddot = la.dsyrk, la.dposv, la.dtrtri, la.ddot
+    cfj, dot, empty = pin.computeFrameJacobian, np.dot, np.empty
+    GT = np.zeros((m, m), order="F")  # LAPACK works in its upper triangle; the rest stays 0
+    fallback, bad_call = ctrl._fallback, ctrl._bad_call
+
+    def lnva(q: np.ndarray, xdot: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+        """LNVA, least-norm rates ``q̇ = J⁺ẋ`` (damped near singularities as in linalg)."""
+        if out is None:
+            out = empty(n)
+        try:
+            J = cfj(model, data, q, fid, _LWA)[rows]
+            G = dsyrk(1.0, J.T, 0.0, GT, 1, 0, 1)  # G = J Jᵀ
+            U, y, info = dposv(G, xdot, 0, 1)  # G = UᵀU, y = G⁻¹ẋ: one factorisation
+            if info:
+                return fallback("lnva", J, xdot, out)
+            Ui, info = dtrtri(U, 0, 0, 1)
+            if info or not ddot(Ui, Ui) <= TRACE_MAX:  # ‖U⁻¹‖² = trace(G⁻¹); NaN fails too
+                return fallback("lnva", J, xdot, out)
+            dot(y, J, out=out)  # a = J⁺ẋ = Jᵀy
+        except FaultToleranceError:
+            raise
+        except _STEP_ERRORS as err:
+            raise bad_call(err, q, xdot, out) from err
+        if not ddot(out, out) < _INF:
+            return fallback("lnva", J, xdot, out)
+        return out
+
+    return lnva
+
+
+def lapack_jvja(ctrl: Controller) -> Callable[..., np.ndarray]:
+    """The JVJA step of ``ctrl`` with its LAPACK (or NumPy) calls, any scenarios (G1, G2)."""
+    model, data, fid, rows = ctrl.model, ctrl.data, ctrl.frame_id, ctrl._rows
+    n, m = ctrl.n, ctrl.m
+    la = ctrl._la
+    dsyrk, dposv, dtrtri, ddot = la.dsyrk, la.dposv, la.dtrtri, la.ddot
+    dgemm, dgemv = la.dgemm, la.dgemv
+    cfj, dot, empty = pin.computeFrameJacobian, np.dot, np.empty
+    divide, multiply, add = np.divide, np.multiply, np.add
+    GT = np.zeros((m, m), order="F")
+    eye = np.asfortranarray(np.eye(n))
+    c = np.empty(n)
+    dF = np.empty(n)
+    off, wrel = ctrl._fw[0], ctrl._fw[1]
+    rank_coef, alpha = ctrl._rank_coef, ctrl._alpha
+    fallback, bad_call, general = ctrl._fallback, ctrl._bad_call, ctrl._shift_general
+    tol, tolerate = ctrl._pivot_threshold, ctrl.tolerate
+    check_tolerable = ctrl.scenarios.check_tolerable
+    mode = ("all" if ctrl._all_uniform else "singletons") if ctrl._singletons else "general"
+    weighted = not ctrl._uniform
+
+    def jvja(q: np.ndarray, xdot: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+        """JVJA, minimum square-sum jump rates, eq. (5) in closed form (G1, G2)."""
+        if out is None:
+            out = empty(n)
+        try:
+            J = cfj(model, data, q, fid, _LWA)[rows]
+            G = dsyrk(1.0, J.T, 0.0, GT, 1, 0, 1)
+            U, B, info = dposv(G, J, 0, 1)
+            if info:
+                return fallback("jvja", J, xdot, out)
+            Ui, info = dtrtri(U, 0, 0, 1)
+            tr = ddot(Ui, Ui)
+            rank_ok = not rank_coef or rank_coef * ddot(J, J) * tr < 1.0
+            if info or not tr <= TRACE_MAX or not rank_ok:  # NaN fails too
+                return fallback("jvja", J, xdot, out)
+            dot(xdot, B, out=out)  # a
+            N = dgemm(-1.0, J.T, B, 1.0, eye)  # N = I - JᵀG⁻¹J
+            d = N.diagonal()
+            if mode == "all":  # c_i = a_i / N_ii, alpha = -1/f
+                if min(d.tolist()) < tol:
+                    if not tolerate:
+                        check_tolerable(N)  # raises IntolerableFailure naming the joint
+                    return fallback("jvja", J, xdot, out)  # pivots damped by the planner
+                divide(out, d, out=c)
+            elif mode == "singletons":
+                add(d, off, out=dF)
+                if min(dF.tolist()) < tol:
+                    if not tolerate:
+                        check_tolerable(N)
+                    return fallback("jvja", J, xdot, out)
+                divide(out, dF, out=c)
+                if weighted:
+                    multiply(c, wrel, out=c)
+            elif not general(N, out, c):
+                return fallback("jvja", J, xdot, out)
+            r = dgemv(alpha, N, c, 1.0, out, 0, 1, 0, 1, 0, 1)  # a + alpha N c, in place
+        except FaultToleranceError:
+            raise
+        except _STEP_ERRORS as err:
+            raise bad_call(err, q, xdot, out) from err
+        if r is not out:  # pragma: no cover - BLAS wrote a copy (np.dot accepted out)
+            out[...] = r
+        if not ddot(out, out) < _INF:
+            return fallback("jvja", J, xdot, out)
+        return out
+
+    return jvja
+
+
+def lapack_mda(ctrl: Controller) -> Callable[..., np.ndarray]:
+    """The MDA step of ``ctrl`` with its LAPACK (or NumPy) calls: ``mda(q, xdot, out=None)``."""
+    model, data, fid, rows = ctrl.model, ctrl.data, ctrl.frame_id, ctrl._rows
+    n, m = ctrl.n, ctrl.m
+    la = ctrl._la
+    dsyrk, dposv, dtrtri, ddot = la.dsyrk, la.dposv, la.dtrtri, la.ddot
+    dgemm, dgemv = la.dgemm, la.dgemv
+    GT = np.zeros((m, m), order="F")
+    eye = np.asfortranarray(np.eye(n))
+    fallback, bad_call = ctrl._fallback, ctrl._bad_call
+    djac, grad_of = ctrl._djac, ctrl.rcn_gradient
+    rank_coef = ctrl._rank_coef
+    gain, max_step = ctrl.gain, ctrl.max_step
+    oMf = data.oMf
+
+    def mda(q: np.ndarray, xdot: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+        """MDA, maximum-dexterity rates ``q̇ = J⁺ẋ - α N ∇K``."""
+        if out is None:
+            out = np.empty(n)
+        try:
+            pin.computeJointJacobians(model, data, q)
+            Jw = pin.getFrameJacobian(model, data, fid, _WORLD)
+            Jl = pin.getFrameJacobian(model, data, fid, _LWA)
+            J = Jl[rows]
+            G = dsyrk(1.0, J.T, 0.0, GT, 1, 0, 1)
+            U, B, info = dposv(G, J, 0, 1)
+            if info:
+                return fallback("mda", J, xdot, out, q)
+            Ui, info = dtrtri(U, 0, 0, 1)
+            tr = ddot(Ui, Ui)
+            rank_ok = not rank_coef or rank_coef * ddot(J, J) * tr < 1.0
+            if info or not tr <= TRACE_MAX or not rank_ok:  # NaN fails too
+                return fallback("mda", J, xdot, out, q)
+            np.dot(xdot, B, out=out)
+            N = dgemm(-1.0, J.T, B, 1.0, eye)
+            grad = grad_of(J, djac(Jw, Jl, oMf[fid].translation))
+            step = dgemv(gain, N, grad)  # α N ∇K [rad/s], capped as planner.mda does
+            size = math.sqrt(ddot(step, step))
+            if not size < _INF:  # ∇K overflowed at a reduced singularity: no direction
+                step = 0.0
+            elif size > max_step:
+                step *= max_step / size
+            r = out
+            np.subtract(out, step, out=out)
+        except FaultToleranceError:
+            raise
+        except _STEP_ERRORS as err:
+            raise bad_call(err, q, xdot, out) from err
+        if r is not out:  # pragma: no cover
+            out[...] = r
+        if not ddot(out, out) < _INF:
+            return fallback("mda", J, xdot, out, q)
+        return out
+
+    return mda
+
+
+# -- LNVA / JVJA in one compiled kernel -------------------------------------------------------
+
+
+def compiled_step(ctrl: Controller, jvja: int) -> Callable[..., np.ndarray]:
+    """The LNVA (``jvja=0``) or single-joint JVJA (``jvja=1``) step of ``ctrl``, numba-compiled.
+
+    Compiles :func:`step_kernel` on first use (here, not in the loop) and runs it once.
+    """
+    model, data, fid, rows = ctrl.model, ctrl.data, ctrl.frame_id, ctrl._rows
+    n, m = ctrl.n, ctrl.m
+    kernel = compiled_kernel()
+    cfj, empty, ndarray, f64 = pin.computeFrameJacobian, np.empty, np.ndarray, np.float64
+    G, B, N, c = np.empty((m, m)), np.empty((m, n)), np.empty((n, n)), np.empty(n)
+    fw = ctrl._fw
+    params = np.array([TRACE_MAX, ctrl._pivot_threshold, ctrl._rank_coef, ctrl._alpha])
+    tolerate = ctrl.tolerate
+    shape_n, shape_m = (n,), (m,)
+    fallback, bad_call = ctrl._fallback, ctrl._bad_call
+    check_tolerable = ctrl.scenarios.check_tolerable
+    name = "jvja" if jvja else "lnva"
+    kernel(np.zeros((m, n)), np.zeros(m), np.zeros(n), G, B, N, c, fw, params, jvja)  # compile
+
+    def step(q: np.ndarray, xdot: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+        if out is None:
+            out = empty(n)
+        elif type(out) is not ndarray or out.shape != shape_n or out.dtype != f64:
+            raise bad_call(ValueError("out"), q, xdot, out)
+        if type(xdot) is not ndarray or xdot.shape != shape_m or xdot.dtype != f64:
+            xdot = np.asarray(xdot, dtype=float)
+            if xdot.shape != shape_m:
+                raise bad_call(ValueError("xdot"), q, xdot, out)
+        try:
+            J = cfj(model, data, q, fid, _LWA)[rows]
+            status = kernel(J, xdot, out, G, B, N, c, fw, params, jvja)
+        except FaultToleranceError:
+            raise
+        except _STEP_ERRORS as err:
+            raise bad_call(err, q, xdot, out) from err
+        if status:
+            if status == 2 and not tolerate:
+                check_tolerable(N)  # raises IntolerableFailure naming the joint
+            return fallback(name, J, xdot, out)
+        return out
+
+    step.__name__ = name
+    step.__doc__ = (
+        "JVJA, minimum square-sum jump rates, eq. (5) in closed form (G2); compiled."
+        if jvja
+        else "LNVA, least-norm rates ``q̇ = J⁺ẋ``; compiled."
+    )
+    return step
