@@ -1,0 +1,216 @@
+"""The live replay: meshcat's server in a child process, listening on 127.0.0.1 only.
+
+meshcat's own server listens on every interface for its web port; :func:`_serve_local` (the body
+of the child process) binds it to :data:`LOCALHOST`. :class:`ReplayServer` starts that process,
+sends it a recorded scene over ZMQ and stops it; :func:`serve` does all three for a run.
+"""
+
+from __future__ import annotations
+
+import atexit
+import contextlib
+import os
+import queue
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from collections.abc import Sequence
+from pathlib import Path
+from typing import IO
+
+from ..arm import Arm
+from ..errors import FaultToleranceError, InvalidInput
+from .scene import _build_scene, _require_meshcat, _Scene
+
+#: The only interface the live server listens on.
+LOCALHOST = "127.0.0.1"
+
+
+def _serve_local(port: int | None = None) -> None:  # pragma: no cover - runs in the child process
+    """Run meshcat's server with every socket on 127.0.0.1 (the body of the server process).
+
+    meshcat's ``ZMQWebSocketBridge`` binds ZMQ to its ``host`` but starts its web server with
+    ``app.listen(port)``, which listens on every interface; here ``listen`` gets the address.
+    """
+    import tornado.ioloop
+    from meshcat.servers import zmqserver
+
+    class LocalBridge(zmqserver.ZMQWebSocketBridge):
+        def make_app(self):
+            app = super().make_app()
+            listen = app.listen
+
+            def listen_local(port, address=None, **kwargs):
+                return listen(port, address=LOCALHOST, **kwargs)
+
+            app.listen = listen_local
+            return app
+
+    bridge = LocalBridge(host=LOCALHOST, port=port)
+    print(f"zmq_url={bridge.zmq_url}", flush=True)
+    print(f"web_url={bridge.web_url}", flush=True)
+    parent = os.getppid()
+
+    def orphaned():
+        if os.getppid() != parent:  # the replaying process died: do not linger
+            bridge.ioloop.stop()
+
+    tornado.ioloop.PeriodicCallback(orphaned, 1000).start()
+    try:
+        bridge.run()
+    except KeyboardInterrupt:
+        pass
+
+
+class ReplayServer:
+    """A meshcat server in a child process, bound to 127.0.0.1; ``close()`` stops it.
+
+    Attributes:
+        url: The viewer's URL (``http://127.0.0.1:PORT/static/``).
+        zmq_url: Where scene commands are sent.
+        process: The server process.
+    """
+
+    def __init__(self, process: subprocess.Popen, url: str, zmq_url: str, log: IO) -> None:
+        self.process = process
+        self.url = url
+        self.zmq_url = zmq_url
+        self._log = log
+        self._socket = None
+        self.info: dict = {}  # what was served (see export's window.ftReplay)
+        atexit.register(self.close)
+
+    @classmethod
+    def start(cls, port: int | None = None, timeout: float = 30.0) -> ReplayServer:
+        """Start the server process and wait until it says where it listens."""
+        _require_meshcat()
+        if port is not None and not (isinstance(port, int) and 0 < port < 65536):
+            raise InvalidInput(f"port must be an integer in 1..65535, got {port!r}")
+        env = dict(os.environ)
+        root = str(Path(__file__).resolve().parents[2])  # the folder holding fault_tolerance/
+        env["PYTHONPATH"] = os.pathsep.join(
+            [root] + ([env["PYTHONPATH"]] if env.get("PYTHONPATH") else [])
+        )
+        code = f"from fault_tolerance.viz.server import _serve_local; _serve_local({port!r})"
+        log = tempfile.TemporaryFile()
+        proc = subprocess.Popen(
+            [sys.executable, "-u", "-c", code],
+            stdout=subprocess.PIPE,
+            stderr=log,
+            stdin=subprocess.DEVNULL,
+            env=env,
+        )
+        lines: queue.Queue = queue.Queue()
+
+        def read():
+            for raw in proc.stdout:
+                lines.put(raw.decode("utf-8", "replace").strip())
+            lines.put(None)
+
+        threading.Thread(target=read, daemon=True).start()
+        found: dict[str, str] = {}
+        deadline = time.monotonic() + timeout
+        while len(found) < 2:
+            try:
+                line = lines.get(timeout=max(0.0, deadline - time.monotonic()))
+            except queue.Empty:
+                line = None
+            if line is None:
+                proc.kill()
+                proc.wait()
+                log.seek(0)
+                detail = log.read().decode("utf-8", "replace").strip().splitlines()[-1:] or [
+                    "no output"
+                ]
+                log.close()
+                where = f"port {port}" if port else "a free port"
+                raise FaultToleranceError(
+                    f"the meshcat server did not start on {where}: {detail[0]}"
+                )
+            key, _, value = line.partition("=")
+            if key in ("zmq_url", "web_url"):
+                found[key] = value
+        return cls(proc, found["web_url"], found["zmq_url"], log)
+
+    def send(self, commands: Sequence[tuple[bytes, bytes, bytes]], timeout: float = 30.0) -> None:
+        """Send recorded scene commands (type, path, msgpack) to the server."""
+        import zmq
+
+        if self._socket is None:
+            sock = zmq.Context.instance().socket(zmq.REQ)
+            sock.setsockopt(zmq.LINGER, 0)
+            sock.setsockopt(zmq.RCVTIMEO, int(timeout * 1000))
+            sock.setsockopt(zmq.SNDTIMEO, int(timeout * 1000))
+            sock.connect(self.zmq_url)
+            self._socket = sock
+        for frames in commands:
+            self._socket.send_multipart(list(frames))
+            reply = self._socket.recv()
+            if reply != b"ok":
+                raise FaultToleranceError(f"the meshcat server refused a command: {reply[:200]!r}")
+
+    @property
+    def running(self) -> bool:
+        """Whether the server process is alive."""
+        return self.process.poll() is None
+
+    def close(self) -> None:
+        """Stop the server (idempotent)."""
+        if self._socket is not None:
+            self._socket.close(linger=0)
+            self._socket = None
+        if self.process.poll() is None:
+            self.process.terminate()
+            try:
+                self.process.wait(timeout=5)
+            except subprocess.TimeoutExpired:
+                self.process.kill()
+                self.process.wait()
+        if self.process.stdout is not None:
+            self.process.stdout.close()
+        if not self._log.closed:
+            self._log.close()
+        with contextlib.suppress(Exception):
+            atexit.unregister(self.close)
+
+    def __enter__(self) -> ReplayServer:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    def __repr__(self) -> str:
+        return f"ReplayServer({self.url!r}, {'running' if self.running else 'stopped'})"
+
+
+def serve(
+    run,
+    arm: Arm | None = None,
+    *,
+    speed: float = 1.0,
+    fps: float = 50.0,
+    port: int | None = None,
+    meshes: str = "compact",
+    dt: float | None = None,
+) -> tuple[str, ReplayServer]:
+    """Serve the replay of ``run`` live: a meshcat server on 127.0.0.1, scene and animation loaded.
+
+    Returns ``(url, server)``; open the URL in a browser (the animation plays when the page
+    connects), call ``server.close()`` (or use it as a context manager) to stop the server.
+    ``port`` is the web port (default: the first free one from 7000).
+    """
+    server = _serve_scene(_build_scene(run, arm, speed=speed, fps=fps, meshes=meshes, dt=dt), port)
+    return server.url, server
+
+
+def _serve_scene(scene: _Scene, port: int | None) -> ReplayServer:
+    server = ReplayServer.start(port)
+    try:
+        server.send(scene.commands)
+    except BaseException:
+        server.close()
+        raise
+    server.info = scene.info
+    return server
