@@ -81,7 +81,7 @@ def jvj(
 
     Example:
         >>> import numpy as np, fault_tolerance as ft
-        >>> J = np.array([[1.0, 0.5, 0.2], [0.0, 1.0, 0.4]])
+        >>> J = np.array([[1.0, 0.5, 0.2], [0.3, 1.0, 0.7]])
         >>> xd = np.array([0.1, 0.0])
         >>> ft.jvj(J, xd, ft.resolve("jvja", J, xd)) <= ft.jvj(J, xd, ft.resolve("lnva", J, xd))
         True
