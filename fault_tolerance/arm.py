@@ -226,6 +226,26 @@ class Arm:
         x6 = np.concatenate([M.translation, pin.log3(M.rotation)])
         return x6[self.rows]
 
+    def resolve(
+        self, algorithm: str, q: np.ndarray, xdot: np.ndarray, lockable=None, **options
+    ) -> np.ndarray:
+        """Joint rates of ``algorithm`` at ``q`` for task velocity ``xdot``; lockable joints by name.
+
+        Shorthand for ``ft.resolve(algorithm, arm.jacobian(q), xdot, lockable, arm=arm, q=q)``;
+        ``lockable`` defaults to the arm's default lockable joints.
+
+        Example:
+            >>> arm = load_arm("planar_3r")
+            >>> qd = arm.resolve("jvja", [0.3, 1.2, 1.0], [0.1, 0.0], ["joint2", "joint3"])
+            >>> bool(np.allclose(arm.jacobian([0.3, 1.2, 1.0]) @ qd, [0.1, 0.0]))
+            True
+        """
+        from .planner import resolve
+
+        q = self.check_q(q)
+        lockable = self.default_lockable if lockable is None else lockable
+        return resolve(algorithm, self.jacobian(q), xdot, lockable, arm=self, q=q, **options)
+
     def task_error(self, x_des: np.ndarray, q: np.ndarray) -> np.ndarray:
         """Task-space error ``x_des − x(q)``, shape (m,), in the velocity coordinates of J.
 
