@@ -10,7 +10,7 @@ import pytest
 import fault_tolerance as ft
 from fault_tolerance.arm import arm_from_meta
 from fault_tolerance.posture import initial_posture
-from fault_tolerance.simulation import FLAG_LOCKED, Run, ServoModel, simulate
+from fault_tolerance.simulation import ARRAYS, FLAG_LOCKED, Run, ServoModel, simulate
 from fault_tolerance.trajectories import CirclePath
 
 
@@ -38,20 +38,7 @@ def test_run_reproduces_its_saved_file_exactly(setup3, tmp_path):
         dt=meta["dt"],
         duration=meta["duration"],
     )
-    for name in (
-        "t",
-        "q",
-        "qd",
-        "x",
-        "x_des",
-        "error",
-        "jvj",
-        "jvj_parts",
-        "rcn",
-        "K",
-        "sigma_min",
-        "flags",
-    ):
+    for name in ARRAYS:
         assert np.array_equal(getattr(loaded, name), getattr(run, name)), name
         assert np.array_equal(getattr(again, name), getattr(run, name)), name
     assert loaded.meta == json.loads(json.dumps(run.meta))
