@@ -14,7 +14,7 @@ import numpy as np
 from .errors import InvalidInput
 from .failures import Scenarios, scenarios
 from .indices import RESPONSES, rcn_gradient
-from .linalg import damped_pivots, pivot_block, projection
+from .linalg import Projection, damped_pivots, pivot_block, projection
 
 #: Default MDA gain α [rad² per unit of K per s]: q̇ = J⁺ẋ − α N ∇K.
 MDA_GAIN = 1e-2
@@ -30,9 +30,11 @@ def _scenarios(J: np.ndarray, lockable, weights, joint_names) -> Scenarios:
     return scenarios(lockable, n, r=n - m, weights=weights, joint_names=joint_names)
 
 
-def lnva(J: np.ndarray, xdot: np.ndarray, lockable=None, **_: object) -> np.ndarray:
+def lnva(
+    J: np.ndarray, xdot: np.ndarray, lockable=None, *, proj: Projection | None = None, **_: object
+) -> np.ndarray:
     """LNVA, least-norm rates ``q̇ = J⁺ẋ`` (``lockable`` is accepted and ignored)."""
-    return projection(J).Jpinv @ xdot
+    return (proj or projection(J)).Jpinv @ xdot
 
 
 # Eqn. (5), in closed form (G2); (G3) for the continuation response.
@@ -45,6 +47,7 @@ def jvja(
     response: str = "least_norm",
     joint_names: Sequence[str] = (),
     tolerate: bool = False,
+    proj: Projection | None = None,
     **_: object,
 ) -> np.ndarray:
     r"""JVJA, minimum square-sum joint velocity jump, eq. (5).
@@ -56,6 +59,8 @@ def jvja(
     Continuation response (G3): :math:`\dot q = a + N z`, :math:`z = -(N W N)^+ N W a` with
     :math:`W = \sum_S w_S E_S N_{S,S}^{-1} E_S^T`.
 
+    ``proj``: the :func:`~.linalg.projection` of ``J`` when the caller has it already.
+
     ``tolerate=True`` (used by the simulation after its first step) damps the pivots of ``N[S, S]``
     below ``linalg.PIVOT_EPS`` instead of raising: the rates stay finite when the path crosses a
     singularity of a reduced Jacobian (the scenario is intolerable only there).
@@ -65,7 +70,7 @@ def jvja(
             ``tolerate``.
     """
     sc = _scenarios(J, lockable, weights, joint_names)
-    proj = projection(J)
+    proj = proj or projection(J)
     N = proj.N
     a = proj.Jpinv @ xdot
     pivots = damped_pivots(sc.pivots(N)) if tolerate else sc.check_tolerable(N)
@@ -112,6 +117,7 @@ def mda(
     dJ: np.ndarray | None = None,
     joint_names: Sequence[str] = (),
     max_step: float | None = MDA_MAX_STEP,
+    proj: Projection | None = None,
     **_: object,
 ) -> np.ndarray:
     r"""MDA, maximum dexterity: :math:`\dot q = J^+\dot x - \alpha N \nabla_q K(q)`.
@@ -128,7 +134,7 @@ def mda(
         dJ = arm.jacobian_derivatives(q)
     if not np.isfinite(gain) or gain < 0:
         raise InvalidInput(f"mda gain must be finite and >= 0, got {gain}")
-    proj = projection(J)
+    proj = proj or projection(J)
     grad = rcn_gradient(J, dJ, lockable, joint_names=joint_names)
     step = gain * proj.N @ grad  # [rad/s], shape (n,)
     size = float(np.linalg.norm(step))

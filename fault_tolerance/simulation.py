@@ -419,6 +419,7 @@ def simulate(
                 gain=gain,
                 tolerate=True,
                 max_step=max_step,
+                proj=proj,
             )
         if locked:
             qd_cmd = np.zeros(n)

@@ -85,6 +85,21 @@ def test_eq14_holds_at_every_case_start(quick):
         assert e["delta"] == pytest.approx(e["f_qh2"], rel=1e-9, abs=1e-12)
 
 
+def test_start_sensitivity_covers_other_dexterous_starts(quick):
+    """Claim 1 is re-checked from other low-K starts on the self-motion curves, all at x0."""
+    from fault_tolerance import load_arm
+
+    _, summary = quick
+    arm = load_arm("planar_3r")
+    for key in CASES:
+        sens = summary["details"][key]["start_sensitivity"]
+        assert len(sens["starts"]) == 6
+        assert 0.0 <= sens["jvja_smaller_fraction"] <= 1.0
+    for s in summary["details"]["fig2"]["start_sensitivity"]["starts"]:
+        np.testing.assert_allclose(arm.fk(np.array(s["q0"])), CASES["fig2"].x0, atol=1e-8)
+        assert s["jvj_mean_lnva"] > 0 and s["jvj_mean_jvja"] > 0
+
+
 def test_report_verdicts_follow_the_numbers():
     """A claim's verdict flips when the measured numbers flip (no hard-coded verdicts)."""
     alg = {
