@@ -222,7 +222,14 @@ class Arm:
 
         Linear rows are the frame origin [m]; angular rows the rotation vector ``log3(R)`` [rad].
         """
+        return self._coords(self.placement(q))
+
+    def fk_and_error(self, x_des: np.ndarray, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``(fk(q), task_error(x_des, q))`` from one forward-kinematics pass (for loops)."""
         M = self.placement(q)
+        return self._coords(M), self._error(x_des, M)
+
+    def _coords(self, M: pin.SE3) -> np.ndarray:
         x6 = np.concatenate([M.translation, pin.log3(M.rotation)])
         return x6[self.rows]
 
@@ -253,10 +260,12 @@ class Arm:
         rotation vector ``log3(R_des R(q)ᵀ)`` (``R_des = exp3`` of the desired rotation vector);
         with only some angular rows their rotation-vector components subtract.
         """
+        return self._error(x_des, self.placement(q))
+
+    def _error(self, x_des: np.ndarray, M: pin.SE3) -> np.ndarray:
         x_des = np.asarray(x_des, dtype=float)
         if x_des.shape != (self.m,):
             raise InvalidInput(f"x_des has shape {x_des.shape}; the task needs ({self.m},)")
-        M = self.placement(q)
         full = np.zeros(6)
         full[self.rows] = x_des
         err = np.zeros(6)

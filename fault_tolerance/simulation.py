@@ -392,7 +392,6 @@ def simulate(
             keep = np.array([j for j in range(n) if j != lock_col])
             qd[lock_col] = 0.0
         J = arm.jacobian(q)
-        x = arm.fk(q)
         x_des = path.x(t)
         xd_des = np.asarray(path.xdot(t), dtype=float)
         if not (
@@ -402,7 +401,7 @@ def simulate(
                 f"the path gives x = {np.asarray(x_des).tolist()}, ẋ = {xd_des.tolist()} "
                 f"at t = {t:.6g} s; it must give {m} finite numbers each"
             )
-        err = arm.task_error(x_des, q)
+        x, err = arm.fk_and_error(x_des, q)
         xd_cmd = xd_des + feedback_gain * err
         proj = projection(J)
         flag = FLAG_NEAR_SINGULAR if proj.sigma_min < SIGMA_EPS else 0
