@@ -18,7 +18,7 @@ from .arm import Arm, load_arm
 from .indices import jump_reduction
 from .linalg import projection
 from .planner import MDA_GAIN
-from .posture import RCN_THRESHOLD, initial_posture, lockable_scenarios, plan, square_sum_rcn_at
+from .posture import RCN_THRESHOLD, initial_posture, plan
 from .simulation import Run, ServoModel, output_folder, simulate, write_atomic
 from .trajectories import CirclePath
 
@@ -274,29 +274,23 @@ def run_experiment(
     horizon = max(T, max(t_max, t_min) + exp.after_lock)
     if hasattr(progress, "grow"):  # the estimate assumed T + after_lock; correct it
         progress.grow(3 * (int(round(horizon / 1e-3)) - int(round((T + exp.after_lock) / 1e-3))))
-    baseline = simulate(
-        arm,
-        exp.path(horizon),
-        "lnva",
-        q0=posture.q,
-        lockable=[exp.joint],
-        servo=exp.servo,
-        feedback_gain=exp.feedback_gain,
-        progress=progress,
-    )
-    for label, t_lock in (("largest jump", t_max), ("smallest jump", t_min)):
-        runs[label] = simulate(
+
+    def lnva_run(**lock):
+        return simulate(
             arm,
             exp.path(horizon),
             "lnva",
             q0=posture.q,
             lockable=[exp.joint],
-            lock_joint=exp.joint,
-            lock_time=t_lock,
             servo=exp.servo,
             feedback_gain=exp.feedback_gain,
             progress=progress,
+            **lock,
         )
+
+    baseline = lnva_run()
+    for label, t_lock in (("largest jump", t_max), ("smallest jump", t_min)):
+        runs[label] = lnva_run(lock_joint=exp.joint, lock_time=t_lock)
     return {
         "arm": arm,
         "posture": posture,
@@ -361,8 +355,7 @@ def start_sensitivity(
     if not curves:
         return {}
     points = np.concatenate(curves)
-    sc = lockable_scenarios(arm, list(case.lockable))
-    K = np.array([square_sum_rcn_at(arm, p, sc) for p in points])
+    K = np.concatenate(result["posture"].curve_K)  # with the case's lockable joints
     good = points[K <= np.quantile(K, 0.25)]  # the starts a Sec. III.D planner would consider
     picks = good[np.linspace(0, len(good) - 1, starts, endpoint=False).astype(int)]
     rows = []

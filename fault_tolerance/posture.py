@@ -135,6 +135,7 @@ class Posture:
     )  # local minima, best first
     curves: list[np.ndarray] = field(default_factory=list)  # traced self-motion curves (r = 1)
     method: str = ""
+    curve_K: list[np.ndarray] = field(default_factory=list)  # K at every point of each curve
 
 
 def _local_minima(values: np.ndarray, closed: bool) -> list[int]:
@@ -203,6 +204,7 @@ def initial_posture(
 
 def _posture_on_curves(arm, x0, sols, sc, step) -> Posture:
     curves: list[np.ndarray] = []
+    curve_K: list[np.ndarray] = []
     cands: list[tuple[float, np.ndarray]] = []
     for s in sols:
         if any(np.min(joint_distance(arm, c, s)) < 5 * step for c in curves):
@@ -210,12 +212,15 @@ def _posture_on_curves(arm, x0, sols, sc, step) -> Posture:
         pts, closed = self_motion_curve(arm, x0, s, step=step)
         curves.append(pts)
         K = np.array([square_sum_rcn_at(arm, p, sc) for p in pts])
+        curve_K.append(K)
         for i in _local_minima(K, closed):
             cands.append((float(K[i]), wrap(arm, pts[i])))
     cands.sort(key=lambda c: c[0])
     best = _refine_on_curve(arm, x0, cands[0][1], sc, step)
     cands[0] = (square_sum_rcn_at(arm, best, sc), best)
-    return Posture(best, cands[0][0], cands, curves, "global search over self-motion curves")
+    return Posture(
+        best, cands[0][0], cands, curves, "global search over self-motion curves", curve_K
+    )
 
 
 def _refine_on_curve(arm, x0, q, sc, step) -> np.ndarray:
