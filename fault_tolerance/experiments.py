@@ -1,4 +1,4 @@
-"""The paper's cases as data (MATH.md's table) and the ``reproduce`` pipeline.
+"""The paper's cases as data (docs/MATH.md's table) and the ``reproduce`` pipeline.
 
 ``reproduce(out)`` runs every case with LNVA, JVJA and MDA from the minimum-RCN start (Sec. III.D
 step i), the Power-Cube lock experiment of Sec. V, and writes figures (PNG + SVG), the runs,

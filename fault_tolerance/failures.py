@@ -2,8 +2,8 @@
 
 A scenario ``S`` is a set of joint columns that lock at once. The user names the lockable joints
 (the paper's "possible failed joints") as column indices, joint names, or tuples of them for
-multi-joint scenarios (MATH.md (G): ``|S| <= r``). Weights ``w_S`` (e.g. failure probabilities)
-default to 1.
+multi-joint scenarios (docs/MATH.md, "Failure scenarios": ``|S| <= r``). Weights ``w_S`` (e.g.
+failure probabilities) default to 1.
 """
 
 from __future__ import annotations

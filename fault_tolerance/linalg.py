@@ -123,7 +123,7 @@ def reduced_rates(a: np.ndarray, N: np.ndarray, S: Sequence[int], damp: bool = F
     return qd
 
 
-# MATH.md (G3), continuation response.
+# docs/MATH.md (G3), continuation response.
 def continuation_rates(qd: np.ndarray, N: np.ndarray, S: Sequence[int]) -> np.ndarray:
     r"""Rates the reduced robot takes when it keeps the solution nearest to ``qd`` (G3).
 

@@ -10,7 +10,7 @@ of its cost:
 * JVJA in closed form (G2), ``q̇ = a - N c / W`` with ``cᵢ = wᵢ aᵢ / Nᵢᵢ``: no per-scenario
   pseudo-inverse; multi-joint scenarios (G1) with one batched solve per scenario size;
 * the reduced condition numbers of all scenarios from one batched ``eigvalsh`` of the stack
-  ``J_S J_Sᵀ`` (MATH.md, eq. 15), and the MDA gradient from one batched ``eigh``;
+  ``J_S J_Sᵀ`` (docs/MATH.md, eq. 15), and the MDA gradient from one batched ``eigh``;
 * buffers allocated once; pass ``out=`` to get the rates in your own array.
 
 Near singularities nothing is approximated. A step first checks a certificate that no damping is
