@@ -7,7 +7,7 @@ nor matplotlib.
 
 __version__ = "0.1.0"
 
-from .arm import Arm, load_arm, parse_task  # noqa: E402
+from .arm import Arm, parse_task  # noqa: E402
 from .errors import (  # noqa: E402
     FaultToleranceError,
     FrameNotFound,
@@ -30,6 +30,7 @@ from .indices import (  # noqa: E402
     square_sum_rcn,
 )
 from .linalg import nullspace_projector, pinv, projection, reduced_rates  # noqa: E402
+from .loading import load_arm  # noqa: E402
 from .planner import RESOLVERS, jvja, jvja_explicit, lnva, mda, resolve  # noqa: E402
 
 __all__ = [

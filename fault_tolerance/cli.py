@@ -92,7 +92,7 @@ def add_robot_options(p: argparse.ArgumentParser) -> None:
 
 def load_robot(args) -> object:
     """The arm the robot options describe."""
-    from .arm import load_arm
+    from .loading import load_arm
 
     if args.robot is None and args.urdf is None:
         raise InvalidInput(
@@ -166,7 +166,7 @@ def add_path_options(p: argparse.ArgumentParser) -> None:
 
 def start_and_path(args, arm):
     """``(q0, path)`` from the options (posture search when only ``x0`` is known)."""
-    from .arm import catalog
+    from .catalog import catalog
     from .posture import initial_posture
     from .trajectories import CirclePath, load_csv
 
@@ -234,7 +234,8 @@ def _bar(total: int, enabled: bool, desc: str):
 
 def cmd_robots(args) -> int:
     """List shipped and example-robot-data arms."""
-    from .arm import EXAMPLE_ROBOTS, catalog, load_arm
+    from .catalog import EXAMPLE_ROBOTS, catalog
+    from .loading import load_arm
 
     rows = []
     for name, entry in catalog().items():
@@ -279,7 +280,7 @@ def cmd_robots(args) -> int:
 
 def cmd_inspect(args) -> int:
     """Print the kinematic tree, the chosen chain and task, and intolerable joints."""
-    from .urdf import inspect_text
+    from .inspection import inspect_text
 
     print(
         inspect_text(

@@ -14,9 +14,10 @@ from pathlib import Path
 
 import numpy as np
 
-from .arm import Arm, load_arm
+from .arm import Arm
 from .indices import jump_reduction
 from .linalg import projection
+from .loading import load_arm
 from .planner import MDA_GAIN
 from .posture import RCN_THRESHOLD, initial_posture, plan
 from .simulation import Run, ServoModel, output_folder, simulate, write_atomic

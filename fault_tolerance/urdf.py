@@ -21,7 +21,6 @@ with limits ±π, so the arm has one coordinate per joint.
 from __future__ import annotations
 
 import contextlib
-import io
 import math
 import os
 import re
@@ -32,7 +31,7 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import NamedTuple
 
-from .errors import RobotNotFound, URDFError
+from .errors import URDFError
 
 #: Largest URDF file accepted [bytes]; real robot descriptions are far smaller.
 MAX_URDF_BYTES = 20 * 1024 * 1024
@@ -325,145 +324,10 @@ def native_reason(lines: list[str]) -> str:
     return "; ".join(k for k in keep if k)
 
 
-def urdf_path_of(target: str) -> Path:
-    """The URDF file behind a catalog name, an example-robot-data name or a path."""
-    from .arm import catalog, example_robot_names, robot_path
+def __getattr__(name: str):
+    """``inspect_text`` and ``urdf_path_of`` moved to :mod:`.inspection` (#11); still importable here."""
+    if name in ("inspect_text", "urdf_path_of", "STRUCTURAL_SAMPLES"):
+        from . import inspection
 
-    if target in catalog():
-        return robot_path(catalog()[target]["urdf"])
-    if target in example_robot_names():
-        from example_robot_data.robots_loader import ROBOTS, getModelPath
-
-        loader = ROBOTS[target]
-        sub = Path(loader.path) / loader.urdf_subpath / loader.urdf_filename
-        return Path(getModelPath(str(sub))) / sub
-    path = Path(target).expanduser()
-    if not path.exists() and path.suffix.lower() not in (".urdf", ".xml"):
-        raise RobotNotFound(target, list(catalog()) + example_robot_names())
-    return path
-
-
-def inspect_text(
-    target: str,
-    *,
-    tip: str | None = None,
-    task=None,
-    joints=None,
-    package_dirs=None,
-) -> str:
-    """A readable description of a robot: the URDF tree (read with yourdfpy), chain, task, intolerable joints."""
-    import numpy as np
-
-    from .arm import catalog, example_robot_names, load_arm
-    from .failures import scenarios
-    from .linalg import PIVOT_TOL, projection
-
-    path = urdf_path_of(target)
-    desc = read_urdf(path)
-    named = target in catalog() or target in example_robot_names()
-    choose_tip = tip is None and not named and len(desc.leaves) > 1
-    # Pinocchio's checks first (their messages are the clearer), then the tree from yourdfpy
-    arm = (
-        None
-        if choose_tip
-        else load_arm(target, tip=tip, task=task, joints=joints, package_dirs=package_dirs)
-    )
-    import yourdfpy  # after the checks: a hostile file is refused without this import's cost
-
-    try:  # yourdfpy parses the checked bytes, never the file itself
-        urdf = yourdfpy.URDF.load(
-            io.BytesIO(desc.data),
-            load_meshes=False,
-            build_scene_graph=False,
-            build_collision_scene_graph=False,
-        )
-    except Exception as err:  # yourdfpy raises many types
-        raise URDFError(f"{path}: yourdfpy could not read it: {err}") from err
-    lines = [
-        f"{target}: {path}",
-        f"robot '{urdf.robot.name}': {len(urdf.robot.links)} links, "
-        f"{len(urdf.robot.joints)} joints",
-        "",
-        "joints (parent -> child):",
-    ]
-    for j in urdf.robot.joints:
-        lim = ""
-        if j.limit is not None and j.type in ("revolute", "prismatic"):
-            lim = (
-                f"  limits [{j.limit.lower:.4g}, {j.limit.upper:.4g}], velocity {j.limit.velocity}"
-            )
-        axis = (
-            "" if j.type == "fixed" or j.axis is None else f"  axis {np.round(j.axis, 3).tolist()}"
-        )
-        lines.append(f"  {j.name:28s} {j.type:10s} {j.parent} -> {j.child}{axis}{lim}")
-    if desc.continuous:
-        lines.append(
-            f"continuous joints, read as revolute with limits ±π: {', '.join(desc.continuous)}"
-        )
-    if desc.mimic:
-        lines.append(
-            "mimic joints (held fixed; they cannot be active joints): "
-            + ", ".join(f"{a} follows {b}" for a, b in desc.mimic.items())
-        )
-    lines += ["", f"candidate tip frames (leaf links): {', '.join(desc.leaves)}"]
-    if arm is None:
-        lines.append(
-            "no tip frame given and there are several leaf links: name one with --tip to "
-            "see the chain"
-        )
-        return "\n".join(lines)
-    lines += [
-        "",
-        f"chain to tip '{arm.tip}': {' -> '.join(arm.joint_names)}",
-        f"task {'/'.join(arm.task)}: n = {arm.n}, m = {arm.m}, redundancy r = {arm.redundancy}",
-    ]
-    q = arm.q_reference
-    J = arm.jacobian(q)
-    proj = projection(J)
-    label = "reference" if np.any(q != arm.neutral()) else "neutral"
-    lines.append(
-        f"at the {label} configuration {np.round(q, 4).tolist()}: "
-        f"σ_min(J) = {proj.sigma_min:.3g}" + ("  (singular)" if proj.sigma_min < 1e-6 else "")
-    )
-    if arm.redundancy >= 1:
-        sc = scenarios("all", arm.n, r=arm.redundancy, joint_names=arm.joint_names)
-        bad = [arm.joint_names[i] for i in sc.columns if proj.N[i, i] < PIVOT_TOL]
-        note = "  (J is singular there, so this says little)" if proj.sigma_min < 1e-6 else ""
-        lines.append(
-            "intolerable joints there (locking one loses the task): "
-            + (", ".join(bad) if bad else "none")
-            + note
-        )
-        always = _always_intolerable(arm, sc.columns)
-        lines.append(
-            f"intolerable at all of {STRUCTURAL_SAMPLES} random regular configurations "
-            "(structurally; leave them out of the lockable set): "
-            + (", ".join(arm.joint_names[i] for i in always) if always else "none")
-        )
-    else:
-        lines.append("not redundant for this task: any locked joint loses it")
-    return "\n".join(lines)
-
-
-#: Random configurations ``inspect`` draws to find structurally intolerable joints.
-STRUCTURAL_SAMPLES = 50
-
-
-def _always_intolerable(arm, columns) -> list[int]:
-    """Joints whose pivot ``N_ii`` vanishes at every sampled regular configuration (seeded)."""
-    import numpy as np
-
-    from .linalg import PIVOT_TOL, projection
-
-    rng = np.random.default_rng(0)
-    always = set(int(i) for i in columns)
-    seen = 0
-    for _ in range(20 * STRUCTURAL_SAMPLES):
-        proj = projection(arm.jacobian(arm.random_q(rng)))
-        if proj.sigma_min < 1e-3:
-            continue
-        always &= {i for i in always if proj.N[i, i] < 1e3 * PIVOT_TOL}
-        seen += 1
-        if seen == STRUCTURAL_SAMPLES or not always:
-            break
-    return sorted(always)
+        return getattr(inspection, name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -38,7 +38,7 @@ def test_catalog_arms_load_with_their_presets(name, n, m):
 
 def test_catalog_lists_the_shipped_robots():
     """robots/catalog.json names exactly the three paper arms and the iiwa, each with its URDF."""
-    from fault_tolerance.arm import catalog, robot_path
+    from fault_tolerance.catalog import catalog, robot_path
 
     cat = catalog()
     assert set(cat) == set(SHIPPED) | {"iiwa"}

@@ -30,7 +30,8 @@ def test_readme_python_blocks_run(tmp_path, monkeypatch):
 
 
 @pytest.mark.parametrize(
-    "module", ["arm", "indices", "planner", "realtime", "failures", "trajectories", "simulation"]
+    "module",
+    ["arm", "loading", "indices", "planner", "realtime", "failures", "trajectories", "simulation"],
 )
 def test_docstring_examples(module):
     """The >>> examples in the module's docstrings hold."""

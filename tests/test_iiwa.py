@@ -13,7 +13,7 @@ import pinocchio as pin
 import pytest
 
 import fault_tolerance as ft
-from fault_tolerance.arm import catalog
+from fault_tolerance.catalog import catalog
 from fault_tolerance.errors import IntolerableFailure
 from fault_tolerance.linalg import projection, reduced_rates
 

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 import fault_tolerance as ft
-from fault_tolerance.arm import arm_from_meta
+from fault_tolerance.loading import arm_from_meta
 from fault_tolerance.posture import initial_posture
 from fault_tolerance.simulation import ARRAYS, FLAG_LOCKED, Run, ServoModel, simulate
 from fault_tolerance.trajectories import CirclePath

@@ -25,7 +25,8 @@ import pytest
 
 import fault_tolerance as ft
 from fault_tolerance import urdf as urdf_mod
-from fault_tolerance.urdf import check_urdf_file, inspect_text, read_urdf
+from fault_tolerance.inspection import inspect_text
+from fault_tolerance.urdf import check_urdf_file, read_urdf
 
 SECRET = "TOPSECRET-4242"
 LIMIT = '<limit lower="-3" upper="3" effort="10" velocity="2"/>'

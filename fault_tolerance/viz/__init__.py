@@ -40,8 +40,9 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import IO, Any, NamedTuple
 
-from ..arm import Arm, arm_from_meta
+from ..arm import Arm
 from ..errors import FaultToleranceError, InvalidInput
+from ..loading import arm_from_meta
 from ..simulation import Run, write_atomic
 from .geometry import (  # noqa: F401 - public constants, importable as fault_tolerance.viz.X
     BACKGROUND,

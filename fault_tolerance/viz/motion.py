@@ -14,8 +14,9 @@ from pathlib import Path
 
 import numpy as np
 
-from ..arm import Arm, arm_from_meta
+from ..arm import Arm
 from ..errors import InvalidInput
+from ..loading import arm_from_meta
 from ..simulation import Run
 
 
