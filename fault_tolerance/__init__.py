@@ -8,9 +8,11 @@ nor matplotlib.
 __version__ = "0.1.0"
 
 from .arm import Arm, parse_task  # noqa: E402
+from .bounded import BoundedRates, rate_box, resolve_bounded  # noqa: E402
 from .errors import (  # noqa: E402
     FaultToleranceError,
     FrameNotFound,
+    InfeasibleBounds,
     IntolerableFailure,
     InvalidInput,
     InvalidScenario,
@@ -57,6 +59,10 @@ __all__ = [
     "lnva",
     "mda",
     "resolve",
+    "BoundedRates",
+    "rate_box",
+    "resolve_bounded",
+    "InfeasibleBounds",
     "FaultToleranceError",
     "FrameNotFound",
     "IntolerableFailure",

@@ -135,6 +135,25 @@ class Arm:
         """Velocity limits [rad/s or m/s], shape (n,)."""
         return np.asarray(self.model.velocityLimit, dtype=float).copy()
 
+    def rate_bounds(self, q: np.ndarray, horizon: float | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """Rate box ``(qd_lo, qd_hi)`` at ``q`` from the position and velocity limits (L1).
+
+        A joint covers at most its distance to a limit within ``horizon`` [s] (default
+        :data:`.bounded.RATE_HORIZON`, 0.05 s; use at least the time step) and never exceeds its
+        velocity limit (defaults where the URDF has none: :func:`.bounded.velocity_limits`);
+        continuous joints have no position limit. See :mod:`fault_tolerance.bounded`.
+
+        Example:
+            >>> from fault_tolerance import load_arm
+            >>> arm = load_arm("planar_3r")
+            >>> lo, hi = arm.rate_bounds([3.1, 0.0, 0.0])
+            >>> round(float(hi[0]), 4), float(hi[1])
+            (0.8318, 3.0)
+        """
+        from .bounded import RATE_HORIZON, arm_rate_box
+
+        return arm_rate_box(self, q, RATE_HORIZON if horizon is None else horizon)
+
     def neutral(self) -> np.ndarray:
         """Pinocchio's neutral configuration, shape (n,)."""
         return np.asarray(pin.neutral(self.model), dtype=float).copy()

@@ -75,3 +75,7 @@ class InvalidInput(FaultToleranceError, ValueError):
 
     Also a ``ValueError``, so code that catches NumPy-style value errors catches it too.
     """
+
+
+class InfeasibleBounds(FaultToleranceError):
+    """No joint rates inside the rate box of the joint limits reach the task, not even scaled to 0."""

@@ -7,6 +7,7 @@ no state.
 
 from __future__ import annotations
 
+import inspect
 from collections.abc import Callable, Sequence
 
 import numpy as np
@@ -31,7 +32,7 @@ def _scenarios(J: np.ndarray, lockable, weights, joint_names) -> Scenarios:
 
 
 def lnva(
-    J: np.ndarray, xdot: np.ndarray, lockable=None, *, proj: Projection | None = None, **_: object
+    J: np.ndarray, xdot: np.ndarray, lockable=None, *, proj: Projection | None = None
 ) -> np.ndarray:
     """LNVA, least-norm rates ``q̇ = J⁺ẋ`` (``lockable`` is accepted and ignored)."""
     return (proj or projection(J)).Jpinv @ xdot
@@ -48,7 +49,6 @@ def jvja(
     joint_names: Sequence[str] = (),
     tolerate: bool = False,
     proj: Projection | None = None,
-    **_: object,
 ) -> np.ndarray:
     r"""JVJA, minimum square-sum joint velocity jump, eq. (5).
 
@@ -118,7 +118,6 @@ def mda(
     joint_names: Sequence[str] = (),
     max_step: float | None = MDA_MAX_STEP,
     proj: Projection | None = None,
-    **_: object,
 ) -> np.ndarray:
     r"""MDA, maximum dexterity: :math:`\dot q = J^+\dot x - \alpha N \nabla_q K(q)`.
 
@@ -147,6 +146,13 @@ def mda(
 
 RESOLVERS: dict[str, Callable[..., np.ndarray]] = {"lnva": lnva, "jvja": jvja, "mda": mda}
 
+#: Keyword options each resolver takes (its signature after ``J, xdot, lockable``).
+RESOLVER_OPTIONS: dict[str, frozenset[str]] = {
+    name: frozenset(list(inspect.signature(f).parameters)[3:]) for name, f in RESOLVERS.items()
+}
+#: Every option :func:`resolve` accepts: those of some resolver, and ``bounds``.
+OPTIONS = frozenset().union(*RESOLVER_OPTIONS.values()) | {"bounds"}
+
 
 def resolve(name: str, J: np.ndarray, xdot: np.ndarray, lockable=None, **options) -> np.ndarray:
     """Joint rates from the resolver ``name`` (``"lnva"``, ``"jvja"`` or ``"mda"``).
@@ -157,8 +163,13 @@ def resolve(name: str, J: np.ndarray, xdot: np.ndarray, lockable=None, **options
         xdot: Task velocity, shape (m,).
         lockable: Joints that may lock: column indices, names (with ``joint_names=``), tuples for
             multi-joint scenarios, ``None``/``"all"`` for every joint, or a :class:`Scenarios`.
-        **options: ``weights``, ``response`` (jvja); ``arm``, ``q``, ``gain`` (mda);
-            ``joint_names`` to name lockable joints (taken from ``arm`` when it is given).
+        **options: ``weights``, ``response`` (jvja); ``arm``, ``q``, ``gain``, ``dJ``,
+            ``max_step`` (mda); ``proj``, ``tolerate``; ``joint_names`` to name lockable joints
+            (taken from ``arm`` when it is given); ``bounds=(qd_lo, qd_hi)``: the rate box of the
+            joint limits (:mod:`.bounded`; the rates minimise the resolver's objective inside it,
+            the task scaled when it cannot be reached: :func:`.bounded.resolve_bounded` also
+            returns that scaling). Each resolver gets the options it takes; an option no resolver
+            takes raises :class:`InvalidInput`.
 
     Example:
         >>> import numpy as np, fault_tolerance as ft
@@ -170,6 +181,11 @@ def resolve(name: str, J: np.ndarray, xdot: np.ndarray, lockable=None, **options
     """
     if name not in RESOLVERS:
         raise InvalidInput(f"resolver '{name}' is not one of {sorted(RESOLVERS)}")
+    unknown = sorted(set(options) - OPTIONS)
+    if unknown:
+        raise InvalidInput(
+            f"resolve: unknown option(s) {unknown}; allowed options are {sorted(OPTIONS)}"
+        )
     J = np.asarray(J, dtype=float)
     xdot = np.asarray(xdot, dtype=float)
     if J.ndim != 2 or xdot.shape != (J.shape[0],):
@@ -178,4 +194,10 @@ def resolve(name: str, J: np.ndarray, xdot: np.ndarray, lockable=None, **options
         raise InvalidInput("J and xdot must be finite")
     if options.get("arm") is not None and not options.get("joint_names"):
         options["joint_names"] = options["arm"].joint_names  # lockable joints by name
-    return RESOLVERS[name](J, xdot, lockable, **options)
+    bounds = options.pop("bounds", None)
+    if bounds is not None:
+        from .bounded import resolve_bounded
+
+        return resolve_bounded(name, J, xdot, lockable, bounds=bounds, **options).qd
+    own = RESOLVER_OPTIONS[name]
+    return RESOLVERS[name](J, xdot, lockable, **{k: v for k, v in options.items() if k in own})
