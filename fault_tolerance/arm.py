@@ -140,7 +140,7 @@ class Arm:
 
         A joint covers at most its distance to a limit within ``horizon`` [s] (default
         :data:`.bounded.RATE_HORIZON`, 0.05 s; use at least the time step) and never exceeds its
-        velocity limit (defaults where the URDF has none: :func:`.bounded.velocity_limits`);
+        velocity limit (defaults where the URDF has none: :func:`.limits.velocity_limits`);
         continuous joints have no position limit. See :mod:`fault_tolerance.bounded`.
 
         Example:
@@ -150,7 +150,8 @@ class Arm:
             >>> round(float(hi[0]), 4), float(hi[1])
             (0.8318, 3.0)
         """
-        from .bounded import RATE_HORIZON, arm_rate_box
+        from .bounded import RATE_HORIZON
+        from .limits import arm_rate_box
 
         return arm_rate_box(self, q, RATE_HORIZON if horizon is None else horizon)
 

@@ -104,35 +104,6 @@ def rate_box(q, lower, upper, velocity, horizon: float = RATE_HORIZON):
     return np.clip(lo_q, -v, v), np.clip(hi_q, -v, v)
 
 
-def _prismatic(joint) -> bool:
-    short = joint.shortname()
-    return short.startswith("JointModelP") and "Planar" not in short
-
-
-def velocity_limits(arm) -> np.ndarray:
-    """The arm's velocity limits [rad/s or m/s], (n,); where the URDF gives none (0, missing or
-    infinite): :data:`DEFAULT_REVOLUTE_SPEED` or :data:`DEFAULT_PRISMATIC_SPEED`."""
-    v = np.abs(arm.velocity_limit)
-    model = arm.model
-    kinds = [_prismatic(model.joints[j]) for j in range(1, model.njoints) if model.joints[j].nv > 0]
-    default = np.where(kinds, DEFAULT_PRISMATIC_SPEED, DEFAULT_REVOLUTE_SPEED)
-    return np.where(np.isfinite(v) & (v > 0), v, default)
-
-
-def arm_rate_box(arm, q, horizon: float = RATE_HORIZON) -> tuple[np.ndarray, np.ndarray]:
-    """The box (L1) of ``arm`` at ``q``: its position limits and :func:`velocity_limits`."""
-    q = arm.check_q(q)
-    return rate_box(q, arm.lower, arm.upper, velocity_limits(arm), horizon)
-
-
-def outside_limits(arm, q, tol: float = 1e-9) -> np.ndarray:
-    """Joints of ``q`` (…, n) beyond their position limits by more than ``tol``, bool (…, n)."""
-    q = np.asarray(q, dtype=float)
-    lo = np.where(np.abs(arm.lower) < NO_LIMIT, arm.lower, -np.inf)
-    hi = np.where(np.abs(arm.upper) < NO_LIMIT, arm.upper, np.inf)
-    return (q < lo - tol) | (q > hi + tol)
-
-
 def _null_basis(N: np.ndarray) -> np.ndarray:
     """Orthonormal basis of the range of the projector ``N``, shape (n, r)."""
     w, V = np.linalg.eigh(N)
@@ -257,60 +228,3 @@ def resolve_bounded(name: str, J, xdot, lockable=None, *, bounds, **options) -> 
         _, scales = reduced_under_limits(J, xdot, sc, lo, hi, proj=proj, tolerate=tolerate)
         sol = _continuation(J, xdot, sc, lo, hi, proj, tolerate)
     return BoundedRates(sol.qd, sol.scale, sol.active, scales)
-
-
-def post_failure_under_limits(J, xdot, qd, sc: Scenarios, lo, hi, response="least_norm", *, tolerate=False):
-    """Rates each reduced robot takes under the box (f, n) and its task scaling (f,) (L4).
-
-    Least-norm response: bounded LNVA of ``J_S``; continuation: the rates nearest to ``qd``.
-    """
-    J = np.asarray(J, dtype=float)
-    proj = projection(J)
-    if response == "least_norm":
-        return reduced_under_limits(J, xdot, sc, lo, hi, proj=proj, tolerate=tolerate)
-    if response != "continuation":
-        raise InvalidInput(f"response {response!r} is not one of {RESPONSES}")
-    if not tolerate:
-        sc.check_tolerable(proj.N)
-    sols = []
-    for S in sc.sets:
-        guess = reduced_rates(qd, proj.N, S, damp=tolerate)  # (G3), unbounded
-        sols.append(reduced_bounded(J, xdot, S, lo, hi, target=qd, guess=guess))
-    return np.array([s.qd for s in sols]), np.array([s.scale for s in sols])
-
-
-# Eqn. (9), (10) under limits (L5)
-def jvj_under_limits(
-    J,
-    xdot,
-    qd,
-    lockable=None,
-    *,
-    bounds,
-    weights: Sequence[float] | None = None,
-    response: str = "least_norm",
-    per_joint: bool = False,
-    joint_names: Sequence[str] = (),
-):
-    """Square-sum jump (9)/(10) of ``qd`` against the rates the reduced robots take under ``bounds``.
-
-    With ``per_joint=True`` the (f, n) jumps of eq. (1). See :func:`tolerable_under_limits` for
-    the scenarios whose reduced robot cannot keep the task at all.
-    """
-    J = np.asarray(J, dtype=float)
-    lo, hi = check_bounds(bounds, J.shape[1])
-    sc = _scenarios(J, lockable, weights, joint_names)
-    qd = np.asarray(qd, dtype=float)
-    post, _ = post_failure_under_limits(J, np.asarray(xdot, dtype=float), qd, sc, lo, hi, response)
-    if per_joint:
-        return np.abs(post - qd)
-    return square_sum_jump(post, qd, sc.weights)
-
-
-def tolerable_under_limits(J, xdot, lockable=None, *, bounds, joint_names: Sequence[str] = ()):
-    """Task scaling ``s_S`` each reduced robot needs under ``bounds`` (f,); ``s_S < 1``: intolerable."""
-    J = np.asarray(J, dtype=float)
-    lo, hi = check_bounds(bounds, J.shape[1])
-    sc = _scenarios(J, lockable, None, joint_names)
-    _, scales = reduced_under_limits(J, np.asarray(xdot, dtype=float), sc, lo, hi)
-    return scales

@@ -79,3 +79,19 @@ class InvalidInput(FaultToleranceError, ValueError):
 
 class InfeasibleBounds(FaultToleranceError):
     """No joint rates inside the rate box of the joint limits reach the task, not even scaled to 0."""
+
+
+class IntolerableUnderLimits(IntolerableFailure):
+    """Locking these joints leaves a robot that cannot keep the task inside its joint limits at q."""
+
+    def __init__(self, joints: Sequence[str], scale: float) -> None:
+        self.joints = list(joints)
+        self.pivot = float("nan")
+        self.scale = scale
+        names = ", ".join(self.joints)
+        FaultToleranceError.__init__(
+            self,
+            f"locking {names} is intolerable under limits here: inside their rate box the other "
+            f"joints reach only {100 * scale:.3g}% of the task velocity; slow the task, start "
+            f"farther from the limits, or remove {names} from the lockable joints",
+        )

@@ -116,6 +116,9 @@ def inspect_text(
             + (", ".join(bad) if bad else "none")
             + note
         )
+        from .limits import inspect_lines
+
+        lines += inspect_lines(arm, q, sc.columns)
         always = _always_intolerable(arm, sc.columns)
         lines.append(
             f"intolerable at all of {STRUCTURAL_SAMPLES} random regular configurations "

@@ -6,8 +6,8 @@ import quadprog
 from scipy.optimize import linprog
 
 import fault_tolerance as ft
-from fault_tolerance import bounded
-from fault_tolerance.errors import InfeasibleBounds, InvalidInput
+from fault_tolerance import bounded, limits
+from fault_tolerance.errors import InfeasibleBounds, IntolerableUnderLimits, InvalidInput
 
 REL = 1e-6
 
@@ -201,8 +201,52 @@ def test_reduced_robot_intolerable_under_limits():
     # locking joint 0 leaves joints 1, 2 which reach at most 0.1 + 0.05 < 0.3
     J = np.array([[1.0, 1.0, 1.0]])
     bounds = ([-1, -0.1, -0.05], [1, 0.1, 0.05])
-    s = bounded.tolerable_under_limits(J, np.array([0.3]), [0, 1], bounds=bounds)
+    s = limits.tolerable_under_limits(J, np.array([0.3]), [0, 1], bounds=bounds)
     assert s[0] == pytest.approx(0.5) and s[1] == 1.0
-    lam = bounded.jvj_under_limits(J, [0.3], [0.1, 0.1, 0.1], [1], bounds=bounds)
+    lam = ft.jvj(J, [0.3], [0.1, 0.1, 0.1], [1], bounds=bounds)
     # reduced robot with joint 1 locked: bounded least norm [0.25, 0, 0.05]
     assert lam == pytest.approx(0.15**2 + 0.1**2 + 0.05**2)
+    with pytest.raises(IntolerableUnderLimits, match="joint index 0"):
+        ft.jvj(J, [0.3], [0.1, 0.1, 0.1], [0, 1], bounds=bounds)
+    # without limits the same scenario is tolerable
+    assert ft.jvj(J, [0.3], [0.1, 0.1, 0.1], [0, 1]) >= 0
+
+
+def test_guaranteed_speed_exact_and_sampled():
+    rng = np.random.default_rng(2)
+    for m, n in [(1, 3), (2, 3), (3, 5), (3, 7)]:
+        J = rng.normal(size=(m, n))
+        lo, hi = -rng.uniform(0.1, 1, n), rng.uniform(0.1, 1, n)
+        rho = limits.guaranteed_speed(J, lo, hi)
+        assert rho > 0
+        # every direction is reachable at speed rho, and some direction not much beyond it
+        dirs = rng.normal(size=(40, m))
+        dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)
+        for d in dirs:
+            assert feasible(J, rho * (1 - 1e-6) * d, lo, hi)
+        y = rng.normal(size=(20000, m))
+        y /= np.linalg.norm(y, axis=1, keepdims=True)
+        C = y @ J
+        assert rho <= np.maximum(C * lo, C * hi).sum(axis=1).min() + 1e-12
+    # a joint at its lower limit with lo = 0 leaves one direction unreachable for a 1-joint robot
+    assert limits.guaranteed_speed(np.array([[1.0]]), [0.0], [1.0]) == 0.0
+
+
+def test_arm_rate_bounds_and_inspect():
+    arm = ft.load_arm("panda")
+    q = arm.q_reference.copy()
+    q[3] = arm.upper[3] - 0.01  # 1 cm rad from the upper limit
+    lo, hi = arm.rate_bounds(q)
+    assert hi[3] == pytest.approx(0.01 / bounded.RATE_HORIZON)
+    assert np.allclose(lo, -arm.velocity_limit) and np.all(hi <= arm.velocity_limit)
+    assert np.all(limits.outside_limits(arm, q) == False)  # noqa: E712
+    from fault_tolerance.inspection import inspect_text
+
+    text = inspect_text("panda")
+    assert "under joint limits there" in text and "intolerable under limits only" in text
+
+
+def test_velocity_defaults_where_urdf_has_none():
+    arm = ft.load_arm("planar_3r")
+    arm.model.velocityLimit = np.array([0.0, np.inf, 2.0])
+    assert np.allclose(limits.velocity_limits(arm), [np.pi, np.pi, 2.0])
