@@ -70,6 +70,47 @@ class IntolerableFailure(FaultToleranceError):
         )
 
 
+class StructurallyIntolerable(IntolerableFailure):
+    """Locking these joints loses the task at every sampled configuration, not only at this one."""
+
+    def __init__(self, joints: Sequence[str], pivot: float, samples: int) -> None:
+        self.joints = list(joints)
+        self.pivot = pivot
+        self.samples = samples
+        names = ", ".join(self.joints)
+        FaultToleranceError.__init__(
+            self,
+            f"locking {names} loses the task structurally: N[S, S] is singular at every one of "
+            f"{samples} sampled regular configurations (here: smallest pivot {pivot:.2e}), so no "
+            f"start helps; remove {names} from the lockable joints",
+        )
+
+
+class IntolerableAtStart(IntolerableFailure):
+    """Locking these joints loses the task at this start only; ``q0`` is a start that works."""
+
+    def __init__(
+        self, joints: Sequence[str], pivot: float, q0: Sequence[float] | None, why: str = ""
+    ) -> None:
+        self.joints = list(joints)
+        self.pivot = pivot
+        self.q0 = None if q0 is None else [float(v) for v in q0]
+        names = ", ".join(self.joints)
+        if self.q0 is None:
+            advice = f"choose another start (--q0/--x0) or remove {names} from the lockable joints"
+        else:
+            advice = (
+                f"a start that works: --q0 {','.join(f'{v:.4f}' for v in self.q0)}"
+                + (f" ({why})" if why else "")
+                + f"; or remove {names} from the lockable joints"
+            )
+        FaultToleranceError.__init__(
+            self,
+            f"locking {names} loses the task at this start only (N[S, S] is singular here, "
+            f"smallest pivot {pivot:.2e}, but not at other configurations); {advice}",
+        )
+
+
 class InvalidInput(FaultToleranceError, ValueError):
     """A numeric input (configuration, rate, time step, path) has the wrong shape or value.
 

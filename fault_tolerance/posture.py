@@ -157,12 +157,15 @@ def initial_posture(
     seeds: int | None = None,
     rng: np.random.Generator | None = None,
     step: float = 0.01,
+    starts: Sequence[np.ndarray] | None = None,
 ) -> Posture:
     """Configuration of minimum square-sum RCN at ``x0`` (paper Sec. III.D, step i).
 
     ``r = 1``: global, over every self-motion curve found from ``seeds`` inverse-kinematics seeds
     (default 24). ``r > 1``: projected gradient descent on ``K`` from each seed (default 8; local
     minima, best kept). The reference configuration and the neutral one are always tried too.
+    ``starts``: the inverse-kinematics seeds to use instead of those (e.g. one configuration that
+    reaches ``x0``: then only its own self-motion is searched).
 
     Raises:
         InvalidInput: ``x0`` has the wrong size or no seed reaches it (out of reach).
@@ -181,7 +184,9 @@ def initial_posture(
         r=arm.redundancy,
         joint_names=arm.joint_names,
     )
-    starts = [arm.q_reference, arm.neutral()] + [arm.random_q(rng) for _ in range(seeds)]
+    if starts is None:
+        starts = [arm.q_reference, arm.neutral()] + [arm.random_q(rng) for _ in range(seeds)]
+    starts = [arm.check_q(q) for q in starts]
     sols = [s for s in (inverse_kinematics(arm, x0, q) for q in starts) if s is not None]
     sols = [s for s in sols if np.all(_wrappable(arm) | ((s >= arm.lower) & (s <= arm.upper)))]
     if not sols:

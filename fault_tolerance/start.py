@@ -1,0 +1,437 @@
+"""The default start: a configuration that works on any arm when neither ``q0`` nor ``x0`` is given.
+
+``q = 0`` and a description's reference posture are often singular, at a joint limit, or a
+configuration where a lockable joint is intolerable (a UR5 at ``q = 0`` is stretched straight; a
+Panda at its reference posture cannot lose ``panda_joint2``). :func:`default_start` picks the start
+the way docs/MATH.md ("The default start") describes:
+
+1. seeds: the mid-range configuration, then configurations drawn from the central half of every
+   joint's range (seeded);
+2. a seed is used if it is regular: inside the limits with a margin, ``σ_min(J)`` well above zero,
+   every lockable scenario tolerable with a margin;
+3. ``x0 = x(seed)``; the posture search of :mod:`.posture` (minimum square-sum RCN on the
+   self-motion through ``x0``) gives candidates, best first; those outside the limits or not
+   regular are dropped, and the seed itself is the last candidate;
+4. each candidate runs the default task (a small circle at ``x0``, or the caller's path) with the
+   caller's algorithms; it is accepted when every sample stays inside the limits, none is
+   near-singular or near-intolerable, and the task error stays below :data:`ERROR_TOL`.
+   Among accepted candidates one whose reduced condition numbers stay below
+   :data:`~.posture.RCN_THRESHOLD` is preferred (step iii of the paper's planning loop).
+
+:func:`explain_intolerable` turns an intolerable scenario at a given start into an error that says
+whether the scenario is intolerable structurally (at every sampled configuration) or only at this
+start, and then proposes a start that works.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from .arm import Arm
+from .errors import (
+    FaultToleranceError,
+    IntolerableAtStart,
+    IntolerableFailure,
+    InvalidInput,
+    StructurallyIntolerable,
+)
+from .failures import Scenarios
+from .indices import condition_numbers, reduced_singular_values
+from .linalg import PIVOT_TOL, projection
+from .posture import RCN_THRESHOLD, initial_posture, joint_distance, lockable_scenarios
+
+#: Distance a start keeps from every joint limit, as a fraction of the joint's range.
+LIMIT_MARGIN = 0.05
+#: Smallest singular value of J [task units per rad] a start must have.
+SIGMA_REGULAR = 1e-2
+#: Smallest pivot of N[S, S] a start must have for every lockable scenario (intolerable: < 1e-9).
+PIVOT_MARGIN = 1e-3
+#: Largest position error [m] (and orientation error [rad]) a checked run may reach.
+ERROR_TOL = 1e-3
+#: Radius [m] of the default circle through the start point.
+DEFAULT_RADIUS = 0.05
+#: Seeds tried at most, and candidates checked by simulation per seed.
+MAX_SEEDS = 6
+MAX_CANDIDATES = 3
+#: Configurations near mid-range drawn to find well-conditioned seeds.
+SEED_SAMPLES = 200
+#: Random regular configurations at which a scenario must be intolerable to count as structural.
+STRUCTURAL_SAMPLES = 50
+
+_ANGULAR = ("rx", "ry", "rz")
+
+
+@dataclass(frozen=True)
+class StartChoice:
+    """A start chosen by :func:`default_start` and why.
+
+    Attributes:
+        q0: Start configuration [rad], shape (n,).
+        x0: Task coordinates of the tool there, shape (m,).
+        K: Square-sum RCN at ``q0``.
+        rcn_max: Largest reduced condition number at ``q0``.
+        run_rcn_max: Largest reduced condition number along the checked runs.
+        sigma_min: Smallest singular value of J at ``q0``.
+        origin: Where ``x0`` came from (``"mid-range configuration"``, ``"given x0"``, ...).
+        algorithms: Algorithms whose runs were checked (empty: no path was checked).
+        tried: Candidates simulated before this one was accepted (itself included).
+        note: A caveat, e.g. that no candidate kept the RCN below the threshold.
+        runs: The checked runs from ``q0`` by algorithm (reuse them instead of simulating again).
+    """
+
+    q0: np.ndarray
+    x0: np.ndarray
+    K: float
+    rcn_max: float
+    run_rcn_max: float
+    sigma_min: float
+    origin: str
+    algorithms: tuple[str, ...]
+    tried: int
+    note: str = ""
+    runs: dict = field(default_factory=dict, repr=False, compare=False)
+
+    def reason(self) -> str:
+        """One line: the start and why it was chosen."""
+        checked = (
+            f"; the task runs from it with {'/'.join(self.algorithms)} inside the limits, "
+            f"regular, largest k_S {self.run_rcn_max:.3g}"
+            if self.algorithms
+            else ""
+        )
+        return (
+            f"start q0 = {np.round(self.q0, 4).tolist()} rad: minimum square-sum RCN K = "
+            f"{self.K:.4g} on the self-motion through x0 = {np.round(self.x0, 4).tolist()} "
+            f"({self.origin}); inside the limits, σ_min(J) = {self.sigma_min:.3g}, every lockable "
+            f"joint tolerable{checked}" + (f"; {self.note}" if self.note else "")
+        )
+
+
+def limit_box(arm: Arm) -> tuple[np.ndarray, np.ndarray]:
+    """Joint limits with infinite ones replaced by ±π (continuous joints are read as ±π)."""
+    lo = np.where(np.isfinite(arm.lower), arm.lower, -np.pi)
+    hi = np.where(np.isfinite(arm.upper), arm.upper, np.pi)
+    return lo, hi
+
+
+def mid_range(arm: Arm) -> np.ndarray:
+    """The configuration halfway between every joint's limits (0 for continuous joints)."""
+    lo, hi = limit_box(arm)
+    return (lo + hi) / 2
+
+
+def inside_limits(arm: Arm, q: np.ndarray, margin: float = 0.0) -> np.ndarray:
+    """Which rows of ``q`` (shape (..., n)) keep ``margin`` × range from every joint limit."""
+    lo, hi = limit_box(arm)
+    pad = margin * (hi - lo)
+    q = np.asarray(q, dtype=float)
+    return np.all((q >= lo + pad - 1e-12) & (q <= hi - pad + 1e-12), axis=-1)
+
+
+def start_problem(arm: Arm, q: np.ndarray, sc: Scenarios) -> str | None:
+    """Why ``q`` is not a usable start (limits, singular J, intolerable scenario), or ``None``."""
+    if not inside_limits(arm, q, LIMIT_MARGIN):
+        return f"within {100 * LIMIT_MARGIN:g} % of a joint limit"
+    proj = projection(arm.jacobian(q))
+    if proj.sigma_min < SIGMA_REGULAR:
+        return f"near-singular (σ_min(J) = {proj.sigma_min:.2g} < {SIGMA_REGULAR:g})"
+    pivots = sc.pivots(proj.N)
+    k = int(np.argmin(pivots))
+    if pivots[k] < PIVOT_MARGIN:
+        return (
+            f"locking {', '.join(sc.name(sc.sets[k]))} nearly loses the task there "
+            f"(pivot {pivots[k]:.2g} < {PIVOT_MARGIN:g})"
+        )
+    return None
+
+
+def run_problem(arm: Arm, run) -> str | None:
+    """Why a checked run disqualifies its start (limits, singular J, task error), or ``None``."""
+    from .simulation import FLAG_NEAR_SINGULAR
+
+    out = ~inside_limits(arm, run.q)
+    if out.any():
+        k = int(np.argmax(out))
+        return f"leaves the joint limits at t = {run.t[k]:.3f} s"
+    if np.any(run.flags & FLAG_NEAR_SINGULAR):
+        return "passes near a singularity of J"
+    pos, ori = task_error_parts(arm.task, run.x_des, run.x, arm=arm, q=run.q)
+    if pos.max() > ERROR_TOL:
+        return f"position error reaches {1e3 * pos.max():.3g} mm"
+    if ori is not None and ori.max() > ERROR_TOL:
+        return f"orientation error reaches {ori.max():.3g} rad"
+    return None
+
+
+def run_caveat(run) -> str | None:
+    """What makes a run that passed :func:`run_problem` less than ideal, or ``None``."""
+    from .simulation import FLAG_NEAR_INTOLERABLE
+
+    near = int(np.count_nonzero(run.flags & FLAG_NEAR_INTOLERABLE))
+    if near:
+        return f"{near} samples where a lockable joint is nearly intolerable (pivots damped)"
+    worst = float(np.max(run.rcn))
+    if worst > RCN_THRESHOLD:
+        return f"largest k_S {worst:.3g} > RCN threshold {RCN_THRESHOLD:g}"
+    return None
+
+
+def task_error_parts(task, x_des, x, *, arm: Arm | None = None, q=None):
+    """Position error [m] and orientation error [rad] (``None`` without angular rows) per sample.
+
+    With ``arm`` and ``q`` the angular part is the rotation that remains (``Arm.task_error``);
+    otherwise the difference of the rotation-vector rows.
+    """
+    task = tuple(task)
+    lin = [i for i, r in enumerate(task) if r not in _ANGULAR]
+    ang = [i for i, r in enumerate(task) if r in _ANGULAR]
+    x_des, x = np.atleast_2d(x_des), np.atleast_2d(x)
+    if arm is not None and q is not None:
+        err = np.array([arm.task_error(xd, qk) for xd, qk in zip(x_des, np.atleast_2d(q))])
+    else:
+        err = x_des - x
+    pos = np.linalg.norm(err[:, lin], axis=1) if lin else np.zeros(len(err))
+    ori = np.linalg.norm(err[:, ang], axis=1) if ang else None
+    return pos, ori
+
+
+def default_path(arm: Arm, x0: np.ndarray, radius: float = DEFAULT_RADIUS):
+    """The default task at ``x0``: a circle of ``radius`` in the first two task rows, 1 s."""
+    from .trajectories import CirclePath
+
+    if arm.m < 2:
+        return None
+    return CirclePath(np.asarray(x0, dtype=float), radius, 2 * np.pi, 1.0, rows=(0, 1))
+
+
+def _candidates(arm: Arm, x0: np.ndarray, sc: Scenarios, seed_q) -> list[tuple[float, np.ndarray]]:
+    """Posture-search candidates at ``x0`` that are usable starts, best first (then the seed).
+
+    With a seed, only the seed's own self-motion is searched (``r = 1``: its curve; ``r > 1``:
+    descent from it); without one, the global search of :func:`~.posture.initial_posture`.
+    """
+    try:
+        starts = None if seed_q is None else [seed_q]
+        found = initial_posture(arm, x0, sc, starts=starts).candidates
+    except InvalidInput:
+        found = []
+    kept: list[tuple[float, np.ndarray]] = []
+    for K, q in found:
+        if len(kept) == MAX_CANDIDATES:
+            break
+        if start_problem(arm, q, sc) is None and all(
+            joint_distance(arm, q, c) > 0.05 for _, c in kept
+        ):
+            kept.append((K, q))
+    if seed_q is not None and all(joint_distance(arm, seed_q, c) > 0.05 for _, c in kept):
+        k = condition_numbers(reduced_singular_values(arm.jacobian(seed_q), sc))
+        kept.append((float(k @ k), np.asarray(seed_q, dtype=float)))
+    return kept
+
+
+def _seeds(arm: Arm, sc: Scenarios, rng, max_seeds: int):
+    """Regular seeds, ``(q, origin)``: the mid-range configuration if it is regular, then the best
+    conditioned (smallest largest ``k_S``) of :data:`SEED_SAMPLES` configurations drawn from the
+    central half of every joint's range."""
+    lo, hi = limit_box(arm)
+    mid = (lo + hi) / 2
+    if start_problem(arm, mid, sc) is None:
+        yield mid, "reached from the mid-range configuration"
+        max_seeds -= 1
+    draws = mid + rng.uniform(-1.0, 1.0, (SEED_SAMPLES, arm.n)) * (hi - lo) / 4
+    worst = np.array([
+        condition_numbers(reduced_singular_values(arm.jacobian(q), sc)).max() for q in draws
+    ])
+    used: list[np.ndarray] = []
+    for i in np.argsort(worst, kind="stable"):
+        if len(used) == max_seeds:
+            return
+        q = draws[i]
+        if start_problem(arm, q, sc) is not None or any(
+            joint_distance(arm, q, u) < 0.1 * np.linalg.norm(hi - lo) for u in used
+        ):
+            continue
+        used.append(q)
+        yield q, (
+            f"reached from the best conditioned of {SEED_SAMPLES} configurations near mid-range, "
+            f"largest k_S {worst[i]:.3g}"
+        )
+
+
+#: Order in which a candidate's runs are checked: cheap resolvers first, so a bad start fails fast.
+_CHEAP_FIRST = ("lnva", "jvja", "mda")
+
+
+def _check(arm, q0, path, algorithms, sc, sim_options):
+    """Simulate ``path`` from ``q0``: ``(problem, caveat, largest k_S, runs)``."""
+    from .simulation import simulate
+
+    order = sorted(algorithms, key=lambda a: _CHEAP_FIRST.index(a) if a in _CHEAP_FIRST else 9)
+    worst, caveat, runs = 0.0, None, {}
+    for alg in order:
+        run = simulate(arm, path, alg, q0=q0, lockable=sc, **sim_options)
+        problem = run_problem(arm, run)
+        if problem:
+            return f"{alg}: {problem}", None, worst, {}
+        runs[alg] = run
+        worst = max(worst, float(np.max(run.rcn)))
+        caveat = caveat or (None if run_caveat(run) is None else f"{alg}: {run_caveat(run)}")
+    return None, caveat, worst, runs
+
+
+def default_start(
+    arm: Arm,
+    lockable=None,
+    *,
+    x0: np.ndarray | Sequence[float] | None = None,
+    path: Callable | object | None = None,
+    algorithms: Sequence[str] = ("jvja",),
+    max_seeds: int = MAX_SEEDS,
+    seed: int = 0,
+    **sim_options,
+) -> StartChoice:
+    """A start inside the limits, regular, with every lockable joint tolerable, that runs the task.
+
+    See the module doc and docs/MATH.md ("The default start").
+
+    Args:
+        arm: The arm.
+        lockable: Joints that may lock (default: the arm's default lockable joints).
+        x0: Start point; without it one is reached from mid-range configurations.
+        path: The task to check from each candidate: a callable ``path(x0) -> TaskPath`` (or
+            ``None`` for no check), a ``TaskPath`` (then ``x0`` is its start), or ``None`` for
+            :func:`default_path` (a 5 cm circle, 1 s).
+        algorithms: Algorithms whose runs must stay inside the limits and regular.
+        max_seeds: Regular seeds tried at most (without ``x0``).
+        seed: Seed of the random seeds (the choice is reproducible).
+        **sim_options: Passed to :func:`~.simulation.simulate` (``dt``, ``feedback_gain``, ...).
+
+    Raises:
+        InvalidInput: no start passed the checks (the message gives the last reason).
+
+    Example:
+        >>> import fault_tolerance as ft
+        >>> arm = ft.load_arm("ur5")
+        >>> start = ft.default_start(arm)
+        >>> bool(ft.start.inside_limits(arm, start.q0, ft.start.LIMIT_MARGIN))
+        True
+    """
+    sc = lockable_scenarios(arm, lockable)
+    if hasattr(path, "x") and hasattr(path, "xdot"):  # a ready TaskPath fixes the start point
+        fixed, x0 = path, np.asarray(path.x0, dtype=float)  # type: ignore[union-attr]
+        make = lambda _x0: fixed  # noqa: E731
+    else:
+        make = path if path is not None else (lambda p: default_path(arm, p))
+    if x0 is not None:
+        x0 = np.asarray(x0, dtype=float)
+        if x0.shape != (arm.m,):
+            raise InvalidInput(f"x0 must be {arm.m} numbers for task {'/'.join(arm.task)}")
+        sources = [(None, x0, "given x0")]
+    else:
+        rng = np.random.default_rng(seed)
+        sources = ((q, arm.fk(q), why) for q, why in _seeds(arm, sc, rng, max_seeds))
+    last, tried, fallback = "no regular configuration found within the joint limits", 0, None
+    for seed_q, point, origin in sources:
+        task = make(point)
+        for K, q in _candidates(arm, point, sc, seed_q):
+            tried += 1
+            problem, caveat, worst, runs = (None, None, 0.0, {}) if task is None else _check(
+                arm, q, task, tuple(algorithms), sc, sim_options
+            )
+            if problem:
+                last = f"the start {np.round(q, 3).tolist()} {problem}"
+                continue
+            choice = _choice(arm, q, point, sc, worst, origin, task, algorithms, tried, runs)
+            if caveat is None:
+                return choice
+            if fallback is None or worst < fallback.run_rcn_max:
+                fallback = replace(choice, note=f"the best start found has a caveat: {caveat}")
+        if fallback is not None:  # this seed gave a usable start: do not search further
+            return replace(fallback, tried=tried)
+    where = f"at x0 = {np.round(x0, 4).tolist()}" if x0 is not None else "from mid-range seeds"
+    raise InvalidInput(
+        f"no start {where} for {arm.name} passed the checks ({last}); give --q0 or --x0, a smaller "
+        "path (--radius) or fewer lockable joints"
+    )
+
+
+def _choice(arm, q, point, sc, worst, origin, task, algorithms, tried, runs) -> StartChoice:
+    J = arm.jacobian(q)
+    k = condition_numbers(reduced_singular_values(J, sc))
+    return StartChoice(
+        q0=np.asarray(q, dtype=float),
+        x0=np.asarray(point, dtype=float),
+        K=float(k @ k),
+        rcn_max=float(k.max()),
+        run_rcn_max=worst if task is not None else float(k.max()),
+        sigma_min=projection(J).sigma_min,
+        origin=origin,
+        algorithms=tuple(algorithms) if task is not None else (),
+        tried=tried,
+        runs=runs,
+    )
+
+
+def intolerable_everywhere(
+    arm: Arm, lockable, samples: int = STRUCTURAL_SAMPLES, seed: int = 0
+) -> list[tuple[str, ...]]:
+    """Scenarios intolerable at every one of ``samples`` random regular configurations (seeded).
+
+    A configuration is regular when ``σ_min(J) >= 1e-3``; intolerable means the smallest pivot of
+    ``N[S, S]`` is below ``1e3 · PIVOT_TOL`` there. The spatial 4R's ``joint4`` is one.
+    """
+    sc = lockable_scenarios(arm, lockable)
+    rng = np.random.default_rng(seed)
+    always = set(range(sc.f))
+    seen = 0
+    for _ in range(20 * samples):
+        proj = projection(arm.jacobian(arm.random_q(rng)))
+        if proj.sigma_min < 1e-3:
+            continue
+        pivots = sc.pivots(proj.N)
+        always &= {k for k in always if pivots[k] < 1e3 * PIVOT_TOL}
+        seen += 1
+        if seen == samples or not always:
+            break
+    return [tuple(sc.name(sc.sets[k])) for k in sorted(always)]
+
+
+_EXPLAINING = False
+
+
+def explain_intolerable(
+    arm: Arm, lockable, err: IntolerableFailure, **start_options
+) -> IntolerableFailure:
+    """``err`` (a scenario intolerable at some start) as a structural or an at-this-start error.
+
+    Structural (:class:`~.errors.StructurallyIntolerable`): the scenario is intolerable at every
+    sampled configuration; no start helps. Otherwise (:class:`~.errors.IntolerableAtStart`) a start
+    that works is proposed: :func:`default_start` for the same lockable joints (``start_options``
+    are passed on).
+    """
+    global _EXPLAINING
+    if _EXPLAINING:  # the proposal's own checks never explain again
+        return err
+    joints = tuple(err.joints)
+    if joints in intolerable_everywhere(arm, [joints]):
+        return StructurallyIntolerable(joints, err.pivot, STRUCTURAL_SAMPLES)
+    _EXPLAINING = True
+    try:
+        choice = default_start(arm, lockable, **start_options)
+    except FaultToleranceError:
+        choice = None
+    finally:
+        _EXPLAINING = False
+    why = None if choice is None else f"tool at x0 = {np.round(choice.x0, 4).tolist()}"
+    return IntolerableAtStart(joints, err.pivot, None if choice is None else choice.q0, why or "")
+
+
+def check_start(arm: Arm, sc: Scenarios, q0: np.ndarray, **start_options) -> None:
+    """Raise the explained error of :func:`explain_intolerable` if a scenario is intolerable at q0."""
+    try:
+        sc.check_tolerable(projection(arm.jacobian(q0)).N)
+    except IntolerableFailure as err:
+        raise explain_intolerable(arm, sc, err, **start_options) from None
