@@ -13,12 +13,14 @@ from .errors import (  # noqa: E402
     FaultToleranceError,
     FrameNotFound,
     InfeasibleBounds,
+    IntolerableAtStart,
     IntolerableFailure,
     InvalidInput,
     InvalidScenario,
     InvalidTask,
     JointNotFound,
     RobotNotFound,
+    StructurallyIntolerable,
     URDFError,
 )
 from .failures import Scenarios, scenarios  # noqa: E402
@@ -34,6 +36,7 @@ from .indices import (  # noqa: E402
 from .linalg import nullspace_projector, pinv, projection, reduced_rates  # noqa: E402
 from .loading import load_arm  # noqa: E402
 from .planner import RESOLVERS, jvja, jvja_explicit, lnva, mda, resolve  # noqa: E402
+from .start import StartChoice, default_start  # noqa: E402
 
 __all__ = [
     "__version__",
@@ -63,9 +66,13 @@ __all__ = [
     "rate_box",
     "resolve_bounded",
     "InfeasibleBounds",
+    "StartChoice",
+    "default_start",
     "FaultToleranceError",
     "FrameNotFound",
     "IntolerableFailure",
+    "IntolerableAtStart",
+    "StructurallyIntolerable",
     "InvalidInput",
     "InvalidScenario",
     "InvalidTask",

@@ -25,7 +25,7 @@ def _verdict(ok_count: int, total: int) -> str:
 
 def _claim_jvja_smallest(cases: dict) -> tuple[str, list[str]]:
     rows = [
-        "| case | λ mean LNVA | λ mean JVJA | λ mean MDA | λ max LNVA | λ max JVJA | λ max MDA | JVJA smallest (mean / max) |",
+        "| case | λ mean LNVA [(rad/s)²] | λ mean JVJA [(rad/s)²] | λ mean MDA [(rad/s)²] | λ max LNVA [(rad/s)²] | λ max JVJA [(rad/s)²] | λ max MDA [(rad/s)²] | JVJA smallest (mean / max) |",
         "|---|---|---|---|---|---|---|---|",
     ]
     ok = 0
@@ -164,7 +164,10 @@ def write_report(summary: dict) -> str:
                 "",
             ]
 
-        rows = ["| case | δ = λ(LN) − λ(OPT) | f‖q̇_H‖² | δ ≥ 0 |", "|---|---|---|---|"]
+        rows = [
+            "| case | δ = λ(LN) − λ(OPT) [(rad/s)²] | f‖q̇_H‖² [(rad/s)²] | δ ≥ 0 |",
+            "|---|---|---|---|",
+        ]
         ok = 0
         for key in cases:
             e = details.get(key, {}).get("eq14_at_start")
@@ -193,7 +196,7 @@ def write_report(summary: dict) -> str:
             "",
             f"**Verdict: {REPRODUCED if ok else NOT_REPRODUCED}**. Planar 3R, Fig. 2 path, only "
             f"joint 3 lockable: max |q̇₃| = {_f(eq8['max_abs_rate_joint3'])} rad/s, max λ = "
-            f"{_f(eq8['jvj_max'])}, tracking error {_f(eq8['tracking_error_max'])} m.",
+            f"{_f(eq8['jvj_max'])} (rad/s)², tracking error {_f(eq8['tracking_error_max'])} m.",
             "",
         ]
 
@@ -218,8 +221,8 @@ def write_report(summary: dict) -> str:
             "### 7. Lock moments of largest and smallest jump (Sec. V: t = 3.1 s and 4.5 s)",
             "",
             f"**Verdict: {REPRODUCED if close else NOT_REPRODUCED}**. We find the largest jump "
-            f"of joint 3 at t = {exp['t_max_jump']:.3f} s (λ = {_f(d.get('jump_at_max', float('nan')))}) "
-            f"and the smallest at t = {exp['t_min_jump']:.3f} s (λ = {_f(d.get('jump_at_min', float('nan')))}). "
+            f"of joint 3 at t = {exp['t_max_jump']:.3f} s (λ = {_f(d.get('jump_at_max', float('nan')))} (rad/s)²) "
+            f"and the smallest at t = {exp['t_min_jump']:.3f} s (λ = {_f(d.get('jump_at_min', float('nan')))} (rad/s)²). "
             + (
                 ""
                 if close

@@ -1,8 +1,8 @@
 """The default start: a configuration that works on any arm when neither ``q0`` nor ``x0`` is given.
 
 ``q = 0`` and a description's reference posture are often singular, at a joint limit, or a
-configuration where a lockable joint is intolerable (a UR5 at ``q = 0`` is stretched straight; a
-Panda at its reference posture cannot lose ``panda_joint2``). :func:`default_start` picks the start
+configuration where a lockable joint is intolerable (a UR5 at ``q = 0`` is stretched out and
+cannot lose its shoulder pan joint; a Panda at its reference posture cannot lose ``panda_joint2``). :func:`default_start` picks the start
 the way docs/MATH.md ("The default start") describes:
 
 1. seeds: the mid-range configuration, then configurations drawn from the central half of every
@@ -190,7 +190,9 @@ def task_error_parts(task, x_des, x, *, arm: Arm | None = None, q=None):
     ang = [i for i, r in enumerate(task) if r in _ANGULAR]
     x_des, x = np.atleast_2d(x_des), np.atleast_2d(x)
     if arm is not None and q is not None:
-        err = np.array([arm.task_error(xd, qk) for xd, qk in zip(x_des, np.atleast_2d(q))])
+        err = np.array(
+            [arm.task_error(xd, qk) for xd, qk in zip(x_des, np.atleast_2d(q), strict=True)]
+        )
     else:
         err = x_des - x
     pos = np.linalg.norm(err[:, lin], axis=1) if lin else np.zeros(len(err))
@@ -233,18 +235,20 @@ def _candidates(arm: Arm, x0: np.ndarray, sc: Scenarios, seed_q) -> list[tuple[f
 
 
 def _seeds(arm: Arm, sc: Scenarios, rng, max_seeds: int):
-    """Regular seeds, ``(q, origin)``: the mid-range configuration if it is regular, then the best
-    conditioned (smallest largest ``k_S``) of :data:`SEED_SAMPLES` configurations drawn from the
-    central half of every joint's range."""
+    """Regular seeds ``(q, origin)``: mid-range if regular, then the best conditioned near it.
+
+    The others are the best conditioned (smallest largest ``k_S``) of :data:`SEED_SAMPLES`
+    configurations drawn from the central half of every joint's range.
+    """
     lo, hi = limit_box(arm)
     mid = (lo + hi) / 2
     if start_problem(arm, mid, sc) is None:
         yield mid, "reached from the mid-range configuration"
         max_seeds -= 1
     draws = mid + rng.uniform(-1.0, 1.0, (SEED_SAMPLES, arm.n)) * (hi - lo) / 4
-    worst = np.array([
-        condition_numbers(reduced_singular_values(arm.jacobian(q), sc)).max() for q in draws
-    ])
+    worst = np.array(
+        [condition_numbers(reduced_singular_values(arm.jacobian(q), sc)).max() for q in draws]
+    )
     used: list[np.ndarray] = []
     for i in np.argsort(worst, kind="stable"):
         if len(used) == max_seeds:
@@ -255,9 +259,12 @@ def _seeds(arm: Arm, sc: Scenarios, rng, max_seeds: int):
         ):
             continue
         used.append(q)
-        yield q, (
-            f"reached from the best conditioned of {SEED_SAMPLES} configurations near mid-range, "
-            f"largest k_S {worst[i]:.3g}"
+        yield (
+            q,
+            (
+                f"reached from the best conditioned of {SEED_SAMPLES} configurations near mid-range, "
+                f"largest k_S {worst[i]:.3g}"
+            ),
         )
 
 
@@ -336,10 +343,12 @@ def default_start(
     last, tried, fallback = "no regular configuration found within the joint limits", 0, None
     for seed_q, point, origin in sources:
         task = make(point)
-        for K, q in _candidates(arm, point, sc, seed_q):
+        for _, q in _candidates(arm, point, sc, seed_q):
             tried += 1
-            problem, caveat, worst, runs = (None, None, 0.0, {}) if task is None else _check(
-                arm, q, task, tuple(algorithms), sc, sim_options
+            problem, caveat, worst, runs = (
+                (None, None, 0.0, {})
+                if task is None
+                else _check(arm, q, task, tuple(algorithms), sc, sim_options)
             )
             if problem:
                 last = f"the start {np.round(q, 3).tolist()} {problem}"

@@ -1,0 +1,119 @@
+"""start: the default start is inside the limits, regular, tolerant, and runs the default task."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import fault_tolerance as ft
+from fault_tolerance import start as st
+from fault_tolerance.linalg import projection
+from fault_tolerance.posture import lockable_scenarios
+from fault_tolerance.simulation import FLAG_NEAR_SINGULAR
+
+
+def _assert_good_start(arm, choice, lockable=None):
+    sc = lockable_scenarios(arm, lockable)
+    assert st.inside_limits(arm, choice.q0, st.LIMIT_MARGIN)
+    proj = projection(arm.jacobian(choice.q0))
+    assert proj.sigma_min >= st.SIGMA_REGULAR
+    assert sc.pivots(proj.N).min() >= st.PIVOT_MARGIN
+    np.testing.assert_allclose(arm.fk(choice.q0), choice.x0, atol=1e-8)
+
+
+@pytest.mark.parametrize("name", ["planar_3r", "ur5"])
+def test_default_start_is_good_and_its_run_stays_inside(name):
+    """The chosen start is regular and inside the limits; the checked run never leaves them."""
+    arm = ft.load_arm(name)
+    choice = ft.default_start(arm)
+    _assert_good_start(arm, choice)
+    run = choice.runs["jvja"]
+    assert st.inside_limits(arm, run.q).all()
+    assert not np.any(run.flags & FLAG_NEAR_SINGULAR)
+    assert run.error.max() < st.ERROR_TOL
+    assert "\n" not in choice.reason() and "q0 = " in choice.reason()
+
+
+def test_q_zero_and_mid_range_are_refused_where_singular():
+    """A UR5 at q = 0 (its mid-range) is stretched out and cannot lose its shoulder pan: not a start."""
+    arm = ft.load_arm("ur5")
+    sc = lockable_scenarios(arm, None)
+    np.testing.assert_allclose(st.mid_range(arm), 0.0)
+    assert "locking shoulder_pan_joint nearly loses the task" in st.start_problem(
+        arm, np.zeros(6), sc
+    )
+    assert np.linalg.norm(ft.default_start(arm).q0) > 0.5
+
+
+def test_panda_reference_posture_is_refused_and_default_start_works():
+    """At the Panda's reference posture a lockable joint is (nearly) intolerable; the start is not."""
+    pose = ft.load_arm("panda")
+    problem = st.start_problem(pose, pose.q_reference, lockable_scenarios(pose, "all"))
+    assert "locking panda_joint2 nearly loses the task" in problem
+    arm = ft.load_arm("panda", task="position")
+    choice = ft.default_start(arm, "all")
+    _assert_good_start(arm, choice, "all")
+
+
+def test_default_start_is_reproducible():
+    """The same arm and options give the same start (seeded)."""
+    arm = ft.load_arm("planar_3r")
+    np.testing.assert_array_equal(ft.default_start(arm).q0, ft.default_start(arm).q0)
+
+
+def test_given_x0_keeps_the_point():
+    """With x0 given, the start reaches it (posture search at x0) and is checked the same way."""
+    arm = ft.load_arm("planar_3r")
+    choice = ft.default_start(arm, x0=[0.35, 0.0], algorithms=("lnva",))
+    np.testing.assert_allclose(choice.x0, [0.35, 0.0])
+    _assert_good_start(arm, choice)
+    assert choice.origin == "given x0"
+
+
+def test_no_start_is_a_clear_error():
+    """A point out of reach gives InvalidInput naming the arm and what to do."""
+    arm = ft.load_arm("planar_3r")
+    with pytest.raises(ft.InvalidInput, match="no start at x0 .* --q0 or --x0"):
+        ft.default_start(arm, x0=[3.0, 0.0])
+
+
+def test_path_too_large_is_refused_with_reason():
+    """A task that leaves the workspace from every candidate is refused, with the last reason."""
+    from fault_tolerance.trajectories import CirclePath
+
+    arm = ft.load_arm("planar_3r")
+    big = lambda x0: CirclePath(x0, 2.0, 2 * np.pi, 1.0)  # noqa: E731
+    with pytest.raises(ft.InvalidInput, match="passed the checks"):
+        ft.default_start(arm, path=big, algorithms=("lnva",), max_seeds=2)
+
+
+def test_task_error_parts_separate_units():
+    """Position [m] and orientation [rad] errors are separate norms, never added."""
+    pos, ori = st.task_error_parts(
+        ("x", "y", "z", "rx", "ry", "rz"), [[0.0, 0, 0, 0, 0, 0]], [[0.003, 0.004, 0, 0, 0, 0.5]]
+    )
+    np.testing.assert_allclose(pos, [0.005])
+    np.testing.assert_allclose(ori, [0.5])
+    pos, ori = st.task_error_parts(("x", "y"), [[0.0, 0.0]], [[0.0, 0.002]])
+    assert ori is None and pos[0] == pytest.approx(0.002)
+
+
+def test_structurally_intolerable_joint_is_named_so():
+    """The 4R's joint 4 is intolerable everywhere: the error says structurally, no start helps."""
+    arm = ft.load_arm("spatial_4r")
+    assert st.intolerable_everywhere(arm, ["joint1", "joint4"]) == [("joint4",)]
+    q = np.array([0.3, 0.4, 0.5, 1.0])
+    with pytest.raises(ft.StructurallyIntolerable, match="structurally"):
+        st.check_start(arm, lockable_scenarios(arm, ["joint1", "joint4"]), q)
+
+
+def test_intolerable_at_this_start_proposes_a_start_that_works():
+    """Panda (position task) at its reference posture: intolerable here only; the q0 it proposes works."""
+    arm = ft.load_arm("panda", task="position")
+    sc = lockable_scenarios(arm, [("panda_joint2", "panda_joint4")])
+    with pytest.raises(ft.IntolerableAtStart, match="at this start only.*--q0 ") as info:
+        st.check_start(arm, sc, arm.q_reference, algorithms=("lnva",))
+    assert not isinstance(info.value, ft.StructurallyIntolerable)
+    q0 = np.array(info.value.q0)
+    assert sc.pivots(projection(arm.jacobian(q0)).N).min() >= st.PIVOT_MARGIN
+    assert st.inside_limits(arm, q0, st.LIMIT_MARGIN)
