@@ -294,6 +294,7 @@ def scp(
         new = None
         if x is not None:
             dq = x[:nq].reshape(cur.q.shape)
+            dq[0] = 0.0 if fixed_start else dq[0]  # a fixed start is kept bit for bit
             q0 = cur.q[0] + dq[0]
             if not fixed_start:
                 from .dp import _correct
