@@ -247,7 +247,7 @@ def solve_qp(qp: QP) -> np.ndarray | None:
         polishing=True,
     )
     solver.warm_start(x=x)
-    res = solver.solve()
+    res = solver.solve(raise_error=False)
     status = str(res.info.status).lower()
     if "solved" not in status or "unsolved" in status or res.x is None:
         return None
