@@ -136,3 +136,29 @@ class IntolerableUnderLimits(IntolerableFailure):
             f"joints reach only {100 * scale:.3g}% of the task velocity; slow the task, start "
             f"farther from the limits, or remove {names} from the lockable joints",
         )
+
+
+class IncompleteResult(FaultToleranceError):
+    """A result folder is not whole: no completion record, or files that differ from it."""
+
+
+class OutputError(FaultToleranceError):
+    """The file system refused to take a result (full, read-only, permissions); nothing was moved."""
+
+
+class FolderLocked(FaultToleranceError):
+    """Another live process is writing the output folder."""
+
+    def __init__(self, folder, holder: dict) -> None:
+        self.folder = folder
+        self.holder = dict(holder)
+        who = f"pid {holder.get('pid', '?')}"
+        if holder.get("host"):
+            who += f" on {holder['host']}"
+        if holder.get("command"):
+            who += f": {holder['command']}"
+        since = f", since {holder['started']}" if holder.get("started") else ""
+        super().__init__(
+            f"{folder}: another command is writing this folder ({who}{since}); wait for it to "
+            "finish or choose another output folder"
+        )
