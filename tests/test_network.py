@@ -80,3 +80,114 @@ def test_replay_command_serves_on_loopback_only(saved_run):
     assert viz.replay_main(folder, open=True, fps=10, wait=wait, stdout=out) == 0
     assert seen and {ip for ip, _ in seen} == {"127.0.0.1"}, seen
     assert "127.0.0.1" in out.getvalue()
+
+
+# -- DNS rebinding: only loopback names in Host and Origin ----------------------------------------
+
+
+def _http_status(port: int, host: str, path: str = "/static/", headers=None) -> int:
+    import http.client
+
+    conn = http.client.HTTPConnection("127.0.0.1", port, timeout=10)
+    try:
+        conn.putrequest("GET", path, skip_host=True)
+        conn.putheader("Host", host)
+        for k, v in (headers or {}).items():
+            conn.putheader(k, v)
+        conn.endheaders()
+        return conn.getresponse().status
+    finally:
+        conn.close()
+
+
+def _ws_status(port: int, host: str, origin: str | None) -> int:
+    """Status line of a websocket handshake on ``/`` (101: accepted)."""
+    import socket
+
+    lines = [
+        "GET / HTTP/1.1",
+        f"Host: {host}",
+        "Upgrade: websocket",
+        "Connection: Upgrade",
+        "Sec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==",
+        "Sec-WebSocket-Version: 13",
+    ] + ([f"Origin: {origin}"] if origin is not None else [])
+    with socket.create_connection(("127.0.0.1", port), timeout=10) as sock:
+        sock.sendall(("\r\n".join(lines) + "\r\n\r\n").encode())
+        head = sock.recv(4096).decode("latin-1")
+    return int(head.split()[1])
+
+
+def test_live_server_refuses_foreign_host_and_origin(saved_run):
+    """HTTP and the websocket answer only a loopback Host (a rebinding page's own name is refused
+    with 403) and websockets open only from a loopback Origin."""
+    from fault_tolerance import viz
+
+    run, arm, _ = saved_run
+    url, server = viz.serve(run, arm, fps=10)
+    try:
+        port = urlparse(url).port
+        assert _http_status(port, f"127.0.0.1:{port}") == 200
+        assert _http_status(port, f"localhost:{port}") == 200
+        assert _http_status(port, f"rebind.example:{port}") == 403
+        assert _http_status(port, "127.0.0.1.rebind.example") == 403
+        assert _http_status(port, f"127.0.0.1:{port}", headers={"Origin": "http://evil"}) == 403
+        loop = f"127.0.0.1:{port}"
+        assert _ws_status(port, loop, f"http://{loop}") == 101
+        assert _ws_status(port, loop, None) == 101
+        assert _ws_status(port, loop, "http://evil.example") == 403
+        assert _ws_status(port, loop, "null") == 403
+        assert _ws_status(port, f"evil.example:{port}", f"http://evil.example:{port}") == 403
+        assert server.running
+    finally:
+        server.close()
+
+
+@pytest.mark.parametrize(
+    "host, ok",
+    [
+        ("127.0.0.1", True),
+        ("127.0.0.1:7000", True),
+        ("LOCALHOST:7001", True),
+        ("[::1]:7000", True),
+        ("localhost.evil.example", False),
+        ("evil.example:7000", False),
+        ("127.0.0.1:70x0", False),
+        ("", False),
+        (None, False),
+    ],
+)
+def test_loopback_host(host, ok):
+    """Host names accepted by the live server: the loopback by address or name, with a port."""
+    from fault_tolerance.viz.server import loopback_host
+
+    assert loopback_host(host) is ok
+
+
+def test_ctrl_c_stops_the_live_replay_with_exit_130(saved_run):
+    """`fault-tolerance replay RUN --open` stopped by SIGINT: exit 130, one line on stderr, no
+    traceback, and the server process is gone."""
+    import signal
+    import subprocess
+    import sys
+
+    _, _, folder = saved_run
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "fault_tolerance", "replay", str(folder), "--open"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    try:
+        line = proc.stdout.readline()
+        assert "127.0.0.1" in line, line
+        children = psutil.Process(proc.pid).children(recursive=True)
+        proc.send_signal(signal.SIGINT)
+        _, stderr = proc.communicate(timeout=30)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert proc.returncode == 130, stderr
+    assert stderr.count("\n") == 1 and "Traceback" not in stderr and "interrupted" in stderr
+    gone, alive = psutil.wait_procs(children, timeout=10)
+    assert not alive

@@ -123,7 +123,8 @@ def replay_main(
     """``fault-tolerance replay RUN [--open | --html FILE] [--speed S]``; returns the exit code.
 
     With ``open`` it prints the URL and calls ``wait()`` (default: sleep until Ctrl-C), then
-    stops the server. Exit codes: 0 done, 2 bad input (one line on stderr), 1 anything else.
+    stops the server. Exit codes: 0 done, 2 bad input (one line on stderr), 130 stopped by Ctrl-C
+    (the server is stopped first), 1 anything else.
     """
     out = stdout or sys.stdout
     err = stderr or sys.stderr
@@ -153,7 +154,8 @@ def replay_main(
     try:
         (wait or _wait_for_interrupt)()
     except KeyboardInterrupt:
-        pass
+        print("replay: interrupted; the server is stopped", file=err)
+        return 130
     finally:
         result.server.close()
     return 0

@@ -1,8 +1,13 @@
 """The live replay: meshcat's server in a child process, listening on 127.0.0.1 only.
 
 meshcat's own server listens on every interface for its web port; :func:`_serve_local` (the body
-of the child process) binds it to :data:`LOCALHOST`. :class:`ReplayServer` starts that process,
-sends it a recorded scene over ZMQ and stops it; :func:`serve` does all three for a run.
+of the child process) binds it, and its ZMQ port, to :data:`LOCALHOST`. It also answers only
+requests addressed to the loopback by name (``Host`` of 127.0.0.1, ``localhost`` or ``[::1]``,
+:func:`loopback_host`) and websockets opened from a loopback page (``Origin``,
+:func:`loopback_origin`): a web page elsewhere cannot reach the viewer by *DNS rebinding* (its
+own name resolving to 127.0.0.1), which a bind address alone does not stop. Anything else gets
+HTTP 403. :class:`ReplayServer` starts that process, sends it a recorded scene over ZMQ and stops
+it; :func:`serve` does all three for a run.
 """
 
 from __future__ import annotations
@@ -26,6 +31,45 @@ from .scene import _build_scene, _require_meshcat, _Scene
 
 #: The only interface the live server listens on.
 LOCALHOST = "127.0.0.1"
+#: Host names a request to the live server may carry (``Host`` and websocket ``Origin``).
+LOOPBACK_NAMES = ("127.0.0.1", "localhost", "::1")
+
+
+def loopback_host(host: str | None) -> bool:
+    """Whether an HTTP ``Host`` header names the loopback (``127.0.0.1[:port]``, ``localhost``, ``[::1]``).
+
+    Example:
+        >>> loopback_host("127.0.0.1:7000"), loopback_host("evil.example:7000")
+        (True, False)
+    """
+    if not host:
+        return False
+    name = host.strip().lower()
+    if name.startswith("["):  # [::1]:port
+        name = name[1 : name.find("]")] if "]" in name else ""
+    elif name.count(":") == 1:
+        name, _, port = name.partition(":")
+        if not port.isdigit():
+            return False
+    return name in LOOPBACK_NAMES
+
+
+def loopback_origin(origin: str | None) -> bool:
+    """Whether a websocket ``Origin`` is a page served from the loopback (``http://127.0.0.1:PORT``).
+
+    A missing ``Origin`` (a non-browser client on this machine) is accepted; ``null`` (a local file
+    or sandboxed frame) and any other host are refused.
+    """
+    if origin is None:
+        return True
+    from urllib.parse import urlsplit
+
+    try:
+        parts = urlsplit(origin.strip())
+        hostname, _ = parts.hostname, parts.port  # .port raises on a malformed port
+    except ValueError:
+        return False
+    return parts.scheme in ("http", "https") and hostname in LOOPBACK_NAMES
 
 
 def _serve_local(port: int | None = None) -> None:  # pragma: no cover - runs in the child process
@@ -35,11 +79,38 @@ def _serve_local(port: int | None = None) -> None:  # pragma: no cover - runs in
     ``app.listen(port)``, which listens on every interface; here ``listen`` gets the address.
     """
     import tornado.ioloop
+    import tornado.web
     from meshcat.servers import zmqserver
+
+    def refuse_foreign(handler) -> None:
+        if not loopback_host(handler.request.headers.get("Host")):
+            raise tornado.web.HTTPError(403, "Host must be 127.0.0.1 or localhost")
+        if not loopback_origin(handler.request.headers.get("Origin")):
+            raise tornado.web.HTTPError(403, "cross-origin requests are refused")
+
+    class LocalStatic(zmqserver.StaticFileHandlerNoCache):
+        def prepare(self):
+            refuse_foreign(self)
+
+    class LocalSocket(zmqserver.WebSocketHandler):
+        def prepare(self):
+            refuse_foreign(self)
+
+        def check_origin(self, origin):
+            return loopback_origin(origin)
 
     class LocalBridge(zmqserver.ZMQWebSocketBridge):
         def make_app(self):
-            app = super().make_app()
+            app = tornado.web.Application(
+                [
+                    (
+                        r"/static/(.*)",
+                        LocalStatic,
+                        {"path": zmqserver.VIEWER_ROOT, "default_filename": zmqserver.VIEWER_HTML},
+                    ),
+                    (r"/", LocalSocket, {"bridge": self}),
+                ]
+            )
             listen = app.listen
 
             def listen_local(port, address=None, **kwargs):
