@@ -528,7 +528,7 @@ def _write_synced(path: Path, data: bytes) -> None:
 
 
 def _fsync(path: Path) -> None:
-    """fsync a file or a folder (its entries), ignoring file systems that cannot."""
+    """Flush a file or a folder (its entries) to disk, ignoring file systems that cannot."""
     with contextlib.suppress(OSError):
         fd = os.open(path, os.O_RDONLY)
         try:

@@ -58,14 +58,18 @@ def check_urdf_file(path: str | Path) -> bytes:
     return _checked(Path(path))[0]
 
 
-def _checked(path: Path):
-    """The file's bytes and its lxml root element, after the safety checks."""
-    if not path.is_file():
-        raise URDFError(f"{path}: no such URDF file")
-    size = path.stat().st_size
+def _checked(path: Path, data: bytes | None = None):
+    """The file's bytes (or ``data``, named ``path``) and its lxml root element, after the safety checks."""
+    if data is None:
+        if not path.is_file():
+            raise URDFError(f"{path}: no such URDF file")
+        size = path.stat().st_size
+    else:
+        size = len(data)
     if size > MAX_URDF_BYTES:
         raise URDFError(f"{path}: {size} bytes is larger than the {MAX_URDF_BYTES} bytes allowed")
-    data = path.read_bytes()
+    if data is None:
+        data = path.read_bytes()
     if data.startswith(_BOMS) or b"\x00" in data:
         raise URDFError(f"{path}: not UTF-8 text (UTF-16/32 or binary); a URDF must be UTF-8")
     try:
@@ -123,8 +127,11 @@ class URDFDescription(NamedTuple):
     unlimited: tuple[str, ...]  # continuous joints without velocity/effort limits (kept infinite)
 
 
-def read_urdf(path: str | Path) -> URDFDescription:
+def read_urdf(path: str | Path, data: bytes | None = None) -> URDFDescription:
     """Check a URDF file (safety and tree structure) and prepare the XML Pinocchio will read.
+
+    With ``data``, those bytes are checked instead of the file, and ``path`` only names them in
+    messages (a URDF carried inside a saved run is read this way; no file is opened).
 
     Besides :func:`check_urdf_file`: every joint has a name, a URDF joint type, a parent and a child
     that are links of the file; no link is the child of two joints; exactly one link has no parent
@@ -135,7 +142,7 @@ def read_urdf(path: str | Path) -> URDFDescription:
         URDFError: naming the file, the element and what is allowed.
     """
     path = Path(path)
-    data, root = _checked(path)
+    data, root = _checked(path, data)
     where = str(path)
     if not root.get("name"):
         raise URDFError(f'{where}: <robot> has no name; a URDF starts with <robot name="...">')
@@ -193,6 +200,7 @@ def read_urdf(path: str | Path) -> URDFDescription:
         parents.add(ends["parent"])
         if jtype in MOVING_JOINT_TYPES:
             _check_axis(where, name, joint.find("axis"))
+            _check_limit(where, name, jtype, joint.find("limit"))
         el = joint.find("mimic")
         if el is not None:
             mimic[name] = el.get("joint") or "?"
@@ -235,6 +243,39 @@ def _check_axis(where: str, name: str, axis) -> None:
     if math.hypot(*xyz) < 1e-9:
         raise URDFError(
             f"{where}: joint '{name}' has a zero axis; a moving joint needs a non-zero axis"
+        )
+
+
+def _check_limit(where: str, name: str, jtype: str, limit) -> None:
+    """``<limit>`` numbers: lower <= upper (finite), velocity and effort >= 0."""
+    if limit is None:
+        return
+    vals = {}
+    keys = (
+        ("velocity", "effort")
+        if jtype == "continuous"
+        else ("lower", "upper", "velocity", "effort")
+    )
+    for key in keys:  # a continuous joint's lower / upper are ignored (read as ±π)
+        text = limit.get(key)
+        if text is None:
+            continue
+        try:
+            vals[key] = float(text)
+        except ValueError:
+            vals[key] = math.nan
+        if math.isnan(vals[key]) or (key in ("lower", "upper") and not math.isfinite(vals[key])):
+            raise URDFError(
+                f"{where}: joint '{name}' has <limit {key}=\"{text}\">; it must be a finite number"
+            )
+        if key in ("velocity", "effort") and vals[key] < 0:
+            raise URDFError(
+                f"{where}: joint '{name}' has <limit {key}=\"{text}\">; it must be >= 0"
+            )
+    if vals.get("lower", 0.0) > vals.get("upper", 0.0):
+        raise URDFError(
+            f"{where}: joint '{name}' has lower limit {vals.get('lower', 0.0)} > upper limit "
+            f"{vals.get('upper', 0.0)}; lower must be <= upper"
         )
 
 

@@ -14,6 +14,7 @@ them (measured with pin 4.1 / urdfdom 6 on tinyxml2, lxml 6, yourdfpy 0.0.60):
 
 from __future__ import annotations
 
+import re
 import socket
 import time
 import warnings
@@ -292,17 +293,18 @@ def test_missing_file_raises_urdf_error(tmp_path):
 
 
 def test_pinocchio_rejection_carries_urdfdoms_reason_and_prints_nothing(tmp_path, capfd):
-    """A URDF urdfdom rejects (a limit that is not a number): the error carries urdfdom's reason,
+    """A URDF urdfdom rejects (an origin that is not numbers): the error carries urdfdom's reason,
     which would otherwise only be printed on stderr, and nothing reaches stderr."""
-    bad = LIMIT.replace('lower="-3"', 'lower="abc"')
     path = write(
         tmp_path,
-        "badlimit.urdf",
+        "badorigin.urdf",
         robot(
-            '<link name="base"/>', joint("joint1", "base", "tool", extra=bad), '<link name="tool"/>'
+            '<link name="base"/>',
+            joint("joint1", "base", "tool", xyz="0.4 abc 0"),
+            '<link name="tool"/>',
         ),
     )
-    with pytest.raises(ft.URDFError, match=r"Pinocchio could not build.*lower value \(abc\)"):
+    with pytest.raises(ft.URDFError, match=r"Pinocchio could not build.*abc"):
         ft.load_arm(str(path))
     assert capfd.readouterr().err == ""
 
@@ -580,3 +582,35 @@ def test_read_urdf_returns_the_checked_text_for_pinocchio(tmp_path):
     desc = read_urdf(path)
     assert "comment" not in desc.xml and desc.leaves == ("tool",)
     assert pin.buildModelFromXML(desc.xml).nv == 3
+
+
+@pytest.mark.parametrize(
+    "limit, message",
+    [
+        ('lower="1" upper="-1" effort="1" velocity="1"', "lower limit 1.0 > upper limit -1.0"),
+        ('lower="nan" upper="1" effort="1" velocity="1"', 'lower="nan"'),
+        ('lower="-inf" upper="1" effort="1" velocity="1"', "finite number"),
+        ('lower="-1" upper="abc" effort="1" velocity="1"', 'upper="abc"'),
+        ('lower="-1" upper="1" effort="1" velocity="-2"', "must be >= 0"),
+    ],
+)
+def test_bad_joint_limits_are_refused_naming_the_joint(limit, message, tmp_path):
+    """<limit> with lower > upper, NaN, infinite or non-numeric bounds, or a negative velocity:
+    URDFError naming the file, the joint and the rule."""
+    text = robot(*chain3()).replace(LIMIT, f"<limit {limit}/>", 1)
+    assert f"<limit {limit}/>" in text
+    path = tmp_path / "limits.urdf"
+    path.write_text(text)
+    with pytest.raises(ft.URDFError, match=re.escape(message)) as info:
+        ft.load_arm(str(path))
+    assert "joint 'joint1'" in str(info.value) and str(path) in str(info.value)
+
+
+def test_urdf_bytes_are_checked_like_a_file(tmp_path):
+    """read_urdf(name, data) checks the given bytes (DTDs, structure) and never opens ``name``."""
+    from fault_tolerance.urdf import read_urdf
+
+    desc = read_urdf(tmp_path / "not_there.urdf", robot(*chain3()).encode())
+    assert "joint1" in desc.joint_types
+    with pytest.raises(ft.URDFError, match="DOCTYPE"):
+        read_urdf(tmp_path / "not_there.urdf", billion_laughs().encode())
