@@ -9,6 +9,7 @@ from pathlib import Path
 import numpy as np
 
 from .arm import Arm
+from .carried import remember, remember_example
 from .catalog import EXAMPLE_ROBOTS, catalog, example_robot_names, robot_path
 from .chains import active_q, reduce_model
 from .errors import RobotNotFound, URDFError
@@ -53,7 +54,7 @@ def load_arm(
 
 def _load_shipped(name: str, entry: dict, tip, task, joints, package_dirs) -> Arm:
     """A robot of ``robots/catalog.json``."""
-    model, visual, _ = load_urdf_models(robot_path(entry["urdf"]), package_dirs)
+    model, visual, desc = load_urdf_models(robot_path(entry["urdf"]), package_dirs)
     tip = entry["tip"] if tip is None else tip
     # optional reference posture of the full model (catalog "q_reference"): joints left out
     # of ``joints`` are fixed there, the active ones give Arm.q_reference
@@ -61,7 +62,7 @@ def _load_shipped(name: str, entry: dict, tip, task, joints, package_dirs) -> Ar
     q_full = None if q_full is None else np.asarray(q_full, dtype=float)
     full = model
     model, visual = reduce_model(model, tip, joints, q_full, visual_model=visual)
-    return Arm(
+    arm = Arm(
         model,
         tip,
         entry["task"] if task is None else task,
@@ -71,6 +72,7 @@ def _load_shipped(name: str, entry: dict, tip, task, joints, package_dirs) -> Ar
         source=name,
         q_reference=None if q_full is None else active_q(full, model, q_full),
     )
+    return remember(arm, "shipped", desc.data, q_full)
 
 
 def _load_file(path: Path, tip, task, joints, package_dirs) -> Arm:
@@ -87,7 +89,7 @@ def _load_file(path: Path, tip, task, joints, package_dirs) -> Arm:
             "move them independently. Leave them out of the active joints (joints=[...], "
             "--joints) to hold them fixed, or choose a tip frame that does not depend on them"
         )
-    return Arm(
+    arm = Arm(
         model,
         tip,
         "position" if task is None else task,
@@ -96,6 +98,7 @@ def _load_file(path: Path, tip, task, joints, package_dirs) -> Arm:
         source=str(path.resolve()),
         package_dirs=package_dirs or (),
     )
+    return remember(arm, "file", desc.data)
 
 
 def _load_example_robot(name: str, tip: str | None, task, joints, shipped: dict) -> Arm:
@@ -116,7 +119,8 @@ def _load_example_robot(name: str, tip: str | None, task, joints, shipped: dict)
     model, visual = reduce_model(robot.model, tip, joints, q_ref, robot.visual_model)
     q_active = None if q_ref is None else active_q(robot.model, model, q_ref)
     task = preset.get("task", "position") if task is None else task
-    return Arm(model, tip, task, name=name, visual_model=visual, source=name, q_reference=q_active)
+    arm = Arm(model, tip, task, name=name, visual_model=visual, source=name, q_reference=q_active)
+    return remember_example(arm, name, robot.model, q_ref)
 
 
 def arm_from_meta(meta: dict) -> Arm:
