@@ -48,6 +48,12 @@ def parse_task(task: str | Sequence[str]) -> tuple[str, ...]:
     return tuple(r for r in TASK_ROWS if r in names)
 
 
+#: Most active joints an arm may have. Measured (scripts/urdf_scaling.py): Pinocchio's
+#: ``model.createData()`` for a serial chain of N joints takes about 75·N³ bytes and grows as N³ in
+#: time (N = 200: 0.6 GB, 1.8 s; N = 300: 1.8 GB, 5.7 s; N = 1000 would need ~60 GB).
+MAX_ACTIVE_JOINTS = 200
+
+
 class Arm:
     """A Pinocchio model of the active joints, one tip frame and one task.
 
@@ -82,6 +88,12 @@ class Arm:
             raise URDFError(
                 f"{label}: the model has no moving joint; an arm needs at least one "
                 "revolute or prismatic joint"
+            )
+        if model.nv > MAX_ACTIVE_JOINTS:
+            raise URDFError(
+                f"{label}: {model.nv} active joints; at most {MAX_ACTIVE_JOINTS} are accepted "
+                "(Pinocchio's data for N joints takes about 75·N³ bytes: 0.6 GB at 200, 60 GB at "
+                "1000); choose fewer with --joints or a tip nearer the base with --tip"
             )
         frame_id_ = frame_id(model, tip)
         self.model = model

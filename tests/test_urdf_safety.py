@@ -614,3 +614,28 @@ def test_urdf_bytes_are_checked_like_a_file(tmp_path):
     assert "joint1" in desc.joint_types
     with pytest.raises(ft.URDFError, match="DOCTYPE"):
         read_urdf(tmp_path / "not_there.urdf", billion_laughs().encode())
+
+
+def long_chain(n: int) -> str:
+    """A serial chain of ``n`` revolute joints ending in ``tool`` (alternating z / y axes)."""
+    parts = ['<link name="l0"/>']
+    for i in range(1, n + 1):
+        child = "tool" if i == n else f"l{i}"
+        axis = "0 0 1" if i % 2 else "0 1 0"
+        parts += [
+            joint(f"j{i}", f"l{i - 1}", child, axis=axis, xyz="0 0 0.1"),
+            f'<link name="{child}"/>',
+        ]
+    return robot(*parts)
+
+
+def test_too_many_active_joints_are_refused_before_pinocchio_allocates(tmp_path):
+    """A 1000-joint chain (inside the file limit) as one arm: refused naming the limit (Pinocchio's
+    data would need ~60 GB); the same file with a tip near the base loads."""
+    from fault_tolerance.arm import MAX_ACTIVE_JOINTS
+
+    path = tmp_path / "chain1000.urdf"
+    path.write_text(long_chain(1000))
+    with pytest.raises(ft.URDFError, match=f"1000 active joints; at most {MAX_ACTIVE_JOINTS}"):
+        ft.load_arm(str(path))
+    assert ft.load_arm(str(path), tip="l5").n == 5
