@@ -62,12 +62,11 @@ def remember_example(arm, name: str, full, q_ref):
     carries no record.
     """
     from .chains import joint_kind
-    from .inspection import urdf_path_of
     from .models import build_model
     from .urdf import read_urdf
 
     try:
-        desc = read_urdf(urdf_path_of(name))
+        desc = read_urdf(_example_urdf(name))
         model = build_model(desc)
         root = None
         if full.njoints > 1 and joint_kind(full.joints[1]) == "floating":
@@ -224,14 +223,25 @@ def _installed_roots(record: dict) -> list[Path]:
 
         return [robot_path("catalog.json").parent]
     if record["kind"] == "example":
-        from .inspection import urdf_path_of
-
         try:
-            urdf = Path(urdf_path_of(record["name"])).resolve()
+            urdf = _example_urdf(record["name"]).resolve()
         except Exception:  # noqa: BLE001 - not installed, or not an example-robot-data name
             return []
         return [p for p in urdf.parents if p.name == "example-robot-data"][:1]
     return []
+
+
+def _example_urdf(name: str) -> Path:
+    """The installed URDF file of an example-robot-data arm (OSError if it is not installed)."""
+    try:
+        from example_robot_data.robots_loader import ROBOTS, getModelPath
+    except ImportError as err:
+        raise OSError("example-robot-data is not installed") from err
+    if name not in ROBOTS:
+        raise OSError(f"{name!r} is not an example-robot-data name")
+    loader = ROBOTS[name]
+    sub = Path(loader.path) / loader.urdf_subpath / loader.urdf_filename
+    return Path(getModelPath(str(sub))) / sub
 
 
 def confine_meshes(xml: str, roots: Sequence[Path]) -> tuple[str, list[str]]:
