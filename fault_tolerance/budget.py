@@ -117,7 +117,7 @@ def check_file_size(path: str | Path, limit: int, what: str) -> int:
     return size
 
 
-def npz_members(path: str | Path, limit: int = MAX_RUN_FILE_BYTES) -> dict[str, tuple]:
+def npz_members(path: str | Path, limit: int | None = None) -> dict[str, tuple]:
     """``{name: (shape, dtype)}`` of an ``.npz`` file's arrays, checked before any is loaded.
 
     Each member must be a stored or deflated ``.npy`` whose header (read, not the data) declares a
@@ -128,6 +128,7 @@ def npz_members(path: str | Path, limit: int = MAX_RUN_FILE_BYTES) -> dict[str, 
         InvalidInput: naming the file and the member.
     """
     path = Path(path)
+    limit = MAX_RUN_FILE_BYTES if limit is None else limit
     total = 0
     out: dict[str, tuple] = {}
     try:
