@@ -1,0 +1,174 @@
+"""Failure-tolerant workspace: brute force, zero area, scaling, workers, resume."""
+
+import re
+
+import numpy as np
+import pytest
+from scipy.optimize import least_squares
+
+import fault_tolerance as ft
+from fault_tolerance import sweep
+from fault_tolerance.errors import InvalidInput
+from fault_tolerance.workspace import failure_tolerant_workspace, planar_chunk, workspace_spec
+
+from conftest import ROOT
+
+
+def scaled_urdf(tmp_path, factor, limit=3.14159, name="planar_3r.urdf"):
+    """planar_3r.urdf with every origin scaled by ``factor`` and joint limits ±``limit``."""
+    text = (ROOT / "robots" / name).read_text()
+
+    def scale(m):
+        xyz = [float(v) * factor for v in m.group(1).split()]
+        return 'xyz="' + " ".join(repr(v) for v in xyz) + '"'
+
+    text = re.sub(r'xyz="([^"]+)"', scale, text)
+    text = re.sub(r'(<axis) xyz="[^"]+"', r'\1 xyz="0 0 1"', text)
+    text = text.replace('lower="-3.14159" upper="3.14159"', f'lower="{-limit}" upper="{limit}"')
+    path = tmp_path / f"scaled_{factor}_{limit}.urdf"
+    path.write_text(text)
+    return path
+
+
+def _brute_reach(arm, p, lo, hi, rng, fixed=None):
+    """Numerical IK on Pinocchio's FK (bounded least squares, several starts): can arm reach p?"""
+    free = [j for j in range(arm.n) if fixed is None or j != fixed[0]]
+
+    def f(u):
+        q = np.empty(arm.n)
+        q[free] = u
+        if fixed is not None:
+            q[fixed[0]] = fixed[1]
+        return arm.fk(q) - p
+
+    for _ in range(8):
+        r = least_squares(f, rng.uniform(lo[free], hi[free]), bounds=(lo[free], hi[free]),
+                          xtol=1e-12, ftol=1e-12)
+        if np.linalg.norm(r.fun) < 1e-7:
+            return True
+    return False
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("physical", [None, 2.6])
+def test_brute_force_equals_map(tmp_path, physical):
+    """On a tiny grid, numerical IK before and after every lock (at many angles) equals the map."""
+    arm = (
+        ft.load_arm("powercube_3r")
+        if physical is None
+        else ft.load_arm(str(scaled_urdf(tmp_path, 1.0, physical)), tip="tool", task="planar")
+    )
+    lim = np.array([[-1.0, 1.0], [-2.0, 2.0], [-2.4, 2.4]])
+    ws = failure_tolerant_workspace(arm, lim, grid=7, samples=400, theta_samples=401)
+    phys = np.stack([arm.lower, arm.upper], 1)
+    rng = np.random.default_rng(7)
+    x, y = ws.axes
+    for a in range(7):
+        for b in range(7):
+            p = np.array([x[a], y[b]])
+            assert _brute_reach(arm, p, lim[:, 0], lim[:, 1], rng) == ws.pre[a, b], p
+            for i in range(3):
+                thetas = np.linspace(lim[i, 0], lim[i, 1], 13)
+                ok = all(_brute_reach(arm, p, phys[:, 0], phys[:, 1], rng, (i, t)) for t in thetas)
+                assert ok == ws.locks[i, a, b], (p, i)
+    assert 0 < ws.ftw.sum() < ws.pre.sum()
+
+
+def test_equal_links_without_limits_have_zero_area():
+    """Equal links, no artificial limits: the FTW is the circle of radius one link (area 0)."""
+    ws = failure_tolerant_workspace(ft.load_arm("planar_3r"), grid=101, samples=16)
+    assert ws.area_ftw == 0.0
+    assert abs(ws.area_pre - np.pi * 1.5**2) < 0.1
+    # joint 1 alone: the disc of radius l2 + l3 - l1 = 0.5 survives every lock angle
+    assert abs((ws.pre & ws.locks[0]).sum() * ws.cell - np.pi * 0.25) < 0.03
+
+
+def test_areas_scale_with_the_square_of_the_link_length(tmp_path):
+    """A URDF with every length doubled has four times the areas, cell for cell."""
+    lim = "-1.2:1.2,-2:2,-2.5:2.5"
+    opts = dict(grid=61, samples=40)
+    a = failure_tolerant_workspace(ft.load_arm("planar_3r"), lim, **opts)
+    big = ft.load_arm(str(scaled_urdf(tmp_path, 2.0)), tip="tool", task="planar")
+    b = failure_tolerant_workspace(big, lim, **opts)
+    assert a.area_ftw > 0
+    np.testing.assert_array_equal(a.ftw, b.ftw)
+    np.testing.assert_allclose([b.area_pre, b.area_ftw], [4 * a.area_pre, 4 * a.area_ftw], rtol=1e-12)
+
+
+def test_maps_are_minima_over_the_self_motion():
+    """The jump and K maps are finite exactly on W(A), and K >= f (each k_S >= 1)."""
+    ws = failure_tolerant_workspace(ft.load_arm("planar_3r"), "-2:2,-2:2,-2:2", grid=41, samples=30)
+    assert np.all(np.isnan(ws.rcn[~ws.pre]))
+    fin = np.isfinite(ws.rcn)
+    assert fin[ws.pre].mean() > 0.95
+    assert np.all(ws.rcn[fin] >= 3.0)
+    assert np.all(ws.jump[np.isfinite(ws.jump)] > 0)
+
+
+def _equal(a, b):
+    np.testing.assert_array_equal(a.pre, b.pre)
+    np.testing.assert_array_equal(a.ftw, b.ftw)
+    np.testing.assert_array_equal(a.locks, b.locks)
+    np.testing.assert_array_equal(a.jump, b.jump)
+    np.testing.assert_array_equal(a.rcn, b.rcn)
+
+
+@pytest.mark.slow
+def test_serial_one_and_two_workers_are_identical(tmp_path):
+    """Serial, one in-process worker and a two-process LocalCluster give identical numbers."""
+    arm = ft.load_arm("planar_3r")
+    opts = dict(grid=41, samples=24, chunks=6)
+    serial = failure_tolerant_workspace(arm, "-1:1,-2:2,-2:2", **opts)
+    one = failure_tolerant_workspace(arm, "-1:1,-2:2,-2:2", workers=1, **opts)
+    two = failure_tolerant_workspace(arm, "-1:1,-2:2,-2:2", workers=2, **opts)
+    _equal(serial, one)
+    _equal(serial, two)
+    sp = ft.load_arm("spatial_4r")
+    s1 = failure_tolerant_workspace(sp, grid=8, samples=3000, theta_samples=3)
+    s2 = failure_tolerant_workspace(sp, grid=8, samples=3000, theta_samples=3, workers=2)
+    _equal(s1, s2)
+    assert 0 < s1.size_ftw < s1.size_pre
+
+
+def test_chunks_are_kept_and_resumed(tmp_path, monkeypatch):
+    """Finished chunks are written; an interrupted run keeps them and a rerun resumes from them."""
+    arm = ft.load_arm("planar_3r")
+    opts = dict(grid=21, samples=12, chunks=4)
+    calls = []
+    interrupt = [True]
+
+    def flaky(spec, k):
+        calls.append(k)
+        if k == 2 and interrupt[0]:
+            raise KeyboardInterrupt
+        return planar_chunk(spec, k)
+
+    spec = workspace_spec(arm, "-1:1,-2:2,-2:2", **opts)
+    with pytest.raises(KeyboardInterrupt):
+        sweep.run(flaky, spec, 4, folder=tmp_path)
+    folder = sweep.chunk_folder(tmp_path, spec)
+    assert sorted(p.name for p in folder.glob("chunk-*.npz")) == ["chunk-00000.npz", "chunk-00001.npz"]
+    calls.clear()
+    interrupt[0] = False
+    chunks = sweep.run(flaky, spec, 4, folder=tmp_path)
+    assert calls == [2, 3]
+    ref = sweep.run(planar_chunk, spec, 4)
+    for c, r in zip(chunks, ref):
+        for key in r:
+            np.testing.assert_array_equal(c[key], r[key])
+    assert not list(folder.glob(".tmp-*"))
+
+
+def test_bad_input_is_refused():
+    """Limits outside the physical range, wrong counts, pose tasks and unknown options raise."""
+    arm = ft.load_arm("planar_3r")
+    with pytest.raises(InvalidInput, match="physical"):
+        workspace_spec(arm, "-4:1,-1:1,-1:1")
+    with pytest.raises(InvalidInput, match="one lo:hi pair per joint"):
+        workspace_spec(arm, "-1:1")
+    with pytest.raises(InvalidInput, match="unknown"):
+        workspace_spec(arm, None, bogus=3)
+    with pytest.raises(InvalidInput, match="position task"):
+        workspace_spec(ft.load_arm("panda", task="pose"))
+    with pytest.raises(InvalidInput, match="workers"):
+        sweep.run(planar_chunk, {}, 0, workers=-1)
