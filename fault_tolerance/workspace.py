@@ -31,65 +31,19 @@ Example:
 
 from __future__ import annotations
 
-import functools
-import hashlib
-import json
-from pathlib import Path
-
 import numpy as np
 
 from . import batch
 from .errors import InvalidInput
 from .planar import full_turn, planar_chain, reach_2r, rigid_pair
+from .robot_spec import arm_of, robot_spec
 from .sweep import run
-from .workspace_result import Workspace
+from .workspace_result import DEFINITION, Workspace
 
-DEFINITION = (
-    "FTW(A) = W(A) ∩ ⋂_{i∈F} ⋂_{θ∈[lo_i,hi_i]} W_i(θ): reachable with q in the artificial limits "
-    "A, and after joint i of F locks at any θ in [lo_i, hi_i] still reachable by the other joints "
-    "within their physical (URDF) limits"
-)
 #: Default sample counts of the planar-3R method.
 SAMPLES = 120  # joint-3 values for W(A) and the self-motion maps
 THETA_SAMPLES = 181  # lock angles where the free joints do not turn fully
 CHUNKS = 16
-
-
-# -- robot spec and worker-side arm cache ---------------------------------------------------
-
-
-def robot_spec(arm) -> dict:
-    """What a worker needs to rebuild ``arm`` (source, tip, task, joints, package dirs)."""
-    spec = {
-        "source": arm.source or arm.name,
-        "tip": arm.tip,
-        "task": list(arm.task),
-        "joints": list(arm.joint_names),
-        "package_dirs": list(arm.package_dirs),
-    }
-    path = Path(spec["source"])
-    if path.is_file():  # an edited URDF is a new spec (its chunks are not reused)
-        spec["sha256"] = hashlib.sha256(path.read_bytes()).hexdigest()[:16]
-    return spec
-
-
-@functools.lru_cache(maxsize=8)
-def _arm_cached(text: str):
-    from .arm import load_arm
-
-    s = json.loads(text)
-    return load_arm(
-        s["source"],
-        tip=s["tip"],
-        task=s["task"],
-        joints=s["joints"],
-        package_dirs=s["package_dirs"] or None,
-    )
-
-
-def arm_of(spec: dict):
-    """The arm of a spec's robot entry, loaded once per process."""
-    return _arm_cached(json.dumps(spec["robot"], sort_keys=True))
 
 
 def parse_limits(arm, limits, deg: bool = False) -> np.ndarray:

@@ -8,6 +8,12 @@ from pathlib import Path
 
 import numpy as np
 
+DEFINITION = (
+    "FTW(A) = W(A) ∩ ⋂_{i∈F} ⋂_{θ∈[lo_i,hi_i]} W_i(θ): reachable with q in the artificial limits "
+    "A, and after joint i of F locks at any θ in [lo_i, hi_i] still reachable by the other joints "
+    "within their physical (URDF) limits"
+)
+
 
 @dataclass(frozen=True)
 class Workspace:

@@ -23,7 +23,8 @@ import pinocchio as pin
 
 from . import batch
 from .errors import InvalidInput
-from .workspace_result import Workspace
+from .robot_spec import arm_of
+from .workspace_result import DEFINITION, Workspace
 
 #: Samples per chunk (FK evaluations); a set of ``samples`` splits into chunks of this size.
 CHUNK_SAMPLES = 10000
@@ -111,8 +112,6 @@ def _uniform(rng, lo, hi, size) -> np.ndarray:
 
 def sampled_chunk(spec: dict, k: int) -> dict[str, np.ndarray]:
     """Cells hit by one chunk of samples, and (W(A) chunks) the smallest indices per cell."""
-    from .workspace import arm_of
-
     arm = arm_of(spec)
     kind, i, t, c = _jobs(spec)[k]
     rng = np.random.default_rng([spec["seed"], k])
@@ -144,8 +143,6 @@ def sampled_chunk(spec: dict, k: int) -> dict[str, np.ndarray]:
 
 def assemble_sampled(spec: dict, chunks: list[dict]) -> Workspace:
     """The :class:`Workspace` of a sampled spec from its chunks (OR, AND and min: order-free)."""
-    from .workspace import DEFINITION
-
     jobs = _jobs(spec)
     axes, h = grid_axes(spec)
     shape = (spec["grid"],) * len(axes)

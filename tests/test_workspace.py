@@ -30,23 +30,32 @@ def scaled_urdf(tmp_path, factor, limit=3.14159, name="planar_3r.urdf"):
     return path
 
 
-def _brute_reach(arm, p, lo, hi, rng, fixed=None):
-    """Numerical IK on Pinocchio's FK (bounded least squares, several starts): can arm reach p?"""
-    free = [j for j in range(arm.n) if fixed is None or j != fixed[0]]
+class _Brute:
+    """Numerical IK on Pinocchio's FK: bounded least squares from the nearest of a joint grid."""
 
-    def f(u):
-        q = np.empty(arm.n)
-        q[free] = u
-        if fixed is not None:
-            q[fixed[0]] = fixed[1]
-        return arm.fk(q) - p
+    def __init__(self, arm, lo, hi, fixed=None, per_axis=25):
+        self.arm, self.lo, self.hi, self.fixed = arm, lo, hi, fixed
+        self.free = [j for j in range(arm.n) if fixed is None or j != fixed[0]]
+        axes = [np.linspace(lo[j], hi[j], per_axis) for j in self.free]
+        self.U = np.stack(np.meshgrid(*axes, indexing="ij"), -1).reshape(-1, len(self.free))
+        self.X = np.array([arm.fk(self._q(u)) for u in self.U])
 
-    for _ in range(8):
-        r = least_squares(f, rng.uniform(lo[free], hi[free]), bounds=(lo[free], hi[free]),
-                          xtol=1e-12, ftol=1e-12)
-        if np.linalg.norm(r.fun) < 1e-7:
-            return True
-    return False
+    def _q(self, u):
+        q = np.empty(self.arm.n)
+        q[self.free] = u
+        if self.fixed is not None:
+            q[self.fixed[0]] = self.fixed[1]
+        return q
+
+    def reach(self, p, starts=4):
+        lo, hi = self.lo[self.free], self.hi[self.free]
+        near = np.argsort(np.linalg.norm(self.X - p, axis=1))[:starts]
+        for u0 in self.U[near]:
+            r = least_squares(lambda u: self.arm.fk(self._q(u)) - p, np.clip(u0, lo + 1e-9, hi - 1e-9),
+                              bounds=(lo, hi), xtol=1e-13, ftol=1e-13, gtol=1e-13)
+            if np.linalg.norm(r.fun) < 1e-7:
+                return True
+        return False
 
 
 @pytest.mark.slow
@@ -59,17 +68,20 @@ def test_brute_force_equals_map(tmp_path, physical):
         else ft.load_arm(str(scaled_urdf(tmp_path, 1.0, physical)), tip="tool", task="planar")
     )
     lim = np.array([[-1.0, 1.0], [-2.0, 2.0], [-2.4, 2.4]])
-    ws = failure_tolerant_workspace(arm, lim, grid=7, samples=400, theta_samples=401)
+    ws = failure_tolerant_workspace(arm, lim, grid=5, samples=400, theta_samples=401)
     phys = np.stack([arm.lower, arm.upper], 1)
-    rng = np.random.default_rng(7)
+    pre = _Brute(arm, lim[:, 0], lim[:, 1], per_axis=15)
+    locks = [
+        [_Brute(arm, phys[:, 0], phys[:, 1], (i, t)) for t in np.linspace(*lim[i], 13)]
+        for i in range(3)
+    ]
     x, y = ws.axes
-    for a in range(7):
-        for b in range(7):
+    for a in range(5):
+        for b in range(5):
             p = np.array([x[a], y[b]])
-            assert _brute_reach(arm, p, lim[:, 0], lim[:, 1], rng) == ws.pre[a, b], p
+            assert pre.reach(p) == ws.pre[a, b], p
             for i in range(3):
-                thetas = np.linspace(lim[i, 0], lim[i, 1], 13)
-                ok = all(_brute_reach(arm, p, phys[:, 0], phys[:, 1], rng, (i, t)) for t in thetas)
+                ok = all(br.reach(p) for br in locks[i])
                 assert ok == ws.locks[i, a, b], (p, i)
     assert 0 < ws.ftw.sum() < ws.pre.sum()
 
