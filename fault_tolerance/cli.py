@@ -595,6 +595,10 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--speed", type=float, default=1.0, help="playback speed factor (default 1)")
     s.set_defaults(func=cmd_replay)
 
+    from .sweep_cli import add_parsers
+
+    add_parsers(sub, fmt, add_robot_options)
+
     s = sub.add_parser(
         "bench", help="the performance benchmark", epilog=_epilog("bench"), formatter_class=fmt
     )
