@@ -83,7 +83,7 @@ def test_brute_force_equals_map(tmp_path, physical):
             for i in range(3):
                 ok = all(br.reach(p) for br in locks[i])
                 assert ok == ws.locks[i, a, b], (p, i)
-    assert 0 < ws.ftw.sum() < ws.pre.sum()
+    assert 0 < ws.pre.sum() < ws.pre.size and 0 < ws.locks.sum() < ws.locks.size  # not trivial
 
 
 def test_equal_links_without_limits_have_zero_area():
