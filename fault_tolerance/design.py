@@ -1,4 +1,4 @@
-"""Design of a planar 3R for fault tolerance: artificial limits and link lengths (MATH.md (W5)).
+"""Design of a planar 3R for fault tolerance: artificial limits and link lengths (MATH.md (F5)).
 
 A *design* is artificial limits ``A = Π [c_i − w_i, c_i + w_i]`` inside the physical limits and,
 with ``vary="links,limits"``, link lengths with their sum fixed (each at least

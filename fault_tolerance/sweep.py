@@ -86,7 +86,7 @@ def client_for(workers: int, scheduler: str | None):
         n_workers=workers,
         threads_per_worker=1,
         processes=workers > 1,
-        dashboard_address=None,
+        dashboard_address="127.0.0.1:0",  # its HTTP server starts anyway: loopback, any free port
         silence_logs=40,
         **local,
     )

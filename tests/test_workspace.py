@@ -142,6 +142,21 @@ def test_serial_one_and_two_workers_are_identical(tmp_path):
     assert 0 < s1.size_ftw < s1.size_pre
 
 
+@pytest.mark.slow
+def test_local_cluster_listens_on_loopback_only():
+    """The embedded two-worker cluster's scheduler and HTTP server bind 127.0.0.1."""
+    client = sweep.client_for(2, None)
+    try:
+        assert client.scheduler.address.startswith("tcp://127.0.0.1:")
+        assert client.dashboard_link.startswith("http://127.0.0.1:")
+        workers = client.scheduler_info()["workers"]
+        assert len(workers) == 2 and all(w.startswith("tcp://127.0.0.1:") for w in workers)
+    finally:
+        cluster = client.cluster
+        client.close()
+        cluster.close()
+
+
 def test_chunks_are_kept_and_resumed(tmp_path, monkeypatch):
     """Finished chunks are written; an interrupted run keeps them and a rerun resumes from them."""
     arm = ft.load_arm("planar_3r")
