@@ -204,4 +204,5 @@ def design_chunk(spec: dict, k: int) -> dict[str, np.ndarray]:
         "jvj": np.array([r.get("jvj", nan) for r in recs]),
         "rcn": np.array([r.get("rcn", nan) for r in recs]),
         "rcn_max": np.array([r.get("rcn_max", nan) for r in recs]),
+        "feasible": np.array([bool(r.get("feasible", True)) for r in recs]),
     }

@@ -36,9 +36,12 @@ def plot_design(d, path: str | Path) -> Path:
         b.set_ylabel("FTW area [m²] (search grid)")
         b.set_title(f"{rec['evaluations']} designs evaluated")
     else:
-        ok = np.isfinite(seen["score"])
-        b.loglog(seen["jvj"][~ok], seen["rcn"][~ok], ".", color="0.75", ms=3, label="infeasible")
-        b.loglog(seen["jvj"][ok], seen["rcn"][ok], ".", ms=4, label="feasible")
+        ok = seen["feasible"]
+        met = np.isfinite(seen["score"])
+        b.loglog(seen["jvj"][~ok], seen["rcn"][~ok], ".", color="0.75", ms=3, label="leaves its limits")
+        b.loglog(seen["jvj"][ok & ~met], seen["rcn"][ok & ~met], ".", color="orange", ms=4,
+                 label="over the RCN requirement")
+        b.loglog(seen["jvj"][met], seen["rcn"][met], ".", ms=4, label="feasible")
         fr = sorted((p["jvj"], p["rcn"]) for p in rec["pareto"])
         if fr:
             b.loglog(*zip(*fr), "k-", lw=1, label="Pareto front")

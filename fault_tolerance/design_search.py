@@ -155,6 +155,7 @@ def design(
 
 def _record(spec, chosen, base, seen, elapsed) -> dict:
     pts = np.stack([seen["jvj"], seen["rcn"]], 1)
+    pts[~seen["feasible"]] = np.nan  # a run that leaves its limits is not a design
     front = pareto(pts) if spec["objective"] != "ftw-area" else np.array([], dtype=int)
     from .design import limits_of, links_of
 
