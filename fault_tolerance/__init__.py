@@ -26,7 +26,6 @@ from .errors import (  # noqa: E402
 from .failures import Scenarios, scenarios  # noqa: E402
 from .indices import (  # noqa: E402
     fault_tolerance_measure,
-    jump_reduction,
     jvj,
     rcn,
     rcn_gradient,
@@ -35,7 +34,15 @@ from .indices import (  # noqa: E402
 )
 from .linalg import nullspace_projector, pinv, projection, reduced_rates  # noqa: E402
 from .loading import load_arm  # noqa: E402
-from .planner import RESOLVERS, jvja, jvja_explicit, lnva, mda, resolve  # noqa: E402
+from .planner import (  # noqa: E402
+    RESOLVERS,
+    jump_reduction,
+    jvja,
+    jvja_explicit,
+    lnva,
+    mda,
+    resolve,
+)
 from .start import StartChoice, default_start  # noqa: E402
 
 __all__ = [

@@ -15,12 +15,13 @@ from pathlib import Path
 import numpy as np
 
 from .arm import Arm
-from .indices import jump_reduction
+from .files import output_folder, write_atomic
 from .linalg import projection
 from .loading import load_arm
-from .planner import MDA_GAIN
+from .planner import MDA_GAIN, jump_reduction
 from .posture import RCN_THRESHOLD, initial_posture, plan
-from .simulation import Run, ServoModel, output_folder, simulate, write_atomic
+from .run import Run
+from .simulation import ServoModel, simulate
 from .trajectories import CirclePath
 
 ALGORITHMS = ("lnva", "jvja", "mda")

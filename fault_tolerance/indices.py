@@ -1,4 +1,4 @@
-"""Indices of the paper: joint velocity jump (1, 9, 10), reduced condition number (15), δ (14).
+"""Indices of the paper: joint velocity jump (1, 9, 10) and reduced condition number (15).
 
 Also the fault-tolerance measure ``k_f = min_S σ_min(J_S)`` (Roberts & Maciejewski) and the
 reduced manipulability ``w_S = √det(J_S J_Sᵀ)``.
@@ -7,7 +7,6 @@ reduced manipulability ``w_S = √det(J_S J_Sᵀ)``.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import NamedTuple
 
 import numpy as np
 
@@ -171,30 +170,6 @@ def rcn_gradient(
         k = smax / smin
         grad += 2.0 * k * (dmax * smin - smax * dmin) / smin**2
     return grad
-
-
-class JumpReduction(NamedTuple):
-    """Eq. (14) at one configuration: measured and predicted reduction of the jump."""
-
-    delta: float  # λ(q̇_LN) - λ(q̇_OPT)
-    predicted: float  # (Σ w_S) ‖q̇_H‖²
-    qd_h: np.ndarray  # null-space part q̇_OPT - q̇_LN
-
-
-# Eqn. (11)-(14)
-def jump_reduction(
-    J: np.ndarray, xdot: np.ndarray, lockable=None, *, weights=None, joint_names: Sequence[str] = ()
-) -> JumpReduction:
-    r"""δ = λ(q̇_LN) − λ(q̇_OPT) and its closed form :math:`f\,\|\dot q_H\|^2`, eq. (14)."""
-    from .planner import jvja, lnva
-
-    J = np.asarray(J, dtype=float)
-    sc = _scenarios(J, lockable, weights, joint_names)
-    ln = lnva(J, xdot)
-    opt = jvja(J, xdot, sc)
-    delta = jvj(J, xdot, ln, sc) - jvj(J, xdot, opt, sc)
-    qd_h = opt - ln
-    return JumpReduction(delta, float(sc.weights.sum() * qd_h @ qd_h), qd_h)
 
 
 def fault_tolerance_measure(J: np.ndarray, lockable=None) -> float:

@@ -18,7 +18,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from types import SimpleNamespace
-from typing import TYPE_CHECKING
+from typing import Protocol
 
 import numpy as np
 import pinocchio as pin
@@ -26,11 +26,9 @@ import pinocchio as pin
 from .errors import FaultToleranceError
 from .linalg import SIGMA_EPS
 
-if TYPE_CHECKING:  # pragma: no cover
-    from .realtime import Controller
-
 __all__ = [
     "TRACE_MAX",
+    "Workspace",
     "compiled_kernel",
     "compiled_step",
     "lapack_jvja",
@@ -49,6 +47,41 @@ _LWA = pin.LOCAL_WORLD_ALIGNED
 _WORLD = pin.WORLD
 _INF = float("inf")
 _STEP_ERRORS = (ValueError, TypeError, RuntimeError, AttributeError, IndexError)
+
+
+class Workspace(Protocol):
+    """What the step builders read: a built :class:`~fault_tolerance.realtime.Controller`.
+
+    Declared here so that this module does not import :mod:`fault_tolerance.realtime` (which
+    imports it).
+    """
+
+    model: pin.Model
+    data: pin.Data
+    frame_id: int
+    n: int
+    m: int
+    tolerate: bool
+    gain: float
+    max_step: float
+    scenarios: object  # failures.Scenarios
+    _rows: slice | np.ndarray
+    _la: SimpleNamespace
+    _fw: np.ndarray
+    _rank_coef: float
+    _alpha: float
+    _pivot_threshold: float
+    _singletons: bool
+    _uniform: bool
+    _all_uniform: bool
+
+    def _fallback(self, name: str, J, xdot, out, q=None) -> np.ndarray: ...
+    def _bad_call(self, err: Exception, q, xdot, out) -> Exception: ...
+    def _shift_general(self, N: np.ndarray, a: np.ndarray, c: np.ndarray) -> bool: ...
+    def _djac(self, Jw: np.ndarray, Jl: np.ndarray, p: np.ndarray) -> np.ndarray: ...
+    def rcn_gradient(self, J: np.ndarray, dJ: np.ndarray) -> np.ndarray:
+        """Gradient of the square-sum RCN ``K``, shape (n,)."""
+        ...
 
 
 # -- linear algebra backends -----------------------------------------------------------------
@@ -244,7 +277,7 @@ def compiled_kernel() -> Callable:
 # -- LNVA / JVJA / MDA with LAPACK (or NumPy) calls --------------------------------------------
 
 
-def lapack_lnva(ctrl: Controller) -> Callable[..., np.ndarray]:
+def lapack_lnva(ctrl: Workspace) -> Callable[..., np.ndarray]:
     """The LNVA step of ``ctrl`` with its LAPACK (or NumPy) calls: ``lnva(q, xdot, out=None)``."""
     model, data, fid, rows = ctrl.model, ctrl.data, ctrl.frame_id, ctrl._rows
     n, m = ctrl.n, ctrl.m
@@ -279,7 +312,7 @@ def lapack_lnva(ctrl: Controller) -> Callable[..., np.ndarray]:
     return lnva
 
 
-def lapack_jvja(ctrl: Controller) -> Callable[..., np.ndarray]:
+def lapack_jvja(ctrl: Workspace) -> Callable[..., np.ndarray]:
     """The JVJA step of ``ctrl`` with its LAPACK (or NumPy) calls, any scenarios (G1, G2)."""
     model, data, fid, rows = ctrl.model, ctrl.data, ctrl.frame_id, ctrl._rows
     n, m = ctrl.n, ctrl.m
@@ -349,7 +382,7 @@ def lapack_jvja(ctrl: Controller) -> Callable[..., np.ndarray]:
     return jvja
 
 
-def lapack_mda(ctrl: Controller) -> Callable[..., np.ndarray]:
+def lapack_mda(ctrl: Workspace) -> Callable[..., np.ndarray]:
     """The MDA step of ``ctrl`` with its LAPACK (or NumPy) calls: ``mda(q, xdot, out=None)``."""
     model, data, fid, rows = ctrl.model, ctrl.data, ctrl.frame_id, ctrl._rows
     n, m = ctrl.n, ctrl.m
@@ -409,7 +442,7 @@ def lapack_mda(ctrl: Controller) -> Callable[..., np.ndarray]:
 # -- LNVA / JVJA in one compiled kernel -------------------------------------------------------
 
 
-def compiled_step(ctrl: Controller, jvja: int) -> Callable[..., np.ndarray]:
+def compiled_step(ctrl: Workspace, jvja: int) -> Callable[..., np.ndarray]:
     """The LNVA (``jvja=0``) or single-joint JVJA (``jvja=1``) step of ``ctrl``, numba-compiled.
 
     Compiles :func:`step_kernel` on first use (here, not in the loop) and runs it once.

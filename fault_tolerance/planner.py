@@ -9,12 +9,13 @@ from __future__ import annotations
 
 import inspect
 from collections.abc import Callable, Sequence
+from typing import NamedTuple
 
 import numpy as np
 
 from .errors import InvalidInput
 from .failures import Scenarios, scenarios
-from .indices import RESPONSES, rcn_gradient
+from .indices import RESPONSES, jvj, rcn_gradient
 from .linalg import Projection, damped_pivots, pivot_block, projection
 
 #: Default MDA gain α [rad² per unit of K per s]: q̇ = J⁺ẋ − α N ∇K.
@@ -201,3 +202,25 @@ def resolve(name: str, J: np.ndarray, xdot: np.ndarray, lockable=None, **options
         return resolve_bounded(name, J, xdot, lockable, bounds=bounds, **options).qd
     own = RESOLVER_OPTIONS[name]
     return RESOLVERS[name](J, xdot, lockable, **{k: v for k, v in options.items() if k in own})
+
+
+class JumpReduction(NamedTuple):
+    """Eq. (14) at one configuration: measured and predicted reduction of the jump."""
+
+    delta: float  # λ(q̇_LN) - λ(q̇_OPT)
+    predicted: float  # (Σ w_S) ‖q̇_H‖²
+    qd_h: np.ndarray  # null-space part q̇_OPT - q̇_LN
+
+
+# Eqn. (11)-(14)
+def jump_reduction(
+    J: np.ndarray, xdot: np.ndarray, lockable=None, *, weights=None, joint_names: Sequence[str] = ()
+) -> JumpReduction:
+    r"""δ = λ(q̇_LN) − λ(q̇_OPT) and its closed form :math:`f\,\|\dot q_H\|^2`, eq. (14)."""
+    J = np.asarray(J, dtype=float)
+    sc = _scenarios(J, lockable, weights, joint_names)
+    ln = lnva(J, xdot)
+    opt = jvja(J, xdot, sc)
+    delta = jvj(J, xdot, ln, sc) - jvj(J, xdot, opt, sc)
+    qd_h = opt - ln
+    return JumpReduction(delta, float(sc.weights.sum() * qd_h @ qd_h), qd_h)

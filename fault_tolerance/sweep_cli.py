@@ -86,7 +86,7 @@ def add_parsers(sub, fmt, add_robot_options) -> None:
 
 def cmd_workspace(args) -> int:
     """Failure-tolerant workspace of one arm into ``--out``."""
-    from .cli import load_robot, lockable_of
+    from .cli.common import load_robot, lockable_of
     from .workspace import failure_tolerant_workspace
 
     arm = load_robot(args)
@@ -112,7 +112,8 @@ def cmd_design(args) -> int:
     """Design search into ``--out``: design.json and design.png."""
     import numpy as np
 
-    from .cli import _floats, load_robot, lockable_of
+    from .cli.common import floats as _floats
+    from .cli.common import load_robot, lockable_of
     from .design import Task, default_task
     from .design_search import design
 

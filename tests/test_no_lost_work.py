@@ -15,8 +15,11 @@ import pytest
 
 import fault_tolerance as ft
 import fault_tolerance.experiments as experiments
+import fault_tolerance.files as files
+import fault_tolerance.run as run_module
 import fault_tolerance.simulation as simulation
-from fault_tolerance.simulation import Run, write_atomic
+from fault_tolerance.files import write_atomic
+from fault_tolerance.run import Run
 
 OLD = b"the previous, complete content\n"
 
@@ -60,7 +63,7 @@ def test_write_failing_midway_leaves_no_partial_file(tmp_path, monkeypatch, exc,
     if existing:
         target.write_bytes(OLD)
     real = os.fdopen
-    monkeypatch.setattr(simulation.os, "fdopen", lambda fd, mode: _HalfWriter(real(fd, mode), exc))
+    monkeypatch.setattr(files.os, "fdopen", lambda fd, mode: _HalfWriter(real(fd, mode), exc))
     with pytest.raises(type(exc)):
         write_atomic(target, b"x" * 100_000)
     monkeypatch.undo()
@@ -77,7 +80,7 @@ def test_failure_in_fsync_or_rename_keeps_the_old_file(tmp_path, monkeypatch, st
     def fail(*args, **kwargs):
         raise OSError(5, f"{step} failed")
 
-    monkeypatch.setattr(simulation.os, step, fail)
+    monkeypatch.setattr(files.os, step, fail)
     with pytest.raises(OSError, match=f"{step} failed"):
         write_atomic(target, "new content")
     monkeypatch.undo()
@@ -103,14 +106,14 @@ def test_run_save_failing_on_the_last_file_keeps_the_earlier_ones(tmp_path, plan
     folder = tmp_path / "run"
     folder.mkdir()
     (folder / "summary.json").write_bytes(OLD)
-    real = simulation.write_atomic
+    real = run_module.write_atomic
 
     def failing(path, data):
         if Path(path).name == "summary.json":
             raise OSError(28, "No space left on device")
         return real(path, data)
 
-    monkeypatch.setattr(simulation, "write_atomic", failing)
+    monkeypatch.setattr(run_module, "write_atomic", failing)
     with pytest.raises(OSError):
         run.save(folder)
     monkeypatch.undo()

@@ -213,7 +213,7 @@ def test_export_is_atomic(planar, tmp_path, monkeypatch):
     def fail(src, dst):
         raise OSError("disk full")
 
-    monkeypatch.setattr("fault_tolerance.simulation.os.replace", fail)
+    monkeypatch.setattr("fault_tolerance.files.os.replace", fail)
     with pytest.raises(OSError, match="disk full"):
         viz.export_html(run, target, arm)
     assert target.read_text() == "previous replay"

@@ -1,0 +1,241 @@
+"""What the benchmark times: its arms, the configuration pool, and the rows of each arm.
+
+The rows come in groups (:data:`GROUPS`): each group is a label, a function that builds its rows
+from a :class:`Case` (one arm, its controller and the pool) and the divisor of ``--steps`` for its
+rows. A new row goes into a builder; a new kind of row may be a new group.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..errors import InvalidInput
+from .routes import installed, jvja_qp, jvja_slsqp, post_failure_rates_explicit
+from .timing import Row, stats, time_rows
+
+#: The benchmark's arms: robot, task and lockable set.
+ARMS: dict[str, dict] = {
+    "planar_3r": {"robot": "planar_3r", "task": None, "lockable": "all"},
+    "spatial_4r": {"robot": "spatial_4r", "task": None, "lockable": ["joint1", "joint2", "joint3"]},
+    "panda_pose": {"robot": "panda", "task": "pose", "lockable": "all"},
+    "panda_position": {"robot": "panda", "task": "position", "lockable": "all"},
+    "powercube_3r": {"robot": "powercube_3r", "task": None, "lockable": "all"},
+}
+#: Arms run when ``--robots`` is not given.
+DEFAULT_ARMS = ("planar_3r", "spatial_4r", "panda_pose", "panda_position")
+POOL = 64
+SEED = 20240521
+
+DESCRIPTIONS = {
+    "jacobian": "task Jacobian (Pinocchio computeFrameJacobian)",
+    "lnva": "LNVA step, fast path (Jacobian included)",
+    "jvja": "JVJA step, closed form G2, fast path (Jacobian included)",
+    "rcn": "RCN of all scenarios, one batched eigvalsh (Jacobian included)",
+    "mda": "MDA step, fast path (Jacobian and its derivatives included)",
+    "lnva_resolve": "arm.jacobian + ft.resolve('lnva')",
+    "jvja_resolve": "arm.jacobian + ft.resolve('jvja')",
+    "mda_resolve": "ft.resolve('mda', arm=, q=) with arm.jacobian(_derivatives)",
+    "rcn_resolve": "arm.jacobian + ft.rcn",
+    "jvja_explicit": "Jacobian + eq. (5), one pseudo-inverse per scenario (planner.jvja_explicit)",
+    "jvja_qp": "Jacobian + eq. (2) per scenario + (3)-(4) by quadprog (dense active-set QP)",
+    "qp_solve_only": "the quadprog call alone, its inputs (J, ẋ, Σ w ˢq̇') given",
+    "jvja_slsqp": "Jacobian + eq. (2) per scenario + (3)-(4) by scipy.optimize SLSQP",
+}
+
+
+@dataclass
+class Case:
+    """One benchmark arm ready to time: the arm, its controller, the pool of (q, ẋ)."""
+
+    key: str
+    spec: dict
+    arm: object
+    ctrl: object  # realtime.Controller
+    qs: list
+    xds: list
+    out: np.ndarray  # an (n,) output buffer shared by the rows
+
+    @property
+    def sc(self):
+        """The controller's failure scenarios."""
+        return self.ctrl.scenarios
+
+    @property
+    def qx(self) -> list[tuple]:
+        """``(q, ẋ)`` pairs of the pool."""
+        return list(zip(self.qs, self.xds, strict=True))
+
+    @property
+    def qxo(self) -> list[tuple]:
+        """``(q, ẋ, out)`` triples of the pool."""
+        return [(q, xd, self.out) for q, xd in self.qx]
+
+
+def _pool(arm, sc, rng: np.random.Generator, size: int) -> tuple[list, list]:
+    """Generic configurations: σ_min(J) ≥ 0.01 and every scenario pivot ≥ 1e-4; unit ẋ."""
+    from ..linalg import min_pivot, projection
+
+    qs, xds = [], []
+    for _ in range(200 * size):
+        q = arm.random_q(rng)
+        proj = projection(arm.jacobian(q))
+        if proj.sigma_min < 1e-2 or min(min_pivot(proj.N, S) for S in sc.sets) < 1e-4:
+            continue
+        v = rng.standard_normal(arm.m)
+        qs.append(np.ascontiguousarray(q))
+        xds.append(v / np.linalg.norm(v))
+        if len(qs) == size:
+            return qs, xds
+    raise InvalidInput(f"{arm.name}: no generic configuration found for the benchmark pool")
+
+
+def make_case(key: str, backend: str = "auto") -> Case:
+    """The arm ``key`` of :data:`ARMS` with its controller and pool."""
+    import fault_tolerance as ft
+
+    from ..realtime import Controller
+
+    spec = ARMS[key]
+    arm = ft.load_arm(spec["robot"], **({"task": spec["task"]} if spec["task"] else {}))
+    ctrl = Controller(arm, spec["lockable"], backend=backend)
+    qs, xds = _pool(arm, ctrl.scenarios, np.random.default_rng(SEED), POOL)
+    return Case(key, spec, arm, ctrl, qs, xds, np.empty(arm.n))
+
+
+# -- the rows, by group ------------------------------------------------------------------------
+
+
+def fast_rows(case: Case) -> dict[str, Row]:
+    """The controller's steps, and LNVA / JVJA with every other installed backend."""
+    from ..realtime import Controller, available_backends
+
+    ctrl, qxo = case.ctrl, case.qxo
+    rows: dict[str, Row] = {
+        "jacobian": (ctrl.jacobian, [(q,) for q in case.qs]),
+        "lnva": (ctrl.lnva, qxo),
+        "jvja": (ctrl.jvja, qxo),
+        "rcn": (ctrl.rcn, [(q, np.empty(case.sc.f)) for q in case.qs]),
+        "mda": (ctrl.mda, qxo),
+    }
+    for other in available_backends():
+        if other != ctrl.backend:
+            c2 = Controller(case.arm, case.spec["lockable"], backend=other)
+            rows[f"lnva_{other}"] = (c2.lnva, qxo)
+            rows[f"jvja_{other}"] = (c2.jvja, qxo)
+    return rows
+
+
+def reference_rows(case: Case) -> dict[str, Row]:
+    """The plain planner (``ft.resolve``, ``ft.rcn``), the explicit route and quadprog."""
+    import fault_tolerance as ft
+
+    from ..planner import jvja_explicit
+
+    arm, ctrl, sc, qx = case.arm, case.ctrl, case.sc, case.qx
+    rows: dict[str, Row] = {
+        "lnva_resolve": (lambda q, xd: ft.resolve("lnva", arm.jacobian(q), xd), qx),
+        "jvja_resolve": (lambda q, xd: ft.resolve("jvja", arm.jacobian(q), xd, lockable=sc), qx),
+        "rcn_resolve": (lambda q: ft.rcn(arm.jacobian(q), sc), [(q,) for q in case.qs]),
+        "jvja_explicit": (lambda q, xd: jvja_explicit(ctrl.jacobian(q), xd, sc), qx),
+    }
+    if installed("quadprog"):
+        import quadprog
+
+        rows["jvja_qp"] = (lambda q, xd: jvja_qp(ctrl.jacobian(q), xd, sc), qx)
+        qp_inputs = []
+        for q, xd in qx:
+            J = ctrl.jacobian(q).copy()
+            g = sc.weights @ post_failure_rates_explicit(J, xd, sc)
+            qp_inputs.append((sc.weights.sum() * np.eye(arm.n), g, J.T.copy(), xd, arm.m))
+        rows["qp_solve_only"] = (quadprog.solve_qp, qp_inputs)
+    return rows
+
+
+def slow_rows(case: Case) -> dict[str, Row]:
+    """The slowest routes (timed with a tenth of the calls): MDA by the planner, SLSQP."""
+    import fault_tolerance as ft
+
+    arm, ctrl, sc, qx = case.arm, case.ctrl, case.sc, case.qx
+
+    def mda_resolve(q, xd):
+        return ft.resolve("mda", arm.jacobian(q), xd, lockable=sc, arm=arm, q=q)
+
+    rows: dict[str, Row] = {"mda_resolve": (mda_resolve, qx)}
+    if installed("scipy"):
+        rows["jvja_slsqp"] = (lambda q, xd: jvja_slsqp(ctrl.jacobian(q), xd, sc), qx)
+    return rows
+
+
+#: ``(label, builder, divisor)``, timed in this order; a group's rows get ``--steps // divisor``
+#: calls (at least 5) after ``--warmup // divisor`` (at least 2) warm-up calls.
+GROUPS: list[tuple[str, Callable[[Case], dict[str, Row]], int]] = [
+    ("fast path", fast_rows, 1),
+    ("reference routes", reference_rows, 1),
+    ("slow routes", slow_rows, 10),
+]
+
+
+def deviations(case: Case, rows: dict[str, Row]) -> dict[str, float]:
+    """How far each JVJA route is from the fast path over the pool, relative to the rates' size.
+
+    (A fast wrong answer is no answer.)
+    """
+    ctrl, qx = case.ctrl, case.qx
+    ref = [ctrl.jvja(q, xd).copy() for q, xd in qx]
+    names = ("jvja_resolve", "jvja_explicit", "jvja_qp", "jvja_slsqp")
+    names += tuple(k for k in rows if k.startswith("jvja_") and k not in names)
+    out = {}
+    for name in names:
+        if name not in rows or name == "jvja":
+            continue
+        fn, args = rows[name]
+        got = [np.array(fn(*a[:2]), dtype=float) for a in args]
+        out[name] = float(
+            max(
+                np.abs(g - r).max() / max(1.0, np.abs(r).max())
+                for g, r in zip(got, ref, strict=True)
+            )
+        )
+    ctrl.fallbacks = 0
+    return out
+
+
+def bench_arm(
+    key: str, steps: int, warmup: int, backend: str = "auto", progress: Callable | None = None
+) -> dict:
+    """Time every row for one benchmark arm (a key of :data:`ARMS`)."""
+    case = make_case(key, backend)
+    built = [(label, build(case), div) for label, build, div in GROUPS]
+    every = {name: row for _, rows, _ in built for name, row in rows.items()}
+    deviation = deviations(case, every)
+    samples: dict[str, np.ndarray] = {}
+    for label, rows, div in built:
+        n_steps = steps if div == 1 else max(steps // div, 5)
+        n_warm = warmup if div == 1 else max(warmup // div, 2)
+        if progress:
+            progress(f"{key}: {label} ({len(rows)} rows x {n_steps} calls)")
+        samples.update(time_rows(rows, n_steps, n_warm))
+    arm, sc = case.arm, case.sc
+    return {
+        "robot": case.spec["robot"],
+        "task": list(arm.task),
+        "n": arm.n,
+        "m": arm.m,
+        "r": arm.redundancy,
+        "lockable": [list(sc.name(S)) for S in sc.sets],
+        "backend": case.ctrl.backend,
+        "fallbacks_during_timing": case.ctrl.fallbacks,
+        "max_rel_diff_vs_jvja": deviation,
+        "ops": {
+            name: {**stats(ns), "description": DESCRIPTIONS.get(name, _backend_description(name))}
+            for name, ns in samples.items()
+        },
+    }
+
+
+def _backend_description(name: str) -> str:
+    method, _, backend = name.partition("_")
+    return f"{method.upper()} step, fast path with the {backend} backend (Jacobian included)"

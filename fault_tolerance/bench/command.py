@@ -1,0 +1,185 @@
+"""``fault-tolerance bench`` and ``scripts/benchmark.py``: options, the run, the printed report."""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import os
+import sys
+import time
+from collections.abc import Sequence
+from datetime import datetime, timezone
+
+from ..errors import FaultToleranceError, InvalidInput
+from .cases import ARMS, DEFAULT_ARMS, POOL, SEED, bench_arm
+from .machine import machine_info
+from .report import SCHEMA, compare, format_compare, format_table, format_targets, load, write_json
+from .targets import targets
+from .timing import BLOCK_WARMUP, ROUNDS, timer_overhead_ns
+
+#: Default number of timed calls per row (the whole default bench takes well under a minute).
+DEFAULT_STEPS = 5000
+DEFAULT_WARMUP = 200
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """Options of ``fault-tolerance bench`` (and ``scripts/benchmark.py``)."""
+    parser.add_argument(
+        "--robots",
+        nargs="+",
+        default=None,
+        metavar="ARM",
+        help=f"arms to time (space or comma separated) among {sorted(ARMS)}; "
+        f"default {' '.join(DEFAULT_ARMS)}",
+    )
+    parser.add_argument(
+        "--steps",
+        type=int,
+        default=DEFAULT_STEPS,
+        help=f"timed calls per operation (default {DEFAULT_STEPS}; the slowest routes get a "
+        "tenth); the default bench takes well under a minute",
+    )
+    parser.add_argument(
+        "--warmup",
+        type=int,
+        default=DEFAULT_WARMUP,
+        help=f"untimed calls per operation first (default {DEFAULT_WARMUP})",
+    )
+    parser.add_argument(
+        "--backend",
+        default="auto",
+        choices=["auto", "numba", "lapack", "numpy"],
+        help="backend of the fast LNVA / JVJA steps (default: the fastest installed); the "
+        "other installed backends get their own rows",
+    )
+    parser.add_argument(
+        "--json",
+        default=None,
+        metavar="FILE",
+        help="also write all results and the machine to FILE (atomically)",
+    )
+    parser.add_argument(
+        "--compare",
+        nargs=2,
+        default=None,
+        metavar=("A.json", "B.json"),
+        help="print the per-row ratio B/A of two saved runs instead of timing",
+    )
+    parser.add_argument(
+        "--strict", action="store_true", help="exit with status 1 if a target fails"
+    )
+
+
+def _arm_keys(robots: Sequence[str] | None) -> list[str]:
+    if not robots:
+        return list(DEFAULT_ARMS)
+    keys = [k.strip() for item in robots for k in item.split(",") if k.strip()]
+    bad = [k for k in keys if k not in ARMS]
+    if bad or not keys:
+        raise InvalidInput(f"unknown benchmark arm(s) {bad}; allowed: {sorted(ARMS)}")
+    return list(dict.fromkeys(keys))
+
+
+def run(args: argparse.Namespace) -> int:
+    """Run the benchmark (or ``--compare``) from parsed options; returns the exit status.
+
+    0 on success, 2 on bad input (a one-line message on stderr), 1 with ``--strict`` when a target
+    fails.
+    """
+    try:
+        return _run(args)
+    except FaultToleranceError as err:
+        print(f"fault-tolerance bench: {err}", file=sys.stderr)
+        return 2
+
+
+def _settings(args: argparse.Namespace, started: float) -> dict:
+    return {
+        "steps": args.steps,
+        "warmup": args.warmup,
+        "pool": POOL,
+        "seed": SEED,
+        "backend": args.backend,
+        "gc_disabled_while_timing": True,
+        "timing": f"{ROUNDS} rounds of one block per row, {BLOCK_WARMUP} untimed calls per block",
+        "timer_overhead_ns": timer_overhead_ns(),
+        "seconds": round(time.time() - started, 1),
+    }
+
+
+def _header(args: argparse.Namespace, data: dict) -> str:
+    machine, results = data["machine"], data["results"]
+    backend = next(iter(results.values()))["backend"]
+    blas = ", ".join(f"{b['library']} {b['threads']} threads" for b in machine["blas_threads"])
+    load_ = f"{machine['loadavg'][0]:.2f}" if machine["loadavg"] else "?"
+    return (
+        f"fault_tolerance bench: {len(results)} arm(s), {args.steps} timed calls per row after "
+        f"{args.warmup} warm-up calls, fast-path backend {backend}, "
+        f"{data['settings']['seconds']} s\n"
+        f"machine: {machine['cpu']} ({machine['cores']} cores), numpy {machine['numpy']}, "
+        f"scipy {machine['scipy']}, pinocchio {machine['pinocchio']}, numba {machine['numba']}, "
+        f"quadprog {machine['quadprog']}; BLAS: {blas or 'unknown'}; load average {load_}\n"
+    )
+
+
+def _check(args: argparse.Namespace) -> list[str]:
+    """The arm keys, after checking ``--steps``, ``--warmup`` and ``--backend``."""
+    if args.steps < 1 or args.warmup < 0:
+        raise InvalidInput(
+            f"--steps must be >= 1 and --warmup >= 0, got {args.steps} and {args.warmup}"
+        )
+    keys = _arm_keys(args.robots)
+    from ..realtime import available_backends
+
+    if args.backend != "auto" and args.backend not in available_backends():
+        raise InvalidInput(
+            f"backend '{args.backend}' is not installed here; available: {available_backends()}"
+        )
+    return keys
+
+
+def _run(args: argparse.Namespace) -> int:
+    if args.compare:
+        a, b = (load(p) for p in args.compare)
+        print(format_compare(compare(a, b), *args.compare))
+        return 0
+    keys = _check(args)
+
+    def progress(msg: str) -> None:
+        print(f"  timing {msg}", file=sys.stderr, flush=True)
+
+    started = time.time()
+    machine = machine_info()
+    results = {key: bench_arm(key, args.steps, args.warmup, args.backend, progress) for key in keys}
+    items = targets(results)
+    machine["loadavg_after"] = list(os.getloadavg()) if hasattr(os, "getloadavg") else None
+    data = {
+        "schema": SCHEMA,
+        "created": datetime.now(timezone.utc).isoformat(timespec="seconds"),
+        "command": " ".join(sys.argv),
+        "machine": machine,
+        "settings": _settings(args, started),
+        "results": results,
+        "targets": items,
+    }
+    print(_header(args, data))
+    print(format_table(results))
+    print("\ntargets (medians; p99 for the latency bound)")
+    print(format_targets(items))
+    if args.json:
+        write_json(args.json, data)
+        print(f"\nwrote {args.json}")
+    failed = [t for t in items if t["pass"] is False]
+    return 1 if (failed and args.strict) else 0
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """``scripts/benchmark.py``: the same options as ``fault-tolerance bench``."""
+    doc = importlib.import_module(__package__).__doc__ or ""
+    parser = argparse.ArgumentParser(
+        prog="benchmark.py",
+        description=doc.split("\n\n")[0],
+        epilog="example: python scripts/benchmark.py --robots panda_pose --json new.json",
+    )
+    add_arguments(parser)
+    return run(parser.parse_args(argv))

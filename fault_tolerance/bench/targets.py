@@ -1,0 +1,77 @@
+"""The issue's targets, evaluated on a benchmark's results: one dict per target, PASS / FAIL / info."""
+
+from __future__ import annotations
+
+#: The issue's targets.
+MAX_JVJA_OVER_LNVA = 1.5
+MIN_EXPLICIT_OVER_JVJA = 10.0
+EXPLICIT_TARGET_ARMS = ("panda_pose", "panda_position")
+MAX_JVJA_P99_US = 100.0
+
+#: Generic routes that must be slower than the fast JVJA step: (row, label).
+SLOWER_ROUTES = (
+    ("jvja_qp", "quadprog route / JVJA"),
+    ("jvja_slsqp", "SLSQP route / JVJA"),
+    ("qp_solve_only", "quadprog call alone / JVJA"),
+)
+
+
+def _item(arm, name, label, value, limit, relation, passed) -> dict:
+    return {
+        "arm": arm,
+        "name": name,
+        "label": label,
+        "value": value,
+        "limit": limit,
+        "relation": relation,
+        "pass": passed,
+    }
+
+
+def arm_targets(key: str, ops: dict) -> list[dict]:
+    """The targets of one arm from its rows ``ops`` (name -> statistics)."""
+
+    def med(name: str) -> float | None:
+        return ops[name]["median_us"] if name in ops else None
+
+    out = []
+    jv, ln = med("jvja"), med("lnva")
+    if jv and ln:
+        r = jv / ln
+        out.append(
+            _item(key, "jvja_over_lnva", "JVJA step / LNVA step", r, MAX_JVJA_OVER_LNVA, "<=",
+                  r <= MAX_JVJA_OVER_LNVA)
+        )  # fmt: skip
+    for backend in ("lapack", "numpy", "numba"):
+        j2, l2 = med(f"jvja_{backend}"), med(f"lnva_{backend}")
+        if j2 and l2:
+            out.append(
+                _item(key, f"jvja_over_lnva_{backend}", f"JVJA / LNVA, {backend} backend",
+                      j2 / l2, MAX_JVJA_OVER_LNVA, "<=", None)
+            )  # fmt: skip
+    ex = med("jvja_explicit")
+    if jv and ex:
+        passed = (ex / jv >= MIN_EXPLICIT_OVER_JVJA) if key in EXPLICIT_TARGET_ARMS else None
+        out.append(
+            _item(key, "explicit_over_jvja", "explicit per-scenario route / JVJA", ex / jv,
+                  MIN_EXPLICIT_OVER_JVJA, ">=", passed)
+        )  # fmt: skip
+    for name, label in SLOWER_ROUTES:
+        g = med(name)
+        if jv and g:
+            out.append(_item(key, f"{name}_over_jvja", label, g / jv, 1.0, ">", g / jv > 1.0))
+    rs = med("jvja_resolve")
+    if jv and rs:
+        out.append(_item(key, "resolve_over_jvja", "ft.resolve / JVJA", rs / jv, None, None, None))
+    if "jvja" in ops:
+        p99 = ops["jvja"]["p99_us"]
+        out.append(
+            _item(key, "jvja_p99_us", "JVJA step p99 [µs]", p99, MAX_JVJA_P99_US, "<",
+                  p99 < MAX_JVJA_P99_US)
+        )  # fmt: skip
+    return out
+
+
+def targets(results: dict) -> list[dict]:
+    """The issue's targets, evaluated on medians (p99 for the latency bound)."""
+    return [item for key, res in results.items() for item in arm_targets(key, res["ops"])]

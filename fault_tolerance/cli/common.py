@@ -1,0 +1,268 @@
+"""What the commands share: robot, start and path options, parsing helpers, errors, exit codes.
+
+Exit codes of ``fault-tolerance``: :data:`EXIT_OK` success, :data:`EXIT_BAD_INPUT` bad input (one
+line on stderr naming the problem and what is allowed; ``--debug`` shows the traceback),
+:data:`EXIT_FAILURE` unexpected failure, :data:`EXIT_INTERRUPTED` interrupted (Ctrl-C).
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import warnings
+from collections.abc import Callable
+
+import numpy as np
+
+from ..errors import FaultToleranceError, InvalidInput
+
+EXIT_OK = 0
+EXIT_FAILURE = 1
+EXIT_BAD_INPUT = 2
+EXIT_INTERRUPTED = 130
+
+FORMATTER = argparse.RawDescriptionHelpFormatter
+
+
+def epilog(example: str) -> str:
+    """The ``example:`` block at the end of a command's ``--help``."""
+    return "example:\n  " + example
+
+
+def floats(text: str, what: str) -> np.ndarray:
+    """Comma-separated finite numbers of option ``what``, or :class:`InvalidInput`."""
+    try:
+        vals = np.array([float(v) for v in text.replace(" ", "").split(",") if v != ""])
+    except ValueError:
+        raise InvalidInput(f"{what} must be comma-separated numbers, got '{text}'") from None
+    if not len(vals) or not np.all(np.isfinite(vals)):
+        raise InvalidInput(f"{what} must be finite comma-separated numbers, got '{text}'")
+    return vals
+
+
+def names(text: str | None) -> list[str] | None:
+    """Comma-separated names (blanks dropped); ``None`` stays ``None``."""
+    if text is None:
+        return None
+    return [t.strip() for t in text.split(",") if t.strip()]
+
+
+# -- common robot options -------------------------------------------------------------------
+
+
+def add_robot_options(p: argparse.ArgumentParser) -> None:
+    """``--robot | --urdf PATH [--package-dir DIR]``, ``--tip``, ``--task``, ``--joints``, ``--lockable``."""
+    g = p.add_argument_group("robot")
+    src = g.add_mutually_exclusive_group()
+    src.add_argument(
+        "--robot",
+        default=None,
+        help="shipped or example-robot-data arm (see `fault-tolerance robots`)",
+    )
+    src.add_argument("--urdf", default=None, help="path of a URDF file")
+    g.add_argument(
+        "--package-dir",
+        action="append",
+        default=[],
+        help="folder for package:// meshes (repeatable)",
+    )
+    g.add_argument(
+        "--tip", default=None, help="tip frame (default: the catalog's, or the last frame)"
+    )
+    g.add_argument(
+        "--task", default=None, help="planar | position | pose | rows among x,y,z,rx,ry,rz"
+    )
+    g.add_argument("--joints", default=None, help="active joints, comma-separated (others fixed)")
+    g.add_argument(
+        "--lockable",
+        default=None,
+        help="joints that may lock: all | joint2,joint3 | joint1+joint2,joint3 (+ joins a multi-joint scenario)",
+    )
+
+
+def load_robot(args) -> object:
+    """The arm the robot options describe."""
+    from ..loading import load_arm
+
+    if args.robot is None and args.urdf is None:
+        raise InvalidInput(
+            "name a robot with --robot NAME or --urdf PATH (see `fault-tolerance robots`)"
+        )
+    return load_arm(
+        args.urdf or args.robot,
+        tip=args.tip,
+        task=args.task,
+        joints=names(args.joints),
+        package_dirs=args.package_dir or None,
+    )
+
+
+def lockable_of(args, arm):
+    """Lockable joints from ``--lockable`` (``a+b`` is a two-joint scenario); arm default if absent."""
+    if args.lockable is None:
+        return list(arm.default_lockable)
+    if args.lockable.strip() == "all":
+        return list(arm.joint_names)
+    items = []
+    for tok in names(args.lockable) or []:
+        items.append(tuple(tok.split("+")) if "+" in tok else tok)
+    if not items:
+        raise InvalidInput("--lockable is empty; use 'all' or joint names like joint2,joint3")
+    return items
+
+
+# -- start, path ----------------------------------------------------------------------------
+
+
+def add_path_options(p: argparse.ArgumentParser) -> None:
+    """Start (``--x0`` / ``--q0``), path (circle or ``--csv``), time step and duration."""
+    g = p.add_argument_group("start and path")
+    g.add_argument(
+        "--x0",
+        default=None,
+        help="start point (task coordinates); the start posture is the minimum-RCN one",
+    )
+    g.add_argument("--q0", default=None, help="start configuration (rad), used as given")
+    g.add_argument(
+        "--csv", default=None, help="task path from a CSV file with header t,x,y[,z...] [,vx,vy...]"
+    )
+    g.add_argument(
+        "--radius",
+        type=float,
+        default=None,
+        help="circle radius [m] (default: the paper's for shipped arms, else 0.05)",
+    )
+    g.add_argument(
+        "--omega", type=float, default=None, help="circle angular rate [rad/s] (default 2π)"
+    )
+    g.add_argument(
+        "--rows", default=None, help="the two task rows the circle lies in, e.g. x,y or y,z"
+    )
+    g.add_argument("--dt", type=float, default=1e-3, help="time step [s] (default 0.001)")
+    g.add_argument(
+        "--duration", type=float, default=None, help="run length [s] (default: the path's)"
+    )
+    g.add_argument(
+        "--feedback", type=float, default=None, help="task-space feedback gain K_p [1/s]"
+    )
+    g.add_argument(
+        "--response",
+        default="least_norm",
+        choices=["least_norm", "continuation"],
+        help="post-failure response of the reduced robot (MATH.md G3)",
+    )
+    g.add_argument("--gain", type=float, default=None, help="MDA gain α (default planner.MDA_GAIN)")
+
+
+def start_and_path(args, arm):
+    """``(q0, path)`` from the options (posture search when only ``x0`` is known)."""
+    from ..catalog import catalog
+    from ..posture import initial_posture
+    from ..trajectories import CirclePath, load_csv
+
+    entry = catalog().get(arm.name) if arm.source == arm.name else None
+    if not (np.isfinite(args.dt) and args.dt > 0):
+        raise InvalidInput(f"--dt must be a finite number > 0 [s], got {args.dt}")
+    if args.duration is not None and not (np.isfinite(args.duration) and args.duration > 0):
+        raise InvalidInput(f"--duration must be a finite number > 0 [s], got {args.duration}")
+    lockable = lockable_of(args, arm)
+    q0 = None if args.q0 is None else arm.check_q(floats(args.q0, "--q0"))
+    if args.csv:
+        path = load_csv(args.csv, rows=list(arm.task) if len(arm.task) else None)
+        x0 = path.x0
+    else:
+        if args.x0 is not None:
+            x0 = floats(args.x0, "--x0")
+        elif q0 is not None:
+            x0 = arm.fk(q0)
+        elif entry and "x0" in entry:
+            x0 = np.array(entry["x0"], dtype=float)
+        else:
+            q0 = arm.q_reference
+            x0 = arm.fk(q0)
+        if len(x0) != arm.m:
+            raise InvalidInput(
+                f"--x0 has {len(x0)} numbers; task {'/'.join(arm.task)} needs {arm.m}"
+            )
+        spec = (entry or {}).get("path", {})
+        if args.rows:
+            chosen = names(args.rows) or []
+            if len(chosen) != 2 or any(r not in arm.task for r in chosen) or chosen[0] == chosen[1]:
+                raise InvalidInput(
+                    f"--rows must name two different task rows among {list(arm.task)}, got '{args.rows}'"
+                )
+            rows = (arm.task.index(chosen[0]), arm.task.index(chosen[1]))
+        else:
+            rows = tuple(spec.get("rows", (0, 1) if arm.m >= 2 else (0, 0)))
+        if arm.m < 2:
+            raise InvalidInput("a circle needs at least two task rows; give a path with --csv")
+        radius = args.radius if args.radius is not None else spec.get("radius", 0.05)
+        omega = args.omega if args.omega is not None else spec.get("omega", 2 * np.pi)
+        duration = spec.get("duration", 1.0)
+        path = CirclePath(
+            x0, radius, omega, args.duration or duration, rows=rows, sign=spec.get("sign", 1.0)
+        )
+    if q0 is None:
+        q0 = initial_posture(arm, x0, lockable).q
+    elif np.linalg.norm(arm.task_error(x0, q0)) > 1e-6:
+        raise InvalidInput(
+            f"--q0 puts the tool at {arm.fk(q0).round(4).tolist()}, not at the path's start {np.round(x0, 4).tolist()}"
+        )
+    return q0, path, lockable
+
+
+def bar(total: int, enabled: bool, desc: str):
+    """A tqdm progress bar of ``total`` steps, or ``None`` when not ``enabled``."""
+    if not enabled:
+        return None
+    from tqdm.auto import tqdm
+
+    return tqdm(total=total, unit="step", desc=desc)
+
+
+# -- parser and errors ----------------------------------------------------------------------
+
+
+class Parser(argparse.ArgumentParser):
+    """argparse with a one-line error message (exit code 2)."""
+
+    def error(self, message: str):  # type: ignore[override]
+        """Exit 2 with one line on stderr."""
+        self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+
+
+def run_command(func: Callable, args: argparse.Namespace) -> int:
+    """Run one command; map errors to exit codes and warnings to one line on stderr."""
+    shown = warnings.showwarning
+    if not args.debug:  # a warning is one line on stderr too
+        warnings.showwarning = _warning_line
+    try:
+        return int(func(args) or 0)
+    except FaultToleranceError as err:
+        if args.debug:
+            raise
+        print(f"fault-tolerance {args.command}: error: {one_line(err)}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    except KeyboardInterrupt:
+        print("interrupted", file=sys.stderr)
+        return EXIT_INTERRUPTED
+    except Exception as err:  # noqa: BLE001 - the last line of defence
+        if args.debug:
+            raise
+        print(
+            f"fault-tolerance {args.command}: unexpected error: {type(err).__name__}: "
+            f"{one_line(err)} (run with --debug for the traceback)",
+            file=sys.stderr,
+        )
+        return EXIT_FAILURE
+    finally:
+        warnings.showwarning = shown
+
+
+def one_line(message) -> str:
+    """``message`` on one line."""
+    return " ".join(str(message).split("\n"))
+
+
+def _warning_line(message, category, filename, lineno, file=None, line=None) -> None:
+    print(f"fault-tolerance: warning: {one_line(message)}", file=sys.stderr)

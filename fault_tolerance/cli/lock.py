@@ -1,0 +1,132 @@
+"""``fault-tolerance lock``: a run in which a joint locks (servo model on)."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+import numpy as np
+
+from .common import (
+    FORMATTER,
+    add_path_options,
+    add_robot_options,
+    bar,
+    epilog,
+    floats,
+    load_robot,
+    start_and_path,
+)
+
+NAME = "lock"
+HELP = "a run in which a joint locks (servo model on)"
+EXAMPLE = (
+    "fault-tolerance lock --robot powercube_3r --joint joint3 --at max --out out/lock_max\n"
+    "  fault-tolerance lock --robot planar_3r --joint joint2 --at 0.4 --tau 0.02 --out out/lock"
+)
+
+
+def add_parser(sub) -> argparse.ArgumentParser:
+    """The ``lock`` sub-command."""
+    s = sub.add_parser(NAME, help=HELP, epilog=epilog(EXAMPLE), formatter_class=FORMATTER)
+    add_robot_options(s)
+    add_path_options(s)
+    s.add_argument("--joint", required=True, help="the joint that locks")
+    s.add_argument(
+        "--at",
+        default="max",
+        help="lock time [s], or max / min: the moment of largest / smallest jump",
+    )
+    s.add_argument("--algorithm", default="lnva", choices=["lnva", "jvja", "mda"])
+    s.add_argument("--tau", type=float, default=0.05, help="servo time constant [s] (default 0.05)")
+    s.add_argument(
+        "--accel-limit", type=float, default=float("inf"), help="servo acceleration limit [rad/s²]"
+    )
+    s.add_argument("--out", default=None)
+    s.add_argument("--html", action="store_true", help="also write a self-contained replay.html")
+    s.add_argument("--no-progress", action="store_true")
+    s.set_defaults(func=run)
+    return s
+
+
+def _lock_time(args, arm, path, q0, joint: str, duration: float, gain: dict) -> float:
+    """``--at``: a time, or the moment of the largest / smallest jump of the planned run."""
+    from ..simulation import simulate
+
+    if args.at not in ("max", "min"):
+        return float(floats(args.at, "--at")[0])
+    planned = simulate(
+        arm,
+        path,
+        args.algorithm,
+        q0=q0,
+        lockable=[joint],
+        dt=args.dt,
+        duration=duration,
+        response=args.response,
+        **gain,
+    )
+    k = int(np.argmax(planned.jvj) if args.at == "max" else np.argmin(planned.jvj))
+    t_lock = float(planned.t[k])
+    print(
+        f"{args.at} jump of {joint} in the planned run at t = {t_lock:.3f} s (λ = {planned.jvj[k]:.4g})"
+    )
+    return t_lock
+
+
+def run(args) -> int:
+    """A run in which a joint locks (at a time, or at the largest / smallest jump)."""
+    from ..run import output_folder
+    from ..simulation import ServoModel, simulate
+
+    arm = load_robot(args)
+    q0, path, lockable = start_and_path(args, arm)
+    joint = arm.joint_names[arm.joint_index(args.joint)]
+    servo = ServoModel(tau=args.tau, accel_limit=args.accel_limit)
+    if args.out:
+        output_folder(args.out)  # refuse a bad --out before the runs
+    feedback = 10.0 if args.feedback is None else args.feedback
+    gain = {} if args.gain is None else {"gain": args.gain}
+    duration = args.duration or path.duration
+    t_lock = _lock_time(args, arm, path, q0, joint, duration, gain)
+    progress = bar(int(round(duration / args.dt)) + 1, not args.no_progress, "lock")
+    run_ = simulate(
+        arm,
+        path,
+        args.algorithm,
+        q0=q0,
+        lockable=lockable,
+        dt=args.dt,
+        duration=duration,
+        lock_joint=joint,
+        lock_time=t_lock,
+        servo=servo,
+        feedback_gain=feedback,
+        response=args.response,
+        progress=progress,
+        **gain,
+    )
+    if progress:
+        progress.close()
+    s = run_.summary()
+    print(f"{joint} locks at t = {t_lock:.3f} s; servo: {servo.describe()}; K_p = {feedback} 1/s")
+    print(
+        f"jump at the lock {s.get('jump_at_lock', 0.0):.4g} (rad/s)²; path error peak after the lock "
+        f"{1e3 * s['path_error_peak_after_lock']:.3f} mm (before: {1e3 * s['path_error_max_before_lock']:.3f} mm)"
+    )
+    if args.out:
+        _write(run_, arm, joint, t_lock, Path(args.out), args.html)
+    return 0
+
+
+def _write(run_, arm, joint: str, t_lock: float, out: Path, html: bool) -> None:
+    from .. import plots
+
+    run_.save(out)
+    plots.save_figure(plots.plot_lock({f"{joint} locks at {t_lock:.2f} s": run_}), out / "lock")
+    plots.save_figure(plots.plot_run(run_), out / "run")
+    if html:
+        from ..viz import export_html
+
+        export_html(run_, out / "replay.html", arm=arm)
+    print(f"wrote {out}/ (run.npz, run.csv, summary.json, lock.png/.svg)")

@@ -1,0 +1,51 @@
+"""``fault-tolerance reproduce``: every case of the paper (figures, summary.json, REPORT.md)."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from .common import EXIT_INTERRUPTED, FORMATTER, epilog, names
+
+NAME = "reproduce"
+HELP = "every case of the paper: figures, summary.json, REPORT.md"
+EXAMPLE = (
+    "fault-tolerance reproduce --out reproduce_out\n"
+    "  fault-tolerance reproduce --out quick --quick --cases fig2,experiment"
+)
+
+
+def add_parser(sub) -> argparse.ArgumentParser:
+    """The ``reproduce`` sub-command."""
+    s = sub.add_parser(NAME, help=HELP, epilog=epilog(EXAMPLE), formatter_class=FORMATTER)
+    s.add_argument("--out", default="reproduce_out", help="output folder (default reproduce_out)")
+    s.add_argument("--cases", default=None, help="subset, e.g. fig2,fig4,experiment")
+    s.add_argument("--quick", action="store_true", help="shortened runs (for tests)")
+    s.add_argument("--html", action="store_true", help="also write meshcat replays (replay.html)")
+    s.add_argument("--no-progress", action="store_true")
+    s.set_defaults(func=run)
+    return s
+
+
+def run(args) -> int:
+    """Every case of the paper into --out."""
+    from ..experiments import reproduce
+
+    cases = names(args.cases)
+    out = Path(args.out)
+    try:
+        summary = reproduce(
+            out, cases=cases, quick=args.quick, progress=not args.no_progress, html=args.html
+        )
+    except KeyboardInterrupt:
+        print(
+            f"interrupted: finished cases are in {out}; see {out / 'summary.partial.json'} for what "
+            "was not finished (an earlier summary.json is left as it was)",
+            file=sys.stderr,
+        )
+        return EXIT_INTERRUPTED
+    print(
+        f"wrote {out}/summary.json, {out}/REPORT.md and figures in {summary['meta']['seconds']} s"
+    )
+    return 0

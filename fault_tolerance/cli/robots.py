@@ -1,0 +1,48 @@
+"""``fault-tolerance robots``: list shipped and example-robot-data arms."""
+
+from __future__ import annotations
+
+import argparse
+
+from ..errors import FaultToleranceError
+from .common import FORMATTER, epilog
+
+NAME = "robots"
+HELP = "list shipped and example-robot-data arms"
+EXAMPLE = "fault-tolerance robots"
+
+
+def add_parser(sub) -> argparse.ArgumentParser:
+    """The ``robots`` sub-command."""
+    s = sub.add_parser(NAME, help=HELP, epilog=epilog(EXAMPLE), formatter_class=FORMATTER)
+    s.set_defaults(func=run)
+    return s
+
+
+def _row(name: str, source: str, arm, description: str) -> tuple:
+    return (name, source, arm.n, "/".join(arm.task), arm.m, arm.redundancy, description)
+
+
+def run(args) -> int:
+    """List shipped and example-robot-data arms."""
+    from ..catalog import EXAMPLE_ROBOTS, catalog
+    from ..loading import load_arm
+
+    rows = [
+        _row(name, "shipped", load_arm(name), e["description"]) for name, e in catalog().items()
+    ]
+    for name, preset in EXAMPLE_ROBOTS.items():
+        try:
+            arm = load_arm(name)
+        except FaultToleranceError as err:  # pragma: no cover - depends on the installed data
+            rows.append((name, "example-robot-data", "?", "?", "?", "?", f"unavailable: {err}"))
+            continue
+        rows.append(_row(name, "example-robot-data", arm, preset["description"]))
+    head = ("name", "source", "DOF", "task", "m", "r", "description")
+    widths = [max(len(str(r[i])) for r in rows + [head]) for i in range(len(head))]
+    for r in [head] + rows:
+        print("  ".join(str(v).ljust(w) for v, w in zip(r, widths, strict=True)).rstrip())
+    print(
+        "\nAny other example-robot-data name or a URDF path works too (--robot NAME | --urdf PATH)."
+    )
+    return 0

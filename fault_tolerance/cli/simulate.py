@@ -1,0 +1,133 @@
+"""``fault-tolerance simulate``: one task run per algorithm, files into ``--out``."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+from ..errors import InvalidInput
+from .common import (
+    EXIT_INTERRUPTED,
+    FORMATTER,
+    add_path_options,
+    add_robot_options,
+    bar,
+    epilog,
+    load_robot,
+    names,
+    start_and_path,
+)
+
+NAME = "simulate"
+HELP = "one task run with one or several algorithms"
+EXAMPLE = (
+    "fault-tolerance simulate --robot planar_3r --out out/fig2\n"
+    "  fault-tolerance simulate --robot spatial_4r --x0 -0.21,0.20,0.35 --algorithms jvja,lnva --out out/4r\n"
+    "  fault-tolerance simulate --robot panda --task position --lockable panda_joint2,panda_joint4 "
+    "--radius 0.05 --rows y,z --out out/panda\n"
+    "  fault-tolerance simulate --urdf my_arm.urdf --tip tool0 --task position --csv path.csv --out out/mine"
+)
+
+
+def add_parser(sub) -> argparse.ArgumentParser:
+    """The ``simulate`` sub-command."""
+    s = sub.add_parser(NAME, help=HELP, epilog=epilog(EXAMPLE), formatter_class=FORMATTER)
+    add_robot_options(s)
+    add_path_options(s)
+    s.add_argument(
+        "--algorithms", default="lnva,jvja,mda", help="comma-separated among lnva,jvja,mda"
+    )
+    s.add_argument("--out", default=None, help="output folder")
+    s.add_argument(
+        "--html", action="store_true", help="also write a self-contained replay.html per run"
+    )
+    s.add_argument("--no-progress", action="store_true")
+    s.set_defaults(func=run)
+    return s
+
+
+def _algorithms(args) -> list[str]:
+    from ..planner import RESOLVERS
+
+    algs = names(args.algorithms) or []
+    bad = [a for a in algs if a not in RESOLVERS]
+    if bad or not algs:
+        raise InvalidInput(f"--algorithms {args.algorithms!r}: choose among {sorted(RESOLVERS)}")
+    return algs
+
+
+def run(args) -> int:
+    """One task run per algorithm; files into --out."""
+    from ..planner import MDA_GAIN
+    from ..run import output_folder
+    from ..simulation import simulate
+
+    arm = load_robot(args)
+    q0, path, lockable = start_and_path(args, arm)
+    algs = _algorithms(args)
+    out = output_folder(args.out) if args.out else None
+    steps = int(round((args.duration or path.duration) / args.dt)) + 1
+    progress = bar(steps * len(algs), not args.no_progress, "simulate")
+    runs, saved = {}, []
+    try:
+        for alg in algs:
+            runs[alg] = simulate(
+                arm,
+                path,
+                alg,
+                q0=q0,
+                lockable=lockable,
+                dt=args.dt,
+                duration=args.duration,
+                feedback_gain=args.feedback or 0.0,
+                response=args.response,
+                gain=MDA_GAIN if args.gain is None else args.gain,
+                progress=progress,
+            )
+            if out:
+                runs[alg].save(out / alg)
+                saved.append(alg)
+    except KeyboardInterrupt:
+        if progress:
+            progress.close()
+        done = saved if out else list(runs)
+        print(
+            f"interrupted: finished {done}, not finished {[a for a in algs if a not in done]}"
+            + (f"; finished runs are in {out}" if out else ""),
+            file=sys.stderr,
+        )
+        return EXIT_INTERRUPTED
+    if progress:
+        progress.close()
+    print_table(runs)
+    if out:
+        _write_figures(runs, arm, algs, out, args.html)
+    return 0
+
+
+def _write_figures(runs, arm, algs, out, html: bool) -> None:
+    from .. import plots
+
+    plots.save_figure(
+        plots.plot_comparison(runs, f"{arm.name}: {', '.join(algs)}"), out / "comparison"
+    )
+    for alg, run_ in runs.items():
+        plots.save_figure(plots.plot_run(run_), out / alg / "run")
+        if html:
+            from ..viz import export_html
+
+            export_html(run_, out / alg / "replay.html", arm=arm)
+    print(f"wrote {out}/ (run.npz, run.csv, summary.json per algorithm; comparison.png/.svg)")
+
+
+def print_table(runs) -> None:
+    """λ and K statistics and the tracking error of each run, one line per algorithm."""
+    print(
+        f"{'algorithm':10} {'λ mean':>10} {'λ max':>10} {'K mean':>10} {'K max':>10} {'track err max [m]':>18}"
+    )
+    for alg, run_ in runs.items():
+        s = run_.summary()
+        print(
+            f"{alg:10} {s['jvj_mean']:10.4g} {s['jvj_max']:10.4g} {s['rcn_mean']:10.4g} "
+            f"{s['rcn_max']:10.4g} {s['tracking_error_max']:18.3g}"
+        )
