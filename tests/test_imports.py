@@ -10,7 +10,6 @@ import fault_tolerance
 PKG = Path(fault_tolerance.__file__).resolve().parent
 
 
-
 def _module_name(path: Path) -> str:
     rel = path.relative_to(PKG.parent).with_suffix("")
     parts = list(rel.parts)
