@@ -396,8 +396,10 @@ def seek(page, t: float, overlays: bool = False) -> bytes:
             const a = viewer.animator;
             a.pause();
             a.time_scrubber.setValue(t);   // the GUI control: sets a.time and seeks the mixer
-            const legend = document.getElementById("ft-legend");
-            if (legend) legend.style.visibility = overlays ? "visible" : "hidden";
+            for (const id of ["ft-legend", "ft-plots"]) {   // colours of the 3D view only
+                const el = document.getElementById(id);
+                if (el) el.style.visibility = overlays ? "visible" : "hidden";
+            }
             viewer.gui.domElement.style.visibility = overlays ? "visible" : "hidden";
         }""",
         [t, overlays],

@@ -42,8 +42,8 @@ from typing import IO, Any, NamedTuple
 
 from ..arm import Arm
 from ..errors import FaultToleranceError, InvalidInput
-from ..loading import arm_from_meta
-from ..simulation import Run, write_atomic
+from ..simulation import write_atomic
+from .collect import describe_runs, run_folders
 from .geometry import (  # noqa: F401 - public constants, importable as fault_tolerance.viz.X
     BACKGROUND,
     CAMERA_FOV,
@@ -53,9 +53,8 @@ from .geometry import (  # noqa: F401 - public constants, importable as fault_to
     TRACE_COLOR,
     TUBE_SIDES,
 )
-from .page import _static_html, embed, export_html, scene_commands
-from .scene import _build_scene
-from .server import LOCALHOST, ReplayServer, _serve_scene, serve
+from .page import _build_page, _page_html, embed, export_html, scene_commands
+from .server import LOCALHOST, ReplayServer, _serve_page, serve
 
 
 class Replay(NamedTuple):
@@ -81,7 +80,8 @@ def replay(
     """Replay ``run`` in the browser: a self-contained HTML file, a live viewer, or both.
 
     Args:
-        run: A Run, the folder it was saved to, an array q (K, n) with ``dt``, or ``(t, q)``.
+        run: A Run, the folder it was saved to, a folder of run folders (one command's runs,
+            shown together), a list or dict of runs, an array q (K, n) with ``dt``, or ``(t, q)``.
         arm: The arm (default: ``arm_from_meta(run.meta)``).
         speed: Replay speed factor (1: real time).
         fps: Animation frames per replay second.
@@ -93,13 +93,9 @@ def replay(
     """
     if not open and html is None:
         raise InvalidInput("choose where to replay: open=True (live viewer) and/or html=FILE")
-    if isinstance(run, (str, Path)):
-        run = Run.load(run)
-    if arm is None and isinstance(run, Run):
-        arm = arm_from_meta(run.meta)
-    scene = _build_scene(run, arm, speed=speed, fps=fps, meshes=meshes, dt=dt)
-    path = write_atomic(html, _static_html(scene)) if html is not None else None
-    server = _serve_scene(scene, port) if open else None
+    page = _build_page(run, arm, speed=speed, fps=fps, meshes=meshes, dt=dt)
+    path = write_atomic(html, _page_html(page)) if html is not None else None
+    server = _serve_page(page, port) if open else None
     return Replay(path, server.url if server else None, server)
 
 
@@ -122,13 +118,30 @@ def replay_main(
 ) -> int:
     """``fault-tolerance replay RUN [--open | --html FILE] [--speed S]``; returns the exit code.
 
-    With ``open`` it prints the URL and calls ``wait()`` (default: sleep until Ctrl-C), then
-    stops the server. Exit codes: 0 done, 2 bad input (one line on stderr), 130 stopped by Ctrl-C
-    (the server is stopped first), 1 anything else.
+    ``RUN`` is a run folder, or a folder of run folders (e.g. ``simulate --out``'s): those are
+    shown together in one page (λ and K overlaid, a selector for the arm shown); without
+    ``--open`` or ``--html`` such a folder's runs are listed. With ``open`` it prints the URL and
+    calls ``wait()`` (default: sleep until Ctrl-C), then stops the server. Exit codes: 0 done,
+    2 bad input (one line on stderr), 130 stopped by Ctrl-C (the server is stopped first),
+    1 anything else.
     """
     out = stdout or sys.stdout
     err = stderr or sys.stderr
     if not open and not html:
+        try:
+            folders = run_folders(run_dir)
+        except FaultToleranceError:
+            folders = []
+        if len(folders) > 1:
+            print(f"{run_dir} holds {len(folders)} runs:", file=out)
+            for line in describe_runs(run_dir):
+                print(f"  {line}", file=out)
+            print(
+                f"replay them together with --html FILE or --open, or one of them, e.g. "
+                f"fault-tolerance replay {folders[0]} --html replay.html",
+                file=out,
+            )
+            return 0
         print("replay: choose --open (live viewer) or --html FILE (self-contained page)", file=err)
         return 2
     try:

@@ -36,7 +36,7 @@ from .geometry import (
     _translation,
     _tube,
 )
-from .motion import _check_rate, _frame_times, _interp_rows, _load_motion
+from .motion import _check_rate, _frame_times, _interp_rows, _load_motion, _Motion
 
 
 def _require_meshcat():
@@ -142,6 +142,8 @@ class _Scene:
 
     commands: list[tuple[bytes, bytes, bytes]]
     info: dict
+    motion: _Motion | None = None  # what was replayed (for the page's plots)
+    arm: Arm | None = None
 
 
 def _build_scene(
@@ -326,7 +328,7 @@ def _build_scene(
         },
         "has_desired_path": desired is not None,
     }
-    return _Scene(commands, info)
+    return _Scene(commands, info, motion, arm)
 
 
 @contextlib.contextmanager

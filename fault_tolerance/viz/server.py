@@ -27,7 +27,8 @@ from typing import IO
 
 from ..arm import Arm
 from ..errors import FaultToleranceError, InvalidInput
-from .scene import _build_scene, _require_meshcat, _Scene
+from .page import _build_page, _Page, _page_html
+from .scene import _require_meshcat, _Scene
 
 #: The only interface the live server listens on.
 LOCALHOST = "127.0.0.1"
@@ -72,11 +73,15 @@ def loopback_origin(origin: str | None) -> bool:
     return parts.scheme in ("http", "https") and hostname in LOOPBACK_NAMES
 
 
-def _serve_local(port: int | None = None) -> None:  # pragma: no cover - runs in the child process
+def _serve_local(  # pragma: no cover - runs in the child process
+    port: int | None = None, page: str | None = None
+) -> None:
     """Run meshcat's server with every socket on 127.0.0.1 (the body of the server process).
 
     meshcat's ``ZMQWebSocketBridge`` binds ZMQ to its ``host`` but starts its web server with
     ``app.listen(port)``, which listens on every interface; here ``listen`` gets the address.
+    With ``page`` (a file), ``/static/`` serves that page (the replay with its plots, connected to
+    the websocket) instead of meshcat's bare viewer; the viewer's other files are served as before.
     """
     import tornado.ioloop
     import tornado.web
@@ -92,6 +97,15 @@ def _serve_local(port: int | None = None) -> None:  # pragma: no cover - runs in
         def prepare(self):
             refuse_foreign(self)
 
+    class PageHandler(tornado.web.RequestHandler):
+        def prepare(self):
+            refuse_foreign(self)
+
+        def get(self):
+            self.set_header("Content-Type", "text/html; charset=utf-8")
+            self.set_header("Cache-Control", "no-store")
+            self.write(Path(page).read_bytes())
+
     class LocalSocket(zmqserver.WebSocketHandler):
         def prepare(self):
             refuse_foreign(self)
@@ -101,8 +115,10 @@ def _serve_local(port: int | None = None) -> None:  # pragma: no cover - runs in
 
     class LocalBridge(zmqserver.ZMQWebSocketBridge):
         def make_app(self):
+            pages = [] if page is None else [(r"/static/(?:index\.html)?", PageHandler)]
             app = tornado.web.Application(
-                [
+                pages
+                + [
                     (
                         r"/static/(.*)",
                         LocalStatic,
@@ -144,8 +160,11 @@ class ReplayServer:
         process: The server process.
     """
 
-    def __init__(self, process: subprocess.Popen, url: str, zmq_url: str, log: IO) -> None:
+    def __init__(
+        self, process: subprocess.Popen, url: str, zmq_url: str, log: IO, page: Path | None = None
+    ) -> None:
         self.process = process
+        self._page = page
         self.url = url
         self.zmq_url = zmq_url
         self._log = log
@@ -154,17 +173,33 @@ class ReplayServer:
         atexit.register(self.close)
 
     @classmethod
-    def start(cls, port: int | None = None, timeout: float = 30.0) -> ReplayServer:
-        """Start the server process and wait until it says where it listens."""
+    def start(
+        cls, port: int | None = None, timeout: float = 30.0, page: str | None = None
+    ) -> ReplayServer:
+        """Start the server process and wait until it says where it listens.
+
+        ``page``: HTML served at ``/static/`` instead of meshcat's bare viewer (the replay page
+        with its plots, see :func:`serve`).
+        """
         _require_meshcat()
         if port is not None and not (isinstance(port, int) and 0 < port < 65536):
             raise InvalidInput(f"port must be an integer in 1..65535, got {port!r}")
+        page_file = None
+        if page is not None:
+            fd, name = tempfile.mkstemp(prefix="ft-replay-", suffix=".html")
+            with os.fdopen(fd, "w", encoding="utf-8") as fh:
+                fh.write(page)
+            page_file = Path(name)
         env = dict(os.environ)
         root = str(Path(__file__).resolve().parents[2])  # the folder holding fault_tolerance/
         env["PYTHONPATH"] = os.pathsep.join(
             [root] + ([env["PYTHONPATH"]] if env.get("PYTHONPATH") else [])
         )
-        code = f"from fault_tolerance.viz.server import _serve_local; _serve_local({port!r})"
+        where = None if page_file is None else str(page_file)
+        code = (
+            "from fault_tolerance.viz.server import _serve_local; "
+            f"_serve_local({port!r}, {where!r})"
+        )
         log = tempfile.TemporaryFile()
         proc = subprocess.Popen(
             [sys.executable, "-u", "-c", code],
@@ -196,6 +231,8 @@ class ReplayServer:
                     "no output"
                 ]
                 log.close()
+                if page_file is not None:
+                    page_file.unlink(missing_ok=True)
                 where = f"port {port}" if port else "a free port"
                 raise FaultToleranceError(
                     f"the meshcat server did not start on {where}: {detail[0]}"
@@ -203,7 +240,7 @@ class ReplayServer:
             key, _, value = line.partition("=")
             if key in ("zmq_url", "web_url"):
                 found[key] = value
-        return cls(proc, found["web_url"], found["zmq_url"], log)
+        return cls(proc, found["web_url"], found["zmq_url"], log, page_file)
 
     def send(self, commands: Sequence[tuple[bytes, bytes, bytes]], timeout: float = 30.0) -> None:
         """Send recorded scene commands (type, path, msgpack) to the server."""
@@ -243,6 +280,8 @@ class ReplayServer:
             self.process.stdout.close()
         if not self._log.closed:
             self._log.close()
+        if self._page is not None:
+            self._page.unlink(missing_ok=True)
         with contextlib.suppress(Exception):
             atexit.unregister(self.close)
 
@@ -268,15 +307,34 @@ def serve(
 ) -> tuple[str, ReplayServer]:
     """Serve the replay of ``run`` live: a meshcat server on 127.0.0.1, scene and animation loaded.
 
+    The page at the URL is the replay page of :func:`~fault_tolerance.viz.export_html` (plots
+    in ``#ft-plots``, synced with the animation), connected to the server's websocket, so scene
+    commands sent later (``server.send``) show too. ``run`` may be several runs (a folder of run
+    folders, a list or a dict): the server holds the first; the page switches between them.
+
     Returns ``(url, server)``; open the URL in a browser (the animation plays when the page
     connects), call ``server.close()`` (or use it as a context manager) to stop the server.
     ``port`` is the web port (default: the first free one from 7000).
     """
-    server = _serve_scene(_build_scene(run, arm, speed=speed, fps=fps, meshes=meshes, dt=dt), port)
+    page = _build_page(run, arm, speed=speed, fps=fps, meshes=meshes, dt=dt)
+    server = _serve_page(page, port)
     return server.url, server
 
 
+def _serve_page(page: _Page, port: int | None) -> ReplayServer:
+    server = ReplayServer.start(port, page=_page_html(page, live=True))
+    scene = page.scenes[0]
+    try:
+        server.send(scene.commands)
+    except BaseException:
+        server.close()
+        raise
+    server.info = scene.info
+    return server
+
+
 def _serve_scene(scene: _Scene, port: int | None) -> ReplayServer:
+    """Serve one recorded scene with meshcat's bare viewer (no plots)."""
     server = ReplayServer.start(port)
     try:
         server.send(scene.commands)
