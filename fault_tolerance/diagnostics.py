@@ -12,8 +12,8 @@ Tolerances (documented here and in the README):
 
 * :data:`TRACKING_TOLERANCE` — largest task error ``‖x − x_des‖`` accepted while no joint is
   locked (1 mm).
-* :data:`LOST_PATH_TOLERANCE` — largest task error accepted after a lock (1 cm): above it the
-  lock "loses the path".
+* :data:`LOST_PATH_TOLERANCE` — how much the task error may grow after a lock above its largest
+  value before the lock (1 cm): beyond it the lock "loses the path".
 * :data:`~fault_tolerance.posture.RCN_THRESHOLD` — the largest reduced condition number ``k_S``
   accepted along a run (the planning loop's threshold, Sec. III.D step iii).
 * the velocity limits of the URDF (``<limit velocity=...>``), with :data:`SPEED_SLACK` relative
@@ -42,7 +42,7 @@ from .simulation import (
 
 #: Largest task error [m] accepted while no joint is locked.
 TRACKING_TOLERANCE = 1e-3
-#: Largest task error [m] accepted after a lock; above it the lock loses the path.
+#: Growth of the task error [m] after a lock (over its peak before) above which the lock loses the path.
 LOST_PATH_TOLERANCE = 1e-2
 #: Relative slack on the velocity limits (a rate within it counts as at the limit, not over).
 SPEED_SLACK = 1e-6
@@ -170,20 +170,25 @@ def tracking_error(run: Run, tolerance: float = TRACKING_TOLERANCE) -> RunWarnin
 
 
 def lock_loses_path(run: Run, tolerance: float = LOST_PATH_TOLERANCE) -> RunWarning | None:
-    """After the lock the task error exceeds ``tolerance`` [m]: the reduced robot lost the path."""
+    """After the lock the task error grows more than ``tolerance`` [m] above its level before.
+
+    The error the run already had before the lock (e.g. the servos' lag, reported by
+    :func:`tracking_error`) is not counted against the lock.
+    """
     lock = run.meta.get("lock")
     after = _locked(run)
     if not lock or not after.any():
         return None
+    before = float(run.error[~after].max()) if (~after).any() else 0.0
     err = np.where(after, run.error, 0.0)
     k = int(np.argmax(err))
-    if err[k] <= tolerance:
+    if err[k] - before <= tolerance:
         return None
     return RunWarning(
         "lost_path",
         f"the lock of {lock['joint']} at t = {lock['time']:.3g} s loses the path: error "
-        f"{1e3 * err[k]:.3g} mm at t = {run.t[k]:.3g} s (tolerance {1e3 * tolerance:g} mm; "
-        f"{1e3 * run.error[-1]:.3g} mm at the end)",
+        f"{1e3 * err[k]:.3g} mm at t = {run.t[k]:.3g} s, {1e3 * before:.3g} mm before the lock "
+        f"(tolerance {1e3 * tolerance:g} mm more; {1e3 * run.error[-1]:.3g} mm at the end)",
     )
 
 

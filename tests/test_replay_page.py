@@ -34,7 +34,9 @@ def planar_runs():
     q0 = initial_posture(arm, [0.35, 0.0]).q
     path = CirclePath([0.35, 0.0], 0.1, 2 * np.pi, 0.6)
     runs = {a: simulate(arm, path, a, q0=q0) for a in ("lnva", "jvja")}
-    lock = simulate(arm, path, "jvja", q0=q0, lock_joint="joint2", lock_time=0.3, feedback_gain=10.0)
+    lock = simulate(
+        arm, path, "jvja", q0=q0, lock_joint="joint2", lock_time=0.3, feedback_gain=10.0
+    )
     return arm, runs, lock
 
 
@@ -325,7 +327,9 @@ def test_live_viewer_and_notebook_embed_have_the_plots(chromium, planar_runs):
     page.set_content(f"<!DOCTYPE html><html><body>{markup}</body></html>")
     frame = page.frames[1]
     frame.wait_for_function("() => window.ftReplay && ftReplay.ready && viewer.animator.duration")
-    frame.evaluate("() => { viewer.animator.pause(); viewer.animator.time_scrubber.setValue(0.4); }")
+    frame.evaluate(
+        "() => { viewer.animator.pause(); viewer.animator.time_scrubber.setValue(0.4); }"
+    )
     frame.evaluate("() => new Promise(r => requestAnimationFrame(() => requestAnimationFrame(r)))")
     assert frame.evaluate(CURSORS) == pytest.approx([0.4] * 3, abs=2e-3)
     page.close()
