@@ -237,7 +237,7 @@ def test_cursor_follows_the_animation(chromium, lock_html):
         pause_at(page, tau)
         assert page.evaluate(CURSORS) == pytest.approx([tau] * 3, abs=2e-3)
     page.evaluate("() => { viewer.animator.time_scrubber.setValue(0); viewer.animator.play(); }")
-    page.wait_for_timeout(300)
+    page.wait_for_function("() => viewer.animator.time > 0.05", timeout=30_000)
     page.evaluate("() => viewer.animator.pause()")
     frames(page)
     tau = page.evaluate("() => viewer.animator.time")
