@@ -241,7 +241,7 @@ def test_cursor_follows_the_animation(chromium, lock_html):
     page.evaluate("() => viewer.animator.pause()")
     frames(page)
     tau = page.evaluate("() => viewer.animator.time")
-    assert 0.05 < tau < 0.6
+    assert 0.05 < tau <= 0.6 + 1e-6  # played (on a busy machine possibly to the end)
     assert page.evaluate(CURSORS) == pytest.approx([tau] * 3, abs=2e-3)
     assert errors == [] and page.evaluate("() => ftReplay.errors") == []
     page.close()
