@@ -32,7 +32,7 @@ from dataclasses import asdict, dataclass
 import numpy as np
 
 from .posture import RCN_THRESHOLD
-from .simulation import (
+from .run import (
     FLAG_LOCKED,
     FLAG_NEAR_INTOLERABLE,
     FLAG_NEAR_SINGULAR,

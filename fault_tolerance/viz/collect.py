@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InvalidInput
-from ..simulation import Run
+from ..run import Run
 
 
 def run_folders(folder: str | Path) -> list[Path]:
