@@ -386,7 +386,7 @@ def eq8_check(duration: float | None = None) -> dict:
     }
 
 
-def step_timing(repeats: int = 2000) -> dict:
+def step_timing(repeats: int = 500) -> dict:
     """Mean time of one ``resolve`` call per algorithm on the planar 3R [µs] (plain path)."""
     from .planner import resolve
 

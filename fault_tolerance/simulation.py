@@ -34,6 +34,9 @@ from .run import (  # noqa: F401 - re-exported: Run, ARRAYS and the flags used t
 )
 from .trajectories import TaskPath
 
+#: Values of ``simulate(engine=...)``.
+ENGINES = ("auto", "fast", "reference")
+
 #: Reduced robots whose smallest N[S, S] pivot falls below this are flagged near-intolerable; the
 #: pivots are damped there (``linalg.PIVOT_EPS``), so JVJA's rates and λ stay finite.
 NEAR_INTOLERABLE = PIVOT_EPS
@@ -143,6 +146,7 @@ def simulate(
     lock_time: float | None = None,
     servo: ServoModel | None = None,
     progress=None,
+    engine: str = "auto",
 ) -> Run:
     """Integrate ``algorithm`` along ``path`` from ``q0``; optionally lock a joint on the way.
 
@@ -164,7 +168,23 @@ def simulate(
         servo: Joint servo model; default perfect rate tracking (``tau = 0``) without a lock and
             :class:`ServoModel()` with one.
         progress: A callable ``progress(k, K)`` or a tqdm-like object with ``update``.
+        engine: ``"auto"`` (default): the compiled sample (:mod:`.sampler`, the controller's
+            workspace) where it applies, the reference code elsewhere; ``"fast"``: the compiled
+            sample or :class:`InvalidInput` saying why not; ``"reference"``: the plain reference
+            code (:mod:`.planner`, :mod:`.indices`) at every sample. The numbers agree to 1e-9.
+
+    Example:
+        >>> import numpy as np, fault_tolerance as ft
+        >>> from fault_tolerance.trajectories import CirclePath
+        >>> arm = ft.load_arm("planar_3r")
+        >>> path = CirclePath(np.array([0.35, 0.0]), 0.1, 2 * np.pi, 0.05)
+        >>> run = simulate(arm, path, "jvja", q0=np.array([0.3, 1.2, 1.0]))
+        >>> ref = simulate(arm, path, "jvja", q0=np.array([0.3, 1.2, 1.0]), engine="reference")
+        >>> bool(np.allclose(run.q, ref.q, rtol=0, atol=1e-12))
+        True
     """
+    if engine not in ENGINES:
+        raise InvalidInput(f"engine {engine!r} is not one of {list(ENGINES)}")
     setup = _setup(
         arm, path, algorithm, q0, lockable, weights, response, dt, duration, feedback_gain, gain,
         lock_joint, lock_time, servo,
@@ -175,11 +195,29 @@ def simulate(
     setup.sc.check_tolerable(projection(arm.jacobian(q)).N)
     K1 = setup.steps + 1
     rec = _allocate(K1, arm.n, arm.m, setup.sc.f, dt)
+    X, XD = sample_path(path, rec["t"], arm.m)
     state = _State(q=q, qd=np.zeros(arm.n), keep=np.arange(arm.n))
+    fast = _sampler(setup, rec, engine)
     for k in range(K1):
-        _step(setup, state, k, rec)
+        _maybe_lock(setup, state, k * dt)
+        if fast is None or not fast.step(state, k, X[k], XD[k]):
+            _step(setup, state, k, rec, X[k], XD[k])
         _tick(progress, k, K1)
     return _finish(setup, state, rec, q0)
+
+
+def _sampler(s: _Setup, rec: dict, engine: str):
+    """The compiled sample of :mod:`.sampler` for this run, or None for the reference code."""
+    if engine == "reference":
+        return None
+    from . import sampler
+
+    why = sampler.covers(s.sc, s.algorithm, s.response)
+    if why is None:
+        return sampler.Sampler(s, rec)
+    if engine == "fast":
+        raise InvalidInput(f"engine 'fast' does not cover this run: {why}; use engine='auto'")
+    return None
 
 
 def _setup(
@@ -222,35 +260,54 @@ def _setup(
     )  # fmt: skip
 
 
+#: The histories a run records per sample, in the order of the run table's columns.
+HISTORIES = ("q", "qd", "qd_cmd", "x", "x_des", "error", "jvj", "jvj_parts", "rcn", "K",
+             "sigma_min", "flags")  # fmt: skip
+
+
+_SCALARS = ("error", "jvj", "K", "sigma_min", "flags")  # one number per sample
+
+
+def _widths(n: int, m: int, f: int) -> dict[str, int]:
+    sizes = {"q": n, "qd": n, "qd_cmd": n, "x": m, "x_des": m, "jvj_parts": f, "rcn": f}
+    return {h: 1 if h in _SCALARS else sizes[h] for h in HISTORIES}
+
+
 def _allocate(K1: int, n: int, m: int, f: int, dt: float) -> dict[str, np.ndarray]:
-    """The time histories of a run of ``K1`` samples, zero-filled."""
-    return {
-        "t": np.arange(K1) * dt,
-        "q": np.zeros((K1, n)),
-        "qd": np.zeros((K1, n)),
-        "qd_cmd": np.zeros((K1, n)),
-        "x": np.zeros((K1, m)),
-        "x_des": np.zeros((K1, m)),
-        "error": np.zeros(K1),
-        "jvj": np.zeros(K1),
-        "jvj_parts": np.zeros((K1, f)),
-        "rcn": np.zeros((K1, f)),
-        "K": np.zeros(K1),
-        "sigma_min": np.zeros(K1),
-        "flags": np.zeros(K1, dtype=np.int64),
-    }
+    """The time histories of a run of ``K1`` samples, zero-filled: views of one table.
+
+    ``rec["_table"]`` (K1, width) holds them all, ``rec["_offsets"]`` the first column of each
+    (in the order of :data:`HISTORIES`), so a compiled sample writes one row.
+    """
+    widths = _widths(n, m, f)
+    offsets = np.cumsum([0] + [widths[h] for h in HISTORIES])
+    table = np.zeros((K1, int(offsets[-1])))
+    rec = {"t": np.arange(K1) * dt, "_table": table, "_offsets": offsets[:-1].astype(np.int64)}
+    for h, lo in zip(HISTORIES, offsets[:-1], strict=True):
+        view = table[:, lo : lo + widths[h]]
+        rec[h] = view[:, 0] if h in _SCALARS else view
+    return rec
 
 
-def _desired(path: TaskPath, t: float, m: int) -> tuple[np.ndarray, np.ndarray]:
-    """``(x_des, ẋ_des)`` of the path at ``t``, checked to be ``m`` finite numbers each."""
-    x_des = path.x(t)
-    xd_des = np.asarray(path.xdot(t), dtype=float)
-    if not (np.all(np.isfinite(x_des)) and xd_des.shape == (m,) and np.all(np.isfinite(xd_des))):
+def sample_path(path: TaskPath, ts: np.ndarray, m: int) -> tuple[np.ndarray, np.ndarray]:
+    """``(x_des, ẋ_des)`` of the path at the times ``ts``, shape (K, m) each, checked finite.
+
+    Uses the path's own ``sample(ts)`` when it has one (:class:`~.trajectories.CirclePath`).
+    """
+    if hasattr(path, "sample"):
+        X, XD = path.sample(ts)
+    else:
+        X = np.array([np.asarray(path.x(t), dtype=float).reshape(-1) for t in ts])
+        XD = np.array([np.asarray(path.xdot(t), dtype=float).reshape(-1) for t in ts])
+    bad = ~(np.all(np.isfinite(X), axis=-1) & np.all(np.isfinite(XD), axis=-1))
+    if X.shape != (len(ts), m) or XD.shape != (len(ts), m) or bad.any():
+        k = int(np.argmax(bad)) if bad.any() else 0
+        x, xd = np.asarray(path.x(ts[k])), np.asarray(path.xdot(ts[k]), dtype=float)
         raise InvalidInput(
-            f"the path gives x = {np.asarray(x_des).tolist()}, ẋ = {xd_des.tolist()} "
-            f"at t = {t:.6g} s; it must give {m} finite numbers each"
+            f"the path gives x = {x.tolist()}, ẋ = {xd.tolist()} "
+            f"at t = {ts[k]:.6g} s; it must give {m} finite numbers each"
         )
-    return x_des, xd_des
+    return X, XD
 
 
 def _maybe_lock(s: _Setup, state: _State, t: float) -> None:
@@ -261,13 +318,10 @@ def _maybe_lock(s: _Setup, state: _State, t: float) -> None:
         state.qd[s.lock_col] = 0.0
 
 
-def _step(s: _Setup, state: _State, k: int, rec: dict) -> None:
-    """One sample: rates commanded at ``q``, indices, record, then ``q ← q + q̇ dt``."""
+def _step(s: _Setup, state: _State, k: int, rec: dict, x_des, xd_des) -> None:
+    """One sample the reference way: rates at ``q``, indices, record, then ``q ← q + q̇ dt``."""
     arm, q = s.arm, state.q
-    t = k * s.dt
-    _maybe_lock(s, state, t)
     J = arm.jacobian(q)
-    x_des, xd_des = _desired(s.path, t, arm.m)
     x, err = arm.fk_and_error(x_des, q)
     xd_cmd = xd_des + s.feedback_gain * err
     proj = projection(J)
@@ -367,8 +421,10 @@ def _finish(s: _Setup, state: _State, rec: dict, q0) -> Run:
             "time": float(s.lock_time),
             "jump": state.lock_jump,
         }
-    qd_cmd = rec.pop("qd_cmd")
-    return Run(meta=meta, qd_cmd=qd_cmd if servo_used else None, **rec)
+    arrays = {k: np.ascontiguousarray(rec[k]) for k in ("t", *HISTORIES)}
+    arrays["flags"] = arrays["flags"].astype(np.int64)
+    qd_cmd = arrays.pop("qd_cmd")
+    return Run(meta=meta, qd_cmd=qd_cmd if servo_used else None, **arrays)
 
 
 def _tick(progress, k: int, total: int) -> None:

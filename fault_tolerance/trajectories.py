@@ -91,6 +91,19 @@ class CirclePath(TaskPath):
         v[j] = self.radius * self.omega * np.cos(self.omega * t)
         return v
 
+    def sample(self, ts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Desired positions and velocities at the times ``ts``, shape (K, m) each (vectorised)."""
+        ts = np.asarray(ts, dtype=float)
+        i, j = self.rows
+        X = np.tile(self.x0, (len(ts), 1))
+        V = np.zeros_like(X)
+        wt = self.omega * ts
+        X[:, i] += self.sign * self.radius * (1.0 - np.cos(wt))
+        X[:, j] += self.radius * np.sin(wt)
+        V[:, i] = self.sign * self.radius * self.omega * np.sin(wt)
+        V[:, j] = self.radius * self.omega * np.cos(wt)
+        return X, V
+
     def spec(self) -> dict:
         """JSON-able description."""
         return {

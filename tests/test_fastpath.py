@@ -1,0 +1,130 @@
+"""The compiled sample of simulate agrees with the reference code (planner, indices) to 1e-9."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import fault_tolerance as ft
+from fault_tolerance import sample_kernel as sk
+from fault_tolerance.run import ARRAYS
+from fault_tolerance.simulation import ServoModel, simulate
+from fault_tolerance.trajectories import CirclePath, FunctionPath
+
+pytest.importorskip("numba")
+
+TOL = 1e-9
+#: k_S comes from eigenvalues of J_S J_Sᵀ in both codes: its rounding error grows like ε k_S²
+#: (relative), whichever code computes it; rows with a large k_S get that much more room.
+EIG = 1e-15
+
+
+def _same(a, b):
+    for name in ARRAYS:
+        x, y = getattr(a, name), getattr(b, name)
+        if name == "flags":
+            np.testing.assert_array_equal(x, y)
+            continue
+        if name in ("rcn", "K"):
+            kmax = b.rcn.max(axis=1) if name == "K" else b.rcn
+            np.testing.assert_array_less(np.abs(x - y), (TOL + EIG * kmax**2) * np.abs(y) + 1e-300)
+            continue
+        scale = max(1.0, float(np.abs(y).max()))
+        np.testing.assert_allclose(x, y, rtol=0, atol=TOL * scale, err_msg=name)
+    if (a.qd_cmd is None) != (b.qd_cmd is None):
+        raise AssertionError("qd_cmd kept in one run only")
+    sa, sb = a.summary(), b.summary()
+    rel = TOL + EIG * float(b.rcn.max()) ** 2
+    assert sa == pytest.approx(sb, rel=TOL, abs=TOL) or all(
+        sa[k] == pytest.approx(sb[k], rel=rel if k.startswith("rcn") else TOL, abs=TOL) for k in sb
+    )
+
+
+def _pair(arm, path, alg, **kw):
+    fast = simulate(arm, path, alg, engine="fast", **kw)
+    ref = simulate(arm, path, alg, engine="reference", **kw)
+    _same(fast, ref)
+    return fast, ref
+
+
+@pytest.mark.parametrize("alg", ["lnva", "jvja", "mda"])
+def test_planar_cases_agree(alg):
+    arm = ft.load_arm("planar_3r")
+    path = CirclePath(np.array([0.35, 0.0]), 0.1, 2 * np.pi, 0.3)
+    _pair(arm, path, alg, q0=np.array([0.3, 1.2, 1.0]), lockable="all")
+
+
+@pytest.mark.parametrize("alg", ["lnva", "jvja", "mda"])
+def test_spatial_with_feedback_and_weights_agree(alg):
+    arm = ft.load_arm("spatial_4r")
+    q0 = np.array([0.3, 0.5, 0.9, 0.7])
+    x0 = arm.fk(q0)
+    path = CirclePath(x0, 0.05, 2 * np.pi, 0.2, rows=(1, 2))
+    _pair(arm, path, alg, q0=q0, lockable=[0, 1, 2], weights=[1.0, 2.0, 0.5], feedback_gain=5.0)
+
+
+def test_pose_task_and_continuation_response_agree():
+    arm = ft.load_arm("panda", task="pose")
+    q0 = np.array([0.1, -0.4, 0.2, -2.0, 0.1, 1.8, 0.6])
+    x0 = arm.fk(q0)
+    path = FunctionPath(lambda t: x0 + 0.02 * np.sin(t) * np.ones(6), 0.05)
+    for response in ("least_norm", "continuation"):
+        _pair(arm, path, "jvja", q0=q0, lockable="all", response=response, feedback_gain=2.0)
+
+
+def test_lock_with_servo_agrees():
+    arm = ft.load_arm("powercube_3r")
+    q0 = np.array([0.4, 0.9, 0.6])
+    path = CirclePath(arm.fk(q0), 0.05, np.pi / 3, 0.4, sign=-1.0)
+    kw = dict(q0=q0, lockable=["joint3"], lock_joint="joint3", lock_time=0.15)
+    _pair(arm, path, "lnva", servo=ServoModel(tau=0.05, accel_limit=50.0), feedback_gain=10, **kw)
+
+
+def test_near_singular_samples_go_the_reference_way_and_agree():
+    """A path through a singularity of J and near-intolerable samples: damped by the reference."""
+    arm = ft.load_arm("planar_3r")
+    q0 = np.array([0.0, 0.3, 0.3])  # nearly stretched: σ_min small, pivots small on the way
+    path = CirclePath(arm.fk(q0), 0.2, 2 * np.pi, 0.3, sign=-1.0)
+    fast, _ = _pair(arm, path, "jvja", q0=q0, lockable="all")
+    assert fast.flags.any()  # the run did meet damped samples
+
+
+def test_engine_is_checked():
+    arm = ft.load_arm("planar_3r")
+    path = CirclePath(np.array([0.35, 0.0]), 0.1, 2 * np.pi, 0.01)
+    with pytest.raises(ft.InvalidInput, match="engine"):
+        simulate(arm, path, q0=np.array([0.3, 1.2, 1.0]), engine="turbo")
+    panda = ft.load_arm("panda", task="position")
+    q0 = np.array([0.1, -0.4, 0.2, -2.0, 0.1, 1.8, 0.6])
+    path = CirclePath(panda.fk(q0), 0.01, 2 * np.pi, 0.01)
+    with pytest.raises(ft.InvalidInput, match="multi-joint"):
+        simulate(panda, path, q0=q0, lockable=[(0, 1), 3], engine="fast")
+
+
+def test_plain_python_kernel_matches_the_compiled_one():
+    """The kernel is valid Python without numba: same row from ``py_func``; rates as ft.resolve."""
+    from fault_tolerance.simulation import HISTORIES, _allocate
+
+    assert sk.COLUMNS == HISTORIES
+    arm = ft.load_arm("spatial_4r")
+    q = arm.random_q(np.random.default_rng(3))
+    J = np.ascontiguousarray(arm.jacobian(q))
+    m, n = J.shape
+    xd = np.array([0.1, 0.0, 0.05])
+    cols, w = np.array([0, 1, 2], dtype=np.int64), np.ones(3)
+    params = np.zeros(sk.N_PARAMS)
+    params[[sk.P_TRACE, sk.P_PIVOT, sk.P_WSUM, sk.P_RCN_MAX, sk.P_LOCK]] = 1e6, 1e-4, 3.0, 1e8, -1
+    params[[sk.P_DT, sk.P_DECAY, sk.P_ACCEL]] = 1e-3, -1.0, np.inf
+    rows = []
+    for fn in (sk.compiled_sample_kernel(), sk.compiled_sample_kernel().py_func):
+        rec = _allocate(1, n, m, 3, 1e-3)
+        flag = fn(J, xd, np.zeros(n), np.zeros(n), q.copy(), np.zeros(n), np.zeros(m),
+                  np.zeros(m), np.zeros(m), cols, w, np.full(n, np.inf), params, sk.JVJA, 0,
+                  rec["_table"], rec["_offsets"], np.zeros(sk.workspace_size(m, n)))  # fmt: skip
+        assert flag == 0
+        rows.append(rec)
+    for h in HISTORIES:
+        np.testing.assert_allclose(rows[0][h], rows[1][h], rtol=1e-12, atol=1e-14, err_msg=h)
+    ref = ft.resolve("jvja", J, xd, lockable=[0, 1, 2])
+    np.testing.assert_allclose(rows[0]["qd_cmd"][0], ref, rtol=1e-10, atol=1e-14)
+    np.testing.assert_allclose(rows[0]["rcn"][0], ft.rcn(J, [0, 1, 2]), rtol=1e-10)
