@@ -24,7 +24,7 @@ import numpy as np
 import pinocchio as pin
 
 from .errors import FaultToleranceError
-from .linalg import SIGMA_EPS
+from .linalg import SIGMA_EPS, projection
 
 __all__ = [
     "TRACE_MAX",
@@ -47,6 +47,7 @@ _LWA = pin.LOCAL_WORLD_ALIGNED
 _WORLD = pin.WORLD
 _INF = float("inf")
 _STEP_ERRORS = (ValueError, TypeError, RuntimeError, AttributeError, IndexError)
+F64 = np.dtype(np.float64)
 
 
 class Workspace(Protocol):
@@ -77,7 +78,9 @@ class Workspace(Protocol):
 
     def _fallback(self, name: str, J, xdot, out, q=None) -> np.ndarray: ...
     def _bad_call(self, err: Exception, q, xdot, out) -> Exception: ...
-    def _shift_general(self, N: np.ndarray, a: np.ndarray, c: np.ndarray) -> bool: ...
+    def _shift_general(
+        self, J: np.ndarray, B: np.ndarray, a: np.ndarray, c: np.ndarray
+    ) -> bool: ...
     def _djac(self, Jw: np.ndarray, Jl: np.ndarray, p: np.ndarray) -> np.ndarray: ...
     def rcn_gradient(self, J: np.ndarray, dJ: np.ndarray) -> np.ndarray:
         """Gradient of the square-sum RCN ``K``, shape (n,)."""
@@ -148,7 +151,7 @@ def lapack_linalg_or_numpy() -> SimpleNamespace:
 
 
 # Eqn. (5) in closed form (G2), one step after the Jacobian; compiled by numba.
-def step_kernel(J, xdot, out, G, B, N, c, fw, params, jvja):  # pragma: no cover - numba
+def step_kernel(J, xdot, out, G, B, c, fw, params, jvja):  # pragma: no cover - numba
     """LNVA (``jvja=0``) or single-joint JVJA (``jvja=1``) rates into ``out``; returns a status.
 
     ``params = [TRACE_MAX, pivot threshold, rank coefficient, alpha]``; ``fw[0]`` is 0 on lockable
@@ -156,9 +159,12 @@ def step_kernel(J, xdot, out, G, B, N, c, fw, params, jvja):  # pragma: no cover
     ``alpha = -1/f``). Status 0: done; 1: no certificate of ``σ_min ≥ SIGMA_EPS`` (or non-finite
     numbers), the caller falls back to the planner; 2: a pivot ``N_ii`` is below the threshold
     (``PIVOT_TOL``: intolerable; ``PIVOT_EPS`` with ``tolerate``: to be damped by the planner).
+    Status 3: ``xdot`` or ``out`` has the wrong size (nothing written).
     Plain Python (valid without numba, and tested so): only scalar loops.
     """
     m, n = J.shape
+    if xdot.shape[0] != m or out.shape[0] != n:
+        return 3
     # G = J Jᵀ (lower triangle) and its Cholesky factor L, in place.
     for i in range(m):
         for j in range(i + 1):
@@ -212,21 +218,23 @@ def step_kernel(J, xdot, out, G, B, N, c, fw, params, jvja):  # pragma: no cover
         if not s < _INF:
             return 1
         return 0
-    # JVJA: B = G⁻¹ J (L Y = J, Lᵀ B = Y); a = Bᵀ ẋ.
+    # JVJA: Y = L⁻¹ J (in B) and z = L⁻¹ ẋ (in c), forward substitutions only: a = Yᵀ z,
+    # N_ii = 1 - ‖Y_i‖², N c = c - Yᵀ (Y c). N is never formed: O(m² n), linear in n.
     for col in range(n):
         for i in range(m):
             t = J[i, col]
             for k in range(i):
                 t -= G[i, k] * B[k, col]
             B[i, col] = t / G[i, i]
-        for i in range(m - 1, -1, -1):
-            t = B[i, col]
-            for k in range(i + 1, m):
-                t -= G[k, i] * B[k, col]
-            B[i, col] = t / G[i, i]
+    for i in range(m):
+        t = xdot[i]
+        for k in range(i):
+            t -= G[i, k] * c[k]
+        c[i] = t / G[i, i]
+    for col in range(n):
         s = 0.0
         for i in range(m):
-            s += B[i, col] * xdot[i]
+            s += B[i, col] * c[i]
         out[col] = s
     if params[2] > 0.0:  # rank certificate (linalg.RANK_RTOL) for arms without a static bound
         s = 0.0
@@ -235,25 +243,25 @@ def step_kernel(J, xdot, out, G, B, N, c, fw, params, jvja):  # pragma: no cover
                 s += J[i, k] * J[i, k]
         if not params[2] * s * tr < 1.0:
             return 1
-    # N = I - Jᵀ B; c_i = (w_i / W) a_i / N_ii on lockable columns; out = a + alpha N c.
-    for r in range(n):
-        for col in range(n):
-            s = 0.0
-            for i in range(m):
-                s -= J[i, r] * B[i, col]
-            N[r, col] = s
-        N[r, r] += 1.0
+    # c_i = (w_i / W) a_i / N_ii on lockable columns; out = a + alpha N c.
     for i in range(n):
-        d = N[i, i] + fw[0, i]
+        d = 1.0 + fw[0, i]
+        for r in range(m):
+            d -= B[r, i] * B[r, i]
         if d < params[1]:
             return 2
         c[i] = out[i] / d * fw[1, i]
     alpha = params[3]
-    for r in range(n):
+    for r in range(m):
         s = 0.0
-        for col in range(n):
-            s += N[r, col] * c[col]
-        out[r] += alpha * s
+        for i in range(n):
+            s += B[r, i] * c[i]
+        G[r, 0] = s  # the factor is no longer needed: its first column is scratch
+    for i in range(n):
+        s = c[i]
+        for r in range(m):
+            s -= B[r, i] * G[r, 0]
+        out[i] += alpha * s
     s = 0.0
     for i in range(n):
         s += out[i] * out[i]
@@ -262,16 +270,55 @@ def step_kernel(J, xdot, out, G, B, N, c, fw, params, jvja):  # pragma: no cover
     return 0
 
 
+# The floor of a control step after the Jacobian: least-norm rates with no check at all.
+def floor_kernel(J, xdot, out, G, y):  # pragma: no cover - numba
+    """``out = Jᵀ (J Jᵀ)⁻¹ ẋ`` by Cholesky, nothing else (the benchmark's floor)."""
+    m, n = J.shape
+    for i in range(m):
+        for j in range(i + 1):
+            s = 0.0
+            for k in range(n):
+                s += J[i, k] * J[j, k]
+            G[i, j] = s
+    for j in range(m):
+        s = G[j, j]
+        for k in range(j):
+            s -= G[j, k] * G[j, k]
+        s = math.sqrt(s)
+        G[j, j] = s
+        for i in range(j + 1, m):
+            t = G[i, j]
+            for k in range(j):
+                t -= G[i, k] * G[j, k]
+            G[i, j] = t / s
+    for i in range(m):
+        t = xdot[i]
+        for k in range(i):
+            t -= G[i, k] * y[k]
+        y[i] = t / G[i, i]
+    for i in range(m - 1, -1, -1):
+        t = y[i]
+        for k in range(i + 1, m):
+            t -= G[k, i] * y[k]
+        y[i] = t / G[i, i]
+    for col in range(n):
+        t = 0.0
+        for i in range(m):
+            t += J[i, col] * y[i]
+        out[col] = t
+
+
 _COMPILED: dict[str, Callable] = {}
 
 
-def compiled_kernel() -> Callable:
-    """:func:`step_kernel` compiled by numba (once per process; cached on disk)."""
-    if "step" not in _COMPILED:
+def compiled_kernel(name: str = "step") -> Callable:
+    """:func:`step_kernel` (or ``"floor"``: :func:`floor_kernel`) compiled by numba, once."""
+    if name not in _COMPILED:
         import numba
 
-        _COMPILED["step"] = numba.njit(cache=True, nogil=True, error_model="numpy")(step_kernel)
-    return _COMPILED["step"]
+        fn = {"step": step_kernel, "floor": floor_kernel}[name]
+        _COMPILED[name] = numba.njit(cache=True, nogil=True, error_model="numpy")(fn)
+    return _COMPILED[name]
 
 
 # -- LNVA / JVJA / MDA with LAPACK (or NumPy) calls --------------------------------------------
@@ -318,13 +365,11 @@ def lapack_jvja(ctrl: Workspace) -> Callable[..., np.ndarray]:
     n, m = ctrl.n, ctrl.m
     la = ctrl._la
     dsyrk, dposv, dtrtri, ddot = la.dsyrk, la.dposv, la.dtrtri, la.ddot
-    dgemm, dgemv = la.dgemm, la.dgemv
+    dgemv = la.dgemv
     cfj, dot, empty = pin.computeFrameJacobian, np.dot, np.empty
-    divide, multiply, add = np.divide, np.multiply, np.add
+    divide, multiply, add, subtract, einsum = np.divide, np.multiply, np.add, np.subtract, np.einsum
     GT = np.zeros((m, m), order="F")
-    eye = np.asfortranarray(np.eye(n))
-    c = np.empty(n)
-    dF = np.empty(n)
+    c, d, dF = np.empty(n), np.empty(n), np.empty(n)
     off, wrel = ctrl._fw[0], ctrl._fw[1]
     rank_coef, alpha = ctrl._rank_coef, ctrl._alpha
     fallback, bad_call, general = ctrl._fallback, ctrl._bad_call, ctrl._shift_general
@@ -349,26 +394,29 @@ def lapack_jvja(ctrl: Workspace) -> Callable[..., np.ndarray]:
             if info or not tr <= TRACE_MAX or not rank_ok:  # NaN fails too
                 return fallback("jvja", J, xdot, out)
             dot(xdot, B, out=out)  # a
-            N = dgemm(-1.0, J.T, B, 1.0, eye)  # N = I - JᵀG⁻¹J
-            d = N.diagonal()
+            einsum("ij,ij->j", J, B, out=d)  # N is never formed: N_ii = 1 - J_iᵀ B_i
+            subtract(1.0, d, out=d)
             if mode == "all":  # c_i = a_i / N_ii, alpha = -1/f
                 if min(d.tolist()) < tol:
                     if not tolerate:
-                        check_tolerable(N)  # raises IntolerableFailure naming the joint
+                        check_tolerable(projection(J).N)  # raises, naming the joint
                     return fallback("jvja", J, xdot, out)  # pivots damped by the planner
                 divide(out, d, out=c)
             elif mode == "singletons":
                 add(d, off, out=dF)
                 if min(dF.tolist()) < tol:
                     if not tolerate:
-                        check_tolerable(N)
+                        check_tolerable(projection(J).N)
                     return fallback("jvja", J, xdot, out)
                 divide(out, dF, out=c)
                 if weighted:
                     multiply(c, wrel, out=c)
-            elif not general(N, out, c):
+            elif not general(J, B, out, c):
                 return fallback("jvja", J, xdot, out)
-            r = dgemv(alpha, N, c, 1.0, out, 0, 1, 0, 1, 0, 1)  # a + alpha N c, in place
+            y = dgemv(1.0, B, c)  # a + alpha N c = a + alpha c - alpha Jᵀ (B c), in place
+            r = dgemv(-alpha, J, y, 1.0, out, 0, 1, 0, 1, 1, 1)
+            multiply(c, alpha, out=c)
+            add(r, c, out=r)
         except FaultToleranceError:
             raise
         except _STEP_ERRORS as err:
@@ -451,7 +499,7 @@ def compiled_step(ctrl: Workspace, jvja: int) -> Callable[..., np.ndarray]:
     n, m = ctrl.n, ctrl.m
     kernel = compiled_kernel()
     cfj, empty, ndarray, f64 = pin.computeFrameJacobian, np.empty, np.ndarray, np.float64
-    G, B, N, c = np.empty((m, m)), np.empty((m, n)), np.empty((n, n)), np.empty(n)
+    G, B, c = np.empty((m, m)), np.empty((m, n)), np.empty(n)
     fw = ctrl._fw
     params = np.array([TRACE_MAX, ctrl._pivot_threshold, ctrl._rank_coef, ctrl._alpha])
     tolerate = ctrl.tolerate
@@ -459,27 +507,38 @@ def compiled_step(ctrl: Workspace, jvja: int) -> Callable[..., np.ndarray]:
     fallback, bad_call = ctrl._fallback, ctrl._bad_call
     check_tolerable = ctrl.scenarios.check_tolerable
     name = "jvja" if jvja else "lnva"
-    kernel(np.zeros((m, n)), np.zeros(m), np.zeros(n), G, B, N, c, fw, params, jvja)  # compile
+    kernel(np.zeros((m, n)), np.zeros(m), np.zeros(n), G, B, c, fw, params, jvja)  # compile
+
+    def slow(q, xdot, out, err: Exception) -> np.ndarray:
+        """A call the compiled kernel refused (types, shapes): convert ``xdot`` once, or say why."""
+        if type(out) is ndarray and out.shape == shape_n and out.dtype == f64:
+            if not (type(xdot) is ndarray and xdot.dtype == f64):
+                x2 = np.asarray(xdot, dtype=float)
+                if x2.shape == shape_m:
+                    return step(q, np.ascontiguousarray(x2), out)
+        raise bad_call(err, q, xdot, out) from err
 
     def step(q: np.ndarray, xdot: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
         if out is None:
             out = empty(n)
-        elif type(out) is not ndarray or out.shape != shape_n or out.dtype != f64:
-            raise bad_call(ValueError("out"), q, xdot, out)
-        if type(xdot) is not ndarray or xdot.shape != shape_m or xdot.dtype != f64:
-            xdot = np.asarray(xdot, dtype=float)
-            if xdot.shape != shape_m:
-                raise bad_call(ValueError("xdot"), q, xdot, out)
-        try:
-            J = cfj(model, data, q, fid, _LWA)[rows]
-            status = kernel(J, xdot, out, G, B, N, c, fw, params, jvja)
+        if type(out) is not ndarray or type(xdot) is not ndarray or out.dtype is not F64:
+            return slow(q, xdot, out, TypeError("not a float64 array"))  # numba would compile it
+        if xdot.dtype is not F64:
+            return slow(q, xdot, out, TypeError("not a float64 array"))
+        try:  # the kernel checks the sizes (status 3); numba checks the dtypes (TypeError)
+            status = kernel(
+                cfj(model, data, q, fid, _LWA)[rows], xdot, out, G, B, c, fw, params, jvja
+            )
         except FaultToleranceError:
             raise
         except _STEP_ERRORS as err:
-            raise bad_call(err, q, xdot, out) from err
+            return slow(q, xdot, out, err)
         if status:
+            if status == 3:
+                return slow(q, xdot, out, ValueError("shape"))
+            J = cfj(model, data, q, fid, _LWA)[rows]
             if status == 2 and not tolerate:
-                check_tolerable(N)  # raises IntolerableFailure naming the joint
+                check_tolerable(projection(J).N)  # raises IntolerableFailure naming the joint
             return fallback(name, J, xdot, out)
         return out
 

@@ -342,26 +342,28 @@ class Controller:
         return InvalidInput(f"step failed: {err}")
 
     # -- multi-joint JVJA (G1), called by kernels.lapack_jvja ---------------------------------
-    def _shift_general(self, N: np.ndarray, a: np.ndarray, c: np.ndarray) -> bool:
+    def _shift_general(self, J: np.ndarray, B: np.ndarray, a: np.ndarray, c: np.ndarray) -> bool:
         """``c = Σ_S (w_S/W) E_S N[S,S]⁻¹ a[S]`` (G1), one batched solve per scenario size.
 
-        False when a pivot needs the planner's damping (``tolerate``); raises when intolerable.
+        ``N[S, S] = I - J_Sᵀ B_S`` (``B = G⁻¹J``): N itself is never formed. False when a pivot
+        needs the planner's damping (``tolerate``); raises when intolerable.
         """
         c[:] = 0.0
         for idx, wrel in self._groups:
-            NSS = N[idx[:, :, None], idx[:, None, :]]  # (k, s, s)
+            NSS = -np.einsum("rks,rkt->kst", J[:, idx], B[:, idx])  # (k, s, s)
+            NSS[:, range(idx.shape[1]), range(idx.shape[1])] += 1.0
             if idx.shape[1] == 1:
                 piv = NSS[:, 0, 0]
                 if piv.min() < self._pivot_threshold:
                     if self.tolerate:
                         return False
-                    self.scenarios.check_tolerable(N)
+                    self.scenarios.check_tolerable(np.eye(self.n) - J.T @ B)
                 np.add.at(c, idx[:, 0], wrel * a[idx[:, 0]] / piv)
                 continue
             if np.linalg.eigvalsh(NSS)[:, 0].min() < self._pivot_threshold:
                 if self.tolerate:
                     return False
-                self.scenarios.check_tolerable(N)
+                self.scenarios.check_tolerable(np.eye(self.n) - J.T @ B)
             sol = np.linalg.solve(NSS, a[idx][:, :, None])[:, :, 0]  # (k, s)
             np.add.at(c, idx.ravel(), (wrel[:, None] * sol).ravel())
         return True

@@ -165,7 +165,7 @@ def test_kernel_as_plain_python(robot, draw_q, draw_xdot, rng):
     """The compiled kernel's source, run as plain Python, gives the planner's LNVA and JVJA."""
     ctrl = _controllers(robot, "numpy")
     n, m = robot.n, robot.m
-    G, B, N, c = np.empty((m, m)), np.empty((m, n)), np.empty((n, n)), np.empty(n)
+    G, B, c = np.empty((m, m)), np.empty((m, n)), np.empty(n)
     params = np.array([realtime.TRACE_MAX, PIVOT_TOL, ctrl._rank_coef, ctrl._alpha])
     for q, xd in _samples(robot, draw_q, draw_xdot, rng, k=3):
         J = robot.arm.jacobian(q)
@@ -174,7 +174,7 @@ def test_kernel_as_plain_python(robot, draw_q, draw_xdot, rng):
             (0, ft.resolve("lnva", J, xd)),
             (1, ft.resolve("jvja", J, xd, lockable=list(robot.lockable))),
         ):
-            assert kernels.step_kernel(J, xd, out, G, B, N, c, ctrl._fw, params, jvja) == 0
+            assert kernels.step_kernel(J, xd, out, G, B, c, ctrl._fw, params, jvja) == 0
             assert_close(out, ref)
 
 

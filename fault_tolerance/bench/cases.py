@@ -23,7 +23,13 @@ ARMS: dict[str, dict] = {
     "panda_pose": {"robot": "panda", "task": "pose", "lockable": "all"},
     "panda_position": {"robot": "panda", "task": "position", "lockable": "all"},
     "powercube_3r": {"robot": "powercube_3r", "task": None, "lockable": "all"},
+    **{
+        f"chain_{n}": {"robot": f"chain_{n}", "task": "pose", "lockable": "all", "chain": n}
+        for n in (7, 14, 30, 50)
+    },
 }
+#: The synthetic chains of the scaling table (``bench.chain``).
+CHAIN_ARMS = ("chain_7", "chain_14", "chain_30", "chain_50")
 #: Arms run when ``--robots`` is not given.
 DEFAULT_ARMS = ("planar_3r", "spatial_4r", "panda_pose", "panda_position")
 POOL = 64
@@ -31,6 +37,10 @@ SEED = 20240521
 
 DESCRIPTIONS = {
     "jacobian": "task Jacobian (Pinocchio computeFrameJacobian)",
+    "floor": "Jacobian + compiled least-norm solve (Cholesky of J Jᵀ, no check): the floor",
+    "jvja_multi": "JVJA step, two-joint scenarios (j, j+1) (Jacobian included)",
+    "sim_jvja": "one simulated JVJA sample: rates, λ parts, k_S, K, σ_min, flags, record",
+    "sim_lnva": "one simulated LNVA sample: rates, λ parts, k_S, K, σ_min, flags, record",
     "lnva": "LNVA step, fast path (Jacobian included)",
     "jvja": "JVJA step, closed form G2, fast path (Jacobian included)",
     "rcn": "RCN of all scenarios, one batched eigvalsh (Jacobian included)",
@@ -99,7 +109,12 @@ def make_case(key: str, backend: str = "auto") -> Case:
     from ..realtime import Controller
 
     spec = ARMS[key]
-    arm = ft.load_arm(spec["robot"], **({"task": spec["task"]} if spec["task"] else {}))
+    if "chain" in spec:
+        from .chain import synthetic_chain
+
+        arm = synthetic_chain(spec["chain"], spec["task"])
+    else:
+        arm = ft.load_arm(spec["robot"], **({"task": spec["task"]} if spec["task"] else {}))
     ctrl = Controller(arm, spec["lockable"], backend=backend)
     qs, xds = _pool(arm, ctrl.scenarios, np.random.default_rng(SEED), POOL)
     return Case(key, spec, arm, ctrl, qs, xds, np.empty(arm.n))
@@ -125,6 +140,56 @@ def fast_rows(case: Case) -> dict[str, Row]:
             c2 = Controller(case.arm, case.spec["lockable"], backend=other)
             rows[f"lnva_{other}"] = (c2.lnva, qxo)
             rows[f"jvja_{other}"] = (c2.jvja, qxo)
+    if case.arm.redundancy >= 2:  # two-joint scenarios: the general (G1) kernel
+        pairs = [(j, j + 1) for j in range(case.arm.n - 1)]
+        rows["jvja_multi"] = (Controller(case.arm, pairs, backend=ctrl.backend).jvja, qxo)
+    return rows
+
+
+def floor_rows(case: Case) -> dict[str, Row]:
+    """The floor of a step: Pinocchio's Jacobian and a compiled least-norm solve, nothing else."""
+    import pinocchio as pin
+
+    from ..kernels import compiled_kernel
+
+    ctrl, m = case.ctrl, case.arm.m
+    kernel, cfj, lwa = compiled_kernel("floor"), pin.computeFrameJacobian, pin.LOCAL_WORLD_ALIGNED
+    model, data, fid, sel = ctrl.model, ctrl.model.createData(), ctrl.frame_id, ctrl._rows
+    G, y = np.empty((m, m)), np.empty(m)
+
+    def floor(q, xd, out):
+        kernel(cfj(model, data, q, fid, lwa)[sel], xd, out, G, y)
+        return out
+
+    return {"floor": (floor, case.qxo)}
+
+
+def simulated_rows(case: Case) -> dict[str, Row]:
+    """One sample of ``simulate`` (the loop body), LNVA and JVJA, along a 1 s circle of 1 cm."""
+    from .. import simulation as sim
+    from ..sampler import Sampler, covers
+    from ..trajectories import CirclePath
+
+    arm, sc = case.arm, case.sc
+    if covers(sc, "jvja", "least_norm") is not None:
+        return {}
+    q0 = case.qs[0]
+    path = CirclePath(arm.fk(q0)[: arm.m], 0.01, 2 * np.pi, 1.0, rows=(0, 1))
+    rows: dict[str, Row] = {}
+    for alg in ("lnva", "jvja"):
+        s = sim._setup(arm, path, alg, q0, sc, None, "least_norm", 1e-3, None, 0.0, 1e-2,
+                       None, None, None)  # fmt: skip
+        rec = sim._allocate(s.steps + 1, arm.n, arm.m, sc.f, s.dt)
+        X, XD = sim.sample_path(path, rec["t"], arm.m)
+        state = sim._State(q=q0.copy(), qd=np.zeros(arm.n), keep=np.arange(arm.n))
+        smp = Sampler(s, rec)
+
+        def sample(k, s=s, state=state, smp=smp, rec=rec, X=X, XD=XD):
+            sim._maybe_lock(s, state, k * s.dt)
+            if not smp.step(state, k, X[k], XD[k]):
+                sim._step(s, state, k, rec, X[k], XD[k])
+
+        rows[f"sim_{alg}"] = (sample, [(k,) for k in range(s.steps + 1)])
     return rows
 
 
@@ -171,8 +236,13 @@ def slow_rows(case: Case) -> dict[str, Row]:
 
 #: ``(label, builder, divisor)``, timed in this order; a group's rows get ``--steps // divisor``
 #: calls (at least 5) after ``--warmup // divisor`` (at least 2) warm-up calls.
+def _fast_group(case: Case) -> dict[str, Row]:
+    """The fast path, the floor and the simulated sample: timed side by side (ratios)."""
+    return {**fast_rows(case), **floor_rows(case), **simulated_rows(case)}
+
+
 GROUPS: list[tuple[str, Callable[[Case], dict[str, Row]], int]] = [
-    ("fast path", fast_rows, 1),
+    ("fast path, floor, simulated sample", _fast_group, 1),
     ("reference routes", reference_rows, 1),
     ("slow routes", slow_rows, 10),
 ]
@@ -189,7 +259,7 @@ def deviations(case: Case, rows: dict[str, Row]) -> dict[str, float]:
     names += tuple(k for k in rows if k.startswith("jvja_") and k not in names)
     out = {}
     for name in names:
-        if name not in rows or name == "jvja":
+        if name not in rows or name in ("jvja", "jvja_multi"):
             continue
         fn, args = rows[name]
         got = [np.array(fn(*a[:2]), dtype=float) for a in args]
