@@ -33,7 +33,8 @@ Backends for the LNVA and single-joint JVJA steps (``backend=``):
 * ``"numpy"``: the same code with NumPy in place of the LAPACK wrappers (no extra dependency);
 * ``"auto"`` (default): the first of these that is installed.
 
-MDA, the RCN and multi-joint JVJA always use the lapack (or numpy) code. The step kernels (the
+MDA and the RCN always use the lapack (or numpy) code; multi-joint JVJA with numba runs
+:func:`fault_tolerance.multi_kernel.multi_kernel`. The step kernels (the
 LAPACK/NumPy calls, the numba kernel and its compilation) are in :mod:`fault_tolerance.kernels`;
 this module builds the workspace they run in and hands singular steps to the planner.
 
@@ -238,9 +239,12 @@ class Controller:
         self._init_scenario_tables()
         if backend == "numba":
             self.lnva = kernels.compiled_step(self, 0)
-            self.jvja = (
-                kernels.compiled_step(self, 1) if self._singletons else kernels.lapack_jvja(self)
-            )
+            if self._singletons:
+                self.jvja = kernels.compiled_step(self, 1)
+            else:  # multi-joint scenarios (G1), compiled too
+                from .multi_kernel import compiled_multi_step
+
+                self.jvja = compiled_multi_step(self)
         else:
             self.lnva = kernels.lapack_lnva(self)
             self.jvja = kernels.lapack_jvja(self)

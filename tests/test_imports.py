@@ -54,7 +54,8 @@ def _imports(path: Path) -> set[str]:
                 mod = node.module or ""
             if not mod.startswith("fault_tolerance"):
                 continue
-            out.add(mod)
+            if node.module or not node.level:  # `from . import kernels` needs kernels only
+                out.add(mod)
             out.update(f"{mod}.{a.name}" for a in node.names)  # `from . import kernels`
     return out
 

@@ -1,0 +1,206 @@
+"""The JVJA step for any scenarios, multi-joint ones too (G1), in one compiled kernel.
+
+:func:`multi_kernel` is :func:`fault_tolerance.kernels.step_kernel`'s JVJA for scenarios of any
+size: with ``Y = L⁻¹J`` (``G = J Jᵀ = L Lᵀ``) every ``N[S, S] = I − Y_Sᵀ Y_S`` is an s x s matrix
+built in O(m s²), factored by Cholesky (a scenario is refused or handed to the planner when
+``N[S, S] − threshold·I`` is not positive definite, i.e. its smallest eigenvalue is below the
+threshold), and ``q̇ = a − N c``, ``c = Σ_S (w_S/W) E_S N[S,S]⁻¹ a_S``, with ``N c = c − Yᵀ(Y c)``:
+N is never formed. Used by :class:`fault_tolerance.realtime.Controller` with the numba backend.
+Plain Python without numba (and tested so).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+
+import numpy as np
+import pinocchio as pin
+
+try:
+    import numba
+
+    _njit = numba.njit(cache=True, nogil=True, error_model="numpy")
+except ImportError:  # pragma: no cover - numba is a core dependency
+
+    def _njit(fn):
+        return fn
+
+
+_LWA = pin.LOCAL_WORLD_ALIGNED
+_F64 = np.dtype(np.float64)
+
+
+@_njit
+def _chol(A, L, s, shift) -> bool:  # pragma: no cover - numba
+    """Lower Cholesky factor of ``A[:s, :s] − shift·I`` into ``L``; False unless PD."""
+    for j in range(s):
+        t = A[j, j] - shift
+        for k in range(j):
+            t -= L[j, k] * L[j, k]
+        if not t > 0.0:
+            return False
+        t = math.sqrt(t)
+        L[j, j] = t
+        for i in range(j + 1, s):
+            u = A[i, j]
+            for k in range(j):
+                u -= L[i, k] * L[j, k]
+            L[i, j] = u / t
+    return True
+
+
+@_njit
+def multi_kernel(J, xdot, out, ws, sets, wrel, params) -> int:  # pragma: no cover - numba
+    """JVJA rates into ``out`` for the scenarios ``sets`` (f, s_max; -1 pads); a status.
+
+    ``params = [TRACE_MAX, pivot threshold, rank coefficient]``; ``wrel`` the weights over their
+    sum; ``ws`` a float workspace of ``m² + m n + n + 2 s_max² + 2 s_max`` numbers. Status 0:
+    done; 1: no certificate of ``σ_min ≥ SIGMA_EPS`` (or not finite): the planner's step;
+    2: a scenario's ``N[S, S]`` has an eigenvalue below the threshold; 3: wrong sizes.
+    """
+    m, n = J.shape
+    if xdot.shape[0] != m or out.shape[0] != n:
+        return 3
+    smax = sets.shape[1]
+    G = ws[0 : m * m].reshape((m, m))
+    Y = ws[m * m : m * m + m * n].reshape((m, n))
+    o = m * m + m * n
+    c = ws[o : o + n]
+    A = ws[o + n : o + n + smax * smax].reshape((smax, smax))
+    L = ws[o + n + smax * smax : o + n + 2 * smax * smax].reshape((smax, smax))
+    x = ws[o + n + 2 * smax * smax : o + n + 2 * smax * smax + smax]
+    for i in range(m):
+        for j in range(i + 1):
+            t = 0.0
+            for k in range(n):
+                t += J[i, k] * J[j, k]
+            G[i, j] = t
+    if not _chol(G, G, m, 0.0):
+        return 1
+    tr = 0.0  # trace(G⁻¹) = ‖L⁻¹‖_F², the certificate (c as scratch)
+    for j in range(m):
+        for i in range(j, m):
+            t = 1.0 if i == j else 0.0
+            for k in range(j, i):
+                t -= G[i, k] * c[k]
+            c[i] = t / G[i, i]
+            tr += c[i] * c[i]
+    if not tr <= params[0]:
+        return 1
+    if params[2] > 0.0:
+        t = 0.0
+        for i in range(m):
+            for k in range(n):
+                t += J[i, k] * J[i, k]
+        if not params[2] * t * tr < 1.0:
+            return 1
+    for col in range(n):  # Y = L⁻¹ J
+        for i in range(m):
+            t = J[i, col]
+            for k in range(i):
+                t -= G[i, k] * Y[k, col]
+            Y[i, col] = t / G[i, i]
+    for i in range(m):  # z = L⁻¹ ẋ (in c), a = Yᵀ z (in out)
+        t = xdot[i]
+        for k in range(i):
+            t -= G[i, k] * c[k]
+        c[i] = t / G[i, i]
+    for col in range(n):
+        t = 0.0
+        for i in range(m):
+            t += Y[i, col] * c[i]
+        out[col] = t
+    for i in range(n):
+        c[i] = 0.0
+    for k in range(sets.shape[0]):
+        s = 0
+        while s < smax and sets[k, s] >= 0:
+            s += 1
+        for p in range(s):  # N[S, S] = I - Y_Sᵀ Y_S
+            for q in range(p + 1):
+                t = 1.0 if p == q else 0.0
+                for r in range(m):
+                    t -= Y[r, sets[k, p]] * Y[r, sets[k, q]]
+                A[p, q] = t
+                A[q, p] = t
+        if not _chol(A, L, s, params[1]):
+            return 2
+        _chol(A, L, s, 0.0)
+        for p in range(s):  # x = N[S, S]⁻¹ a_S
+            t = out[sets[k, p]]
+            for q in range(p):
+                t -= L[p, q] * x[q]
+            x[p] = t / L[p, p]
+        for p in range(s - 1, -1, -1):
+            t = x[p]
+            for q in range(p + 1, s):
+                t -= L[q, p] * x[q]
+            x[p] = t / L[p, p]
+        for p in range(s):
+            c[sets[k, p]] += wrel[k] * x[p]
+    for r in range(m):  # out = a - N c = a - c + Yᵀ (Y c); G's first column as scratch
+        t = 0.0
+        for i in range(n):
+            t += Y[r, i] * c[i]
+        G[r, 0] = t
+    total = 0.0
+    for i in range(n):
+        t = c[i]
+        for r in range(m):
+            t -= Y[r, i] * G[r, 0]
+        out[i] -= t
+        total += out[i] * out[i]
+    if not total < math.inf:
+        return 1
+    return 0
+
+
+def compiled_multi_step(ctrl) -> Callable[..., np.ndarray]:
+    """The compiled JVJA step of a controller whose scenarios may lock several joints."""
+    from .kernels import TRACE_MAX
+    from .linalg import projection
+
+    model, data, fid, rows = ctrl.model, ctrl.data, ctrl.frame_id, ctrl._rows
+    n, m, sc = ctrl.n, ctrl.m, ctrl.scenarios
+    smax = max(len(S) for S in sc.sets)
+    sets = -np.ones((sc.f, smax), dtype=np.int64)
+    for k, S in enumerate(sc.sets):
+        sets[k, : len(S)] = S
+    wrel = np.ascontiguousarray(sc.weights / sc.weights.sum())
+    params = np.array([TRACE_MAX, ctrl._pivot_threshold, ctrl._rank_coef])
+    ws = np.zeros(m * m + m * n + n + 2 * smax * smax + 2 * smax)
+    cfj, ndarray = pin.computeFrameJacobian, np.ndarray
+    fallback, bad_call, tolerate = ctrl._fallback, ctrl._bad_call, ctrl.tolerate
+    multi_kernel(np.zeros((m, n)), np.zeros(m), np.zeros(n), ws, sets, wrel, params)  # compile
+
+    def slow(q, xdot, out, err):
+        if type(out) is ndarray and out.shape == (n,) and out.dtype is _F64:
+            x2 = np.asarray(xdot, dtype=float)
+            if x2.shape == (m,) and not (type(xdot) is ndarray and xdot.dtype is _F64):
+                return jvja(q, np.ascontiguousarray(x2), out)
+        raise bad_call(err, q, xdot, out) from err
+
+    def jvja(q: np.ndarray, xdot: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+        """JVJA, minimum square-sum jump rates, eq. (5) (G1, any scenarios); compiled."""
+        if out is None:
+            out = np.empty(n)
+        if type(out) is not ndarray or type(xdot) is not ndarray or out.dtype is not _F64:
+            return slow(q, xdot, out, TypeError("not a float64 array"))
+        if xdot.dtype is not _F64:
+            return slow(q, xdot, out, TypeError("not a float64 array"))
+        try:
+            status = multi_kernel(cfj(model, data, q, fid, _LWA)[rows], xdot, out, ws, sets,
+                                  wrel, params)  # fmt: skip
+        except (ValueError, TypeError, RuntimeError, AttributeError, IndexError) as err:
+            return slow(q, xdot, out, err)
+        if status:
+            if status == 3:
+                return slow(q, xdot, out, ValueError("shape"))
+            J = cfj(model, data, q, fid, _LWA)[rows]
+            if status == 2 and not tolerate:
+                sc.check_tolerable(projection(J).N)  # raises IntolerableFailure naming them
+            return fallback("jvja", J, xdot, out)
+        return out
+
+    return jvja

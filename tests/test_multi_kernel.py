@@ -1,0 +1,53 @@
+"""The compiled multi-joint JVJA step (G1) gives the planner's rates; plain Python too."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import fault_tolerance as ft
+from fault_tolerance import multi_kernel as mk
+from fault_tolerance.realtime import Controller
+
+pytest.importorskip("numba")
+
+PAIRS = [(0, 1), (2, 4), 3, (5, 6)]
+
+
+@pytest.fixture(scope="module")
+def panda():
+    return ft.load_arm("panda", task="position")
+
+
+def test_compiled_multi_joint_step_matches_the_planner(panda):
+    rng = np.random.default_rng(11)
+    ctrl = Controller(panda, PAIRS, weights=[1.0, 2.0, 0.5, 1.5], backend="numba")
+    for _ in range(20):
+        q, xd = panda.random_q(rng), rng.standard_normal(3)
+        J = panda.jacobian(q)
+        try:
+            ref = ft.resolve("jvja", J, xd, lockable=PAIRS, weights=[1.0, 2.0, 0.5, 1.5])
+        except ft.IntolerableFailure:
+            with pytest.raises(ft.IntolerableFailure):
+                ctrl.jvja(q, xd)
+            continue
+        np.testing.assert_allclose(ctrl.jvja(q, xd), ref, rtol=1e-9, atol=1e-11)
+        np.testing.assert_allclose(J @ ctrl.jvja(q, xd), xd, atol=1e-9)
+    assert ctrl.jvja.__name__ == "jvja"
+
+
+def test_plain_python_multi_kernel(panda):
+    rng = np.random.default_rng(2)
+    q, xd = panda.random_q(rng), rng.standard_normal(3)
+    J = np.ascontiguousarray(panda.jacobian(q))
+    sets = np.array([[0, 1], [3, -1]], dtype=np.int64)
+    wrel = np.array([0.5, 0.5])
+    params = np.array([1e6, 1e-9, 0.0])
+    outs = []
+    for fn in (mk.multi_kernel, mk.multi_kernel.py_func):
+        out = np.zeros(7)
+        assert fn(J, xd, out, np.zeros(9 + 21 + 7 + 8 + 4), sets, wrel, params) == 0
+        outs.append(out)
+    np.testing.assert_allclose(outs[0], outs[1], rtol=1e-12, atol=1e-14)
+    ref = ft.resolve("jvja", J, xd, lockable=[(0, 1), 3])
+    np.testing.assert_allclose(outs[0], ref, rtol=1e-9, atol=1e-12)
