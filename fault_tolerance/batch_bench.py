@@ -57,3 +57,16 @@ def bench_batch(configurations: int = 20000, reference: int = 2000, seed: int = 
         "target_speedup": TARGET_SPEEDUP,
         "passed": bool(t_loop / t_batch >= TARGET_SPEEDUP),
     }
+
+
+def target_item(result: dict) -> dict:
+    """The bench target row of :func:`bench_batch` (same fields as ``bench.targets``)."""
+    return {
+        "arm": "panda_position",
+        "name": "batch_over_loop",
+        "label": "loop / batched API per configuration",
+        "value": result["speedup"],
+        "limit": TARGET_SPEEDUP,
+        "relation": ">=",
+        "pass": result["passed"],
+    }

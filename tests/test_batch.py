@@ -112,3 +112,19 @@ def test_bad_input_is_refused():
         batch.resolve("mda", Js, np.ones((4, 2)))
     with pytest.raises(InvalidInput, match="finite"):
         batch.rcn(np.full((2, 2, 3), np.nan))
+
+
+def test_bench_has_the_batched_row(tmp_path, capsys):
+    """fault-tolerance bench times the batched API against the loop and lists its target."""
+    import json
+
+    from fault_tolerance import bench
+
+    out = tmp_path / "b.json"
+    args = ["--robots", "planar_3r", "--steps", "4", "--warmup", "1"]
+    assert bench.main([*args, "--batch-configurations", "300", "--json", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert "batched API" in text and "loop / batched API per configuration" in text
+    data = json.loads(out.read_text())
+    assert data["batch"]["configurations"] > 200 and data["batch"]["speedup"] > 0
+    assert bench.main([*args, "--batch-configurations", "-1"]) == 2

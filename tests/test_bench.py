@@ -17,7 +17,7 @@ from fault_tolerance import bench
 from fault_tolerance.planner import jvja_explicit
 
 ROOT = __import__("pathlib").Path(__file__).resolve().parents[1]
-TINY = ["--robots", "planar_3r", "--steps", "4", "--warmup", "1"]
+TINY = ["--robots", "planar_3r", "--steps", "4", "--warmup", "1", "--batch-configurations", "200"]
 
 
 @pytest.fixture(scope="module")

@@ -5,8 +5,7 @@ import json
 import numpy as np
 import pytest
 
-from fault_tolerance.cli import main
-from fault_tolerance.sweep_cli import EXAMPLES
+from fault_tolerance.cli import EXAMPLES, main
 
 
 @pytest.mark.parametrize("cmd", ["workspace", "design"])

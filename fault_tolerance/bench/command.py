@@ -68,6 +68,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--strict", action="store_true", help="exit with status 1 if a target fails"
     )
+    parser.add_argument(
+        "--batch-configurations",
+        type=int,
+        default=20000,
+        metavar="B",
+        help="configurations of the batched-API row (Panda position task, five lockable "
+        "joints; default 20000; 0 skips it)",
+    )
 
 
 def _arm_keys(robots: Sequence[str] | None) -> list[str]:
@@ -124,6 +132,8 @@ def _header(args: argparse.Namespace, data: dict) -> str:
 
 def _check(args: argparse.Namespace) -> list[str]:
     """The arm keys, after checking ``--steps``, ``--warmup`` and ``--backend``."""
+    if args.batch_configurations < 0:
+        raise InvalidInput(f"--batch-configurations must be >= 0, got {args.batch_configurations}")
     if args.steps < 1 or args.warmup < 0:
         raise InvalidInput(
             f"--steps must be >= 1 and --warmup >= 0, got {args.steps} and {args.warmup}"
@@ -152,6 +162,13 @@ def _run(args: argparse.Namespace) -> int:
     machine = machine_info()
     results = {key: bench_arm(key, args.steps, args.warmup, args.backend, progress) for key in keys}
     items = targets(results)
+    batch = None
+    if args.batch_configurations:
+        from ..batch_bench import bench_batch, target_item
+
+        progress(f"batched API ({args.batch_configurations} configurations)")
+        batch = bench_batch(args.batch_configurations)
+        items.append(target_item(batch))
     machine["loadavg_after"] = list(os.getloadavg()) if hasattr(os, "getloadavg") else None
     data = {
         "schema": SCHEMA,
@@ -161,9 +178,16 @@ def _run(args: argparse.Namespace) -> int:
         "settings": _settings(args, started),
         "results": results,
         "targets": items,
+        "batch": batch,
     }
     print(_header(args, data))
     print(format_table(results))
+    if batch:
+        print(
+            f"\nbatched API, {batch['arm']}, {batch['configurations']} configurations (Jacobian, "
+            f"JVJA rates, jump, RCN): loop {batch['loop_us']:.1f} us, batch {batch['batch_us']:.1f} "
+            f"us per configuration"
+        )
     print("\ntargets (medians; p99 for the latency bound)")
     print(format_targets(items))
     if args.json:

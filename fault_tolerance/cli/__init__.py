@@ -15,7 +15,7 @@ import sys
 import textwrap
 
 from .. import __version__
-from . import bench, inspect, lock, replay, reproduce, robots, simulate
+from . import bench, design, inspect, lock, replay, reproduce, robots, simulate, workspace
 from .common import (
     FORMATTER,
     Parser,
@@ -40,7 +40,7 @@ __all__ = [
 ]
 
 #: The sub-command modules, in the order of ``fault-tolerance --help``.
-COMMANDS = [robots, inspect, simulate, lock, reproduce, replay, bench]
+COMMANDS = [robots, inspect, simulate, lock, reproduce, replay, workspace, design, bench]
 #: The ``example:`` text of each command's ``--help``.
 EXAMPLES = {mod.NAME: mod.EXAMPLE for mod in COMMANDS}
 
@@ -62,10 +62,6 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--debug", action="store_true", help="show tracebacks")
     sub = p.add_subparsers(dest="command", metavar="COMMAND")
     for mod in COMMANDS:
-        if mod is bench:  # the sweeps (workspace, design: #14) come before the benchmark
-            from ..sweep_cli import add_parsers
-
-            add_parsers(sub, FORMATTER, add_robot_options)
         mod.add_parser(sub)
     return p
 

@@ -1,0 +1,94 @@
+"""``fault-tolerance design``: artificial limits (and links) of a planar 3R for fault tolerance."""
+
+from __future__ import annotations
+
+import argparse
+
+import numpy as np
+
+from ..errors import InvalidInput
+from .common import FORMATTER, add_robot_options, epilog, floats, load_robot, lockable_of
+from .workspace import DASK_HELP, add_dask_options, singletons
+
+NAME = "design"
+HELP = "artificial limits (and links) of a planar 3R for fault tolerance"
+EXAMPLE = (
+    "fault-tolerance design --robot planar_3r --vary limits --objective ftw-area --out out/d\n"
+    "  fault-tolerance design --robot planar_3r --vary links,limits --objective jvj "
+    "--rcn-max 40 --task circle --workers 2 --out out/d_jvj"
+)
+
+
+def add_parser(sub) -> argparse.ArgumentParser:
+    """The ``design`` sub-command (its ``--task`` names the task path: circle)."""
+    s = sub.add_parser(
+        NAME, help=HELP, description=DASK_HELP, epilog=epilog(EXAMPLE), formatter_class=FORMATTER
+    )
+    add_robot_options(s)
+    s.add_argument("--vary", default="limits", help="limits | links,limits (default limits)")
+    s.add_argument("--objective", default="ftw-area", help="ftw-area | jvj | rcn")
+    s.add_argument("--x0", default=None, help="circle start x,y [m] (default: the catalog's)")
+    s.add_argument("--radius", type=float, default=None, help="circle radius [m]")
+    s.add_argument("--rcn-max", type=float, default=None, help="require max K <= this on the task")
+    s.add_argument("--candidates", type=int, default=128, help="quasi-random designs (default 128)")
+    s.add_argument("--rounds", type=int, default=4, help="pattern-search rounds (default 4)")
+    s.add_argument("--grid", type=int, default=201, help="grid of the chosen design's map")
+    s.add_argument("--seed", type=int, default=0)
+    add_dask_options(s)
+    s.set_defaults(func=run)
+    return s
+
+
+def _task(args, arm):
+    from ..design import Task, default_task
+
+    task = default_task(arm) if arm.n == 3 else None
+    if task is None or (args.x0 is None and args.radius is None):
+        return task
+    x0 = tuple(floats(args.x0, "--x0")) if args.x0 else task.x0
+    radius = task.radius if args.radius is None else args.radius
+    if len(x0) != 2 or not np.isfinite(radius) or radius <= 0:
+        raise InvalidInput("--x0 needs two numbers x,y and --radius a positive number [m]")
+    return Task(x0, radius, task.omega, task.duration, task.sign)
+
+
+def run(args) -> int:
+    """Design search into ``--out``: design.json and design.png."""
+    from ..design_search import design
+
+    if args.task not in (None, "circle", "planar"):  # design's --task names the task path
+        raise InvalidInput(
+            f"--task '{args.task}' is not one of ['circle'] (design's task is the circle path; "
+            "the robot's task rows are planar)"
+        )
+    args.task = "planar"
+    arm = load_robot(args)
+    arm.default_lockable = singletons(lockable_of(args, arm))
+    d = design(
+        arm,
+        args.vary,
+        args.objective,
+        task=_task(args, arm),
+        rcn_max=args.rcn_max,
+        candidates=args.candidates,
+        rounds=args.rounds,
+        grid=args.grid,
+        seed=args.seed,
+        workers=args.workers or 0,
+        scheduler=args.scheduler,
+        folder=args.out,
+        progress=not args.no_progress,
+    )
+    d.save(args.out)
+    r = d.record
+
+    def num(v):
+        return "n/a" if v is None else f"{v:.4g}"
+
+    links = f", links [m] {np.round(r['links'], 4).tolist()}" if "links" in r else ""
+    print(
+        f"{arm.name}: {r['objective']} design, limits [rad] {np.round(r['limits'], 3).tolist()}"
+        f"{links}; FTW area {r['area_ftw']:.4g} m², mean JVJ {num(r['jvj'])}, mean K "
+        f"{num(r['rcn'])} ({r['evaluations']} designs, {r['elapsed_s']} s) -> {args.out}/design.json"
+    )
+    return 0

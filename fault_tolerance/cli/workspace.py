@@ -1,0 +1,92 @@
+"""``fault-tolerance workspace``: the failure-tolerant workspace of one arm (a sweep, on Dask)."""
+
+from __future__ import annotations
+
+import argparse
+import time
+
+from ..errors import InvalidInput
+from .common import FORMATTER, add_robot_options, epilog, load_robot, lockable_of
+
+NAME = "workspace"
+HELP = "failure-tolerant workspace map (areas/volumes, jump and RCN maps)"
+EXAMPLE = (
+    "fault-tolerance workspace --robot planar_3r --limits=-60:60,-120:120,-120:120 --deg "
+    "--out out/ws\n"
+    "  fault-tolerance workspace --robot powercube_3r --grid 301 --workers 2 --out out/pc\n"
+    "  fault-tolerance workspace --robot spatial_4r --grid 24 --scheduler tcp://10.0.0.5:8786 "
+    "--out out/4r"
+)
+DASK_HELP = (
+    "dask: --workers N starts a local cluster of N processes on 127.0.0.1 (1: in this process, "
+    "0: serial without Dask); --scheduler tcp://HOST:PORT uses a running cluster (`dask "
+    "scheduler` on one machine, `dask worker tcp://HOST:PORT --nthreads 1` on each, with "
+    "fault_tolerance installed). Finished chunks go to OUT/chunks-<hash>/; a rerun of the same "
+    "command resumes from them, and Ctrl-C keeps them."
+)
+
+
+def add_dask_options(p: argparse.ArgumentParser) -> None:
+    """``--workers N | --scheduler ADDR``, ``--out DIR``, ``--no-progress`` (the sweeps' options)."""
+    g = p.add_mutually_exclusive_group()
+    g.add_argument("--workers", type=int, default=1, help="local worker processes (default 1)")
+    g.add_argument("--scheduler", default=None, help="address of a running Dask scheduler")
+    p.add_argument("--out", required=True, help="output folder")
+    p.add_argument("--no-progress", action="store_true")
+
+
+def singletons(lockable) -> list[str]:
+    """The lockable joints of a sweep: one joint per scenario."""
+    if any(isinstance(j, tuple) for j in lockable):
+        raise InvalidInput("sweeps lock one joint at a time; use --lockable joint1,joint2 (no +)")
+    return list(lockable)
+
+
+def add_parser(sub) -> argparse.ArgumentParser:
+    """The ``workspace`` sub-command."""
+    s = sub.add_parser(
+        NAME, help=HELP, description=DASK_HELP, epilog=epilog(EXAMPLE), formatter_class=FORMATTER
+    )
+    add_robot_options(s)
+    s.add_argument(
+        "--limits",
+        default=None,
+        help="artificial limits lo:hi per joint, written --limits=-1:1,... (default: URDF)",
+    )
+    s.add_argument("--deg", action="store_true", help="--limits in degrees")
+    s.add_argument("--grid", type=int, default=None, help="points per axis (planar 201, spatial 24)")
+    s.add_argument("--samples", type=int, default=None, help="self-motion / configuration samples")
+    s.add_argument("--theta-samples", type=int, default=None, help="sampled lock angles")
+    s.add_argument("--chunks", type=int, default=None, help="chunks of a planar map (default 16)")
+    add_dask_options(s)
+    s.set_defaults(func=run)
+    return s
+
+
+def run(args) -> int:
+    """Failure-tolerant workspace of one arm into ``--out``."""
+    from ..workspace import failure_tolerant_workspace
+
+    arm = load_robot(args)
+    keys = ("grid", "samples", "theta_samples", "chunks")
+    opts = {k: getattr(args, k) for k in keys if getattr(args, k) is not None}
+    t0 = time.perf_counter()
+    ws = failure_tolerant_workspace(
+        arm,
+        args.limits,
+        singletons(lockable_of(args, arm)),
+        deg=args.deg,
+        workers=args.workers or 0,
+        scheduler=args.scheduler,
+        folder=args.out,
+        progress=not args.no_progress,
+        **opts,
+    )
+    ws.save(args.out)
+    unit, kind = ("m³", "volume") if ws.spatial else ("m²", "area")
+    print(
+        f"{arm.name}: {kind} before a failure {ws.size_pre:.4g} {unit}, failure tolerant "
+        f"{ws.size_ftw:.4g} {unit} ({ws.spec['method']}, grid {ws.spec['grid']}, "
+        f"{time.perf_counter() - t0:.1f} s) -> {args.out}/workspace.json, .npz, .png"
+    )
+    return 0
