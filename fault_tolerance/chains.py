@@ -39,7 +39,7 @@ def joint_kind(joint) -> str:
     return short
 
 
-def frame_id(model: pin.Model, tip: str, *, warn: bool = False) -> int:
+def frame_id(model: pin.Model, tip: str, *, warn: bool = False, label: str = "") -> int:
     """Id of the frame named ``tip``.
 
     Real descriptions often give a link and a joint the same name, so Pinocchio has two frames
@@ -68,7 +68,7 @@ def frame_id(model: pin.Model, tip: str, *, warn: bool = False) -> int:
     if len(bodies) == 1:
         if warn:
             warnings.warn(
-                f"frame name '{tip}' is carried by {len(ids)} frames at different places "
+                f"{label + ': ' if label else ''}frame name '{tip}' is carried by {len(ids)} frames at different places "
                 f"({', '.join(described)}); the tip is the link '{tip}'",
                 stacklevel=3,
             )
@@ -88,7 +88,7 @@ def reduce_model(
 
     ``label`` names the robot in error messages (default: the model's name).
     """
-    fid = frame_id(model, tip, warn=True)
+    fid = frame_id(model, tip, warn=True, label=label)
     names = [model.names[j] for j in range(1, model.njoints)]
     if joints is None:
         keep = supporting_joints(model, fid)

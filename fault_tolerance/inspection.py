@@ -42,8 +42,10 @@ def inspect_text(
     package_dirs=None,
     xacro_args=None,
 ) -> str:
-    """A readable description of a robot: its tree (read with yourdfpy), serial chains, the chosen
-    chain, task and intolerable joints. ``target`` is a robot name, a URDF or a xacro file.
+    """A readable description of a robot: tree, serial chains, chain, task, intolerable joints.
+
+    ``target`` is a robot name, a URDF or a xacro file; the tree is read with yourdfpy from the
+    checked (expanded) text.
     """
     named = target in catalog() or target in example_robot_names()
     if named:
