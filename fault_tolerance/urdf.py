@@ -115,8 +115,13 @@ def _checked_bytes(data: bytes, where: str):
     return data, prefixes, root
 
 
-_UNDECLARED = re.compile(r"Namespace prefix (\S+) (?:on|for) ")
+_UNDECLARED = re.compile(r"Namespace prefix \S+ (?:on|for) \S+ is not defined")
 _ROOT_TAG = re.compile(rb"<(?![?!])[A-Za-z_][\w.:-]*")
+_COMMENT = re.compile(rb"<!--.*?-->", re.S)
+_USED_PREFIX = re.compile(
+    rb"<\s*/?\s*([A-Za-z_][\w.-]*):[A-Za-z_]|\s([A-Za-z_][\w.-]*):[A-Za-z_][\w.-]*\s*="
+)
+_DECLARED_PREFIX = re.compile(rb"xmlns:([A-Za-z_][\w.-]*)\s*=")
 
 
 def _parse_declaring_prefixes(where: str, data: bytes):
@@ -124,15 +129,14 @@ def _parse_declaring_prefixes(where: str, data: bytes):
     try:
         return data, (), _parse_safely(where, data)
     except URDFError as err:
-        cause = err.__cause__
-        log = getattr(cause, "error_log", None) or []
-        prefixes = sorted({m.group(1) for e in log if (m := _UNDECLARED.match(e.message))})
-        if not prefixes or any(
-            not _UNDECLARED.match(e.message) for e in log if e.level_name == "FATAL"
-        ):
+        if not _UNDECLARED.search(str(err.__cause__ or "")):
             raise
+        text = _COMMENT.sub(b"", data)
+        used = {(a or b).decode() for a, b in _USED_PREFIX.findall(text)}
+        declared = {p.decode() for p in _DECLARED_PREFIX.findall(text)}
+        prefixes = sorted(used - declared - {"xml", "xmlns"})
         root = _ROOT_TAG.search(data)
-        if root is None or any(not re.fullmatch(r"[A-Za-z_][\w.-]*", p) for p in prefixes):
+        if not prefixes or root is None:
             raise
         decl = b"".join(f' xmlns:{p}="urn:undeclared:{p}"'.encode() for p in prefixes)
         data = data[: root.end()] + decl + data[root.end() :]
