@@ -96,7 +96,7 @@ def build_visuals(
 ) -> pin.GeometryModel | None:
     """Visual geometry of a description; visuals whose mesh is missing or unreadable are left out.
 
-    One warning lists the meshes left out. ``None`` when no visual is left.
+    One warning lists the meshes left out (the model may then hold no geometry at all).
     """
     root = _parse_safely(desc.path, desc.xml.encode("utf-8"))
     dropped = _resolve_meshes(root, package_dirs, Path(desc.path).parent)
@@ -128,8 +128,6 @@ def build_visuals(
             "(package_dirs=[...]) where package:// meshes live",
             stacklevel=4,
         )
-    if visual is None or visual.ngeoms == 0:
-        return None
     return visual
 
 
