@@ -179,7 +179,7 @@ def _quiet() -> Iterator[io.StringIO]:
 @contextlib.contextmanager
 def _patched(xacro, package_dirs: PackageDirs, notices: list[str]) -> Iterator[None]:
     """Xacro with ``$(find)`` from our package folders, checked file reads and collected warnings."""
-    from . import urdf
+    from .urdf import check_bytes, prefix_notice
 
     subst = xacro.substitution_args
     saved = (subst._eval_find, subst._eval_dict["find"], xacro.parse, xacro.warning)
@@ -196,9 +196,9 @@ def _patched(xacro, package_dirs: PackageDirs, notices: list[str]) -> Iterator[N
             except OSError as err:
                 xacro.filestack.pop()
                 raise xacro.XacroException(f"{err.strerror}: {file}", exc=err) from None
-            data, prefixes = urdf.check_bytes(data, str(file), require_robot=False)
+            data, prefixes = check_bytes(data, str(file), require_robot=False)
             if prefixes:
-                notices.append(urdf.prefix_notice(str(file), prefixes))
+                notices.append(prefix_notice(str(file), prefixes))
             inp = data.decode("utf-8")
         return original_parse(inp, filename)
 
