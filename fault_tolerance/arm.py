@@ -106,6 +106,8 @@ class Arm:
         self.visual_model = visual_model
         self.source = source
         self.package_dirs = [str(d) for d in package_dirs]
+        self.xacro_args: dict[str, str] = {}  # set by load_arm for xacro sources
+        self.description = None  # the checked URDFDescription, when loaded from a file
         self.joint_names: list[str] = [
             model.names[j] for j in range(1, model.njoints) if model.joints[j].nv > 0
         ]

@@ -6,6 +6,8 @@ import json
 from importlib import resources
 from pathlib import Path
 
+from .errors import FaultToleranceError
+
 #: Arms of example-robot-data with the defaults we give them: tip frame, task, active joints.
 EXAMPLE_ROBOTS: dict[str, dict] = {
     "panda": {
@@ -29,15 +31,39 @@ EXAMPLE_ROBOTS: dict[str, dict] = {
 }
 
 
+def robots_dir() -> Path:
+    """The folder of the shipped robots, in every layout the package runs from.
+
+    Installed (wheel or editable), the robots are the package data ``fault_tolerance.robots``.
+    Run from the root of a clone after a non-editable ``pip install .``, the clone's own
+    ``fault_tolerance/`` folder shadows the installed package and has no ``robots`` subpackage;
+    the robots are then the clone's ``robots/`` folder beside it.
+    """
+    try:
+        found = Path(str(resources.files(f"{__package__}.robots")))
+        if (found / "catalog.json").is_file():
+            return found
+    except ModuleNotFoundError:
+        pass
+    here = Path(__file__).resolve().parent
+    for folder in (here / "robots", here.parent / "robots"):
+        if (folder / "catalog.json").is_file():
+            return folder
+    raise FaultToleranceError(
+        f"the shipped robots (robots/catalog.json) are missing: neither the package data "
+        f"'{__package__}.robots' nor {here.parent / 'robots'} exists; reinstall the package "
+        "(pip install .)"
+    )
+
+
 def catalog() -> dict[str, dict]:
     """The shipped robots (``robots/catalog.json``): URDF file, tip, task, lockable joints."""
-    text = resources.files("fault_tolerance.robots").joinpath("catalog.json").read_text()
-    return json.loads(text)
+    return json.loads((robots_dir() / "catalog.json").read_text())
 
 
 def robot_path(filename: str) -> Path:
-    """Path of a file shipped in ``robots/`` (works from a checkout and from a wheel)."""
-    return Path(str(resources.files("fault_tolerance.robots").joinpath(filename)))
+    """Path of a file shipped in ``robots/`` (from a wheel, an editable install or a clone)."""
+    return robots_dir() / filename
 
 
 def example_robot_names() -> list[str]:

@@ -7,7 +7,9 @@ a frame name may appear twice; :func:`frame_id` accepts that when both frames ar
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Sequence
+from typing import NamedTuple
 
 import numpy as np
 import pinocchio as pin
@@ -37,20 +39,41 @@ def joint_kind(joint) -> str:
     return short
 
 
-def frame_id(model: pin.Model, tip: str) -> int:
-    """Id of the frame named ``tip``; refused when several frames of that name are at different places."""
-    if not model.existFrame(tip):
+def frame_id(model: pin.Model, tip: str, *, warn: bool = False, label: str = "") -> int:
+    """Id of the frame named ``tip``.
+
+    Real descriptions often give a link and a joint the same name, so Pinocchio has two frames
+    of that name. Both at one place (a fixed joint and its child link): either serves, the
+    link's is returned. At different places: the link's (a tip is a link), with a warning if
+    ``warn``. Several frames of the name and no link among them: :class:`AmbiguousFrame`.
+    """
+    ids = [i for i, f in enumerate(model.frames) if f.name == tip]
+    if not ids:
         raise FrameNotFound(tip, [f.name for f in model.frames])
-    same = [f for f in model.frames if f.name == tip]
-    first = same[0]
-    if any(
-        f.parentJoint != first.parentJoint or not f.placement.isApprox(first.placement)
-        for f in same[1:]
+    if len(ids) == 1:
+        return ids[0]
+    first = model.frames[ids[0]]
+    bodies = [i for i in ids if model.frames[i].type == pin.FrameType.BODY]
+    if all(
+        model.frames[i].parentJoint == first.parentJoint
+        and model.frames[i].placement.isApprox(first.placement)
+        for i in ids[1:]
     ):
-        raise AmbiguousFrame(
-            tip, [f"{f.name} ({f.type.name} on joint '{model.names[f.parentJoint]}')" for f in same]
-        )
-    return model.getFrameId(tip)
+        return bodies[0] if bodies else ids[0]
+    described = [
+        f"{model.frames[i].name} ({model.frames[i].type.name} on joint "
+        f"'{model.names[model.frames[i].parentJoint]}')"
+        for i in ids
+    ]
+    if len(bodies) == 1:
+        if warn:
+            warnings.warn(
+                f"{label + ': ' if label else ''}frame name '{tip}' is carried by {len(ids)} frames at different places "
+                f"({', '.join(described)}); the tip is the link '{tip}'",
+                stacklevel=3,
+            )
+        return bodies[0]
+    raise AmbiguousFrame(tip, described)
 
 
 def reduce_model(
@@ -65,7 +88,7 @@ def reduce_model(
 
     ``label`` names the robot in error messages (default: the model's name).
     """
-    fid = frame_id(model, tip)
+    fid = frame_id(model, tip, warn=True, label=label)
     names = [model.names[j] for j in range(1, model.njoints)]
     if joints is None:
         keep = supporting_joints(model, fid)
@@ -89,10 +112,47 @@ def reduce_model(
     if not lock:
         return model, visual_model
     q_ref = pin.neutral(model) if q_reference is None else np.asarray(q_reference, dtype=float)
-    if visual_model is None:
-        return pin.buildReducedModel(model, lock, q_ref), None
-    reduced, geoms = pin.buildReducedModel(model, [visual_model], lock, q_ref)
-    return reduced, geoms[0]
+    # buildReducedModel looks each locked joint's frame up by name: a link of the same name
+    # would make that lookup ambiguous (a raw ValueError), so such frames are renamed meanwhile
+    renamed = _rename_frames_named_like_joints(model, [model.names[j] for j in lock])
+    try:
+        if visual_model is None:
+            reduced, geom = pin.buildReducedModel(model, lock, q_ref), None
+        else:
+            reduced, geoms = pin.buildReducedModel(model, [visual_model], lock, q_ref)
+            geom = geoms[0]
+    except Exception as err:  # Pinocchio's ValueError/RuntimeError: never raw to the user
+        raise URDFError(
+            f"{label or model.name}: Pinocchio could not fix the joints outside the arm: {err}"
+        ) from err
+    finally:
+        _restore_frame_names(model, renamed)
+    _restore_frame_names(reduced, renamed)
+    return reduced, geom
+
+
+_RENAMED = "\x00frame"  # suffix no URDF name carries
+
+
+def _rename_frames_named_like_joints(model: pin.Model, joints: Sequence[str]) -> list[str]:
+    """Give the non-joint frames that share a name with one of ``joints`` a temporary name."""
+    clash = set(joints)
+    renamed = []
+    for i, f in enumerate(model.frames):
+        if f.name in clash and f.type not in (pin.FrameType.JOINT, pin.FrameType.FIXED_JOINT):
+            renamed.append(f.name)
+            f.name += _RENAMED
+            model.frames[i] = f
+    return renamed
+
+
+def _restore_frame_names(model: pin.Model, renamed: Sequence[str]) -> None:
+    if not renamed:
+        return
+    for i, f in enumerate(model.frames):
+        if f.name.endswith(_RENAMED):
+            f.name = f.name[: -len(_RENAMED)]
+            model.frames[i] = f
 
 
 def active_q(full: pin.Model, reduced: pin.Model, q_full: np.ndarray) -> np.ndarray:
@@ -104,3 +164,56 @@ def active_q(full: pin.Model, reduced: pin.Model, q_full: np.ndarray) -> np.ndar
             if reduced.joints[j].nv > 0
         ]
     )
+
+
+class SerialChain(NamedTuple):
+    """The moving joints from the root to some leaf links, and the tip suggested for them."""
+
+    tip: str  # the suggested tip frame (a leaf link)
+    joints: tuple[str, ...]  # moving joints from the root outwards, mimic joints left out
+    ends: tuple[str, ...]  # every leaf link this chain serves (tip included)
+
+    def option(self) -> str:
+        """The command-line options selecting this chain."""
+        return f"--tip {self.tip} --joints {','.join(self.joints)}"
+
+
+#: Name fragments of links that are end effectors rather than sensors (the suggested tips).
+TIP_WORDS = ("tcp", "tool", "eef", "end_effector", "ee_link", "flange", "gripper", "hand", "wrist")
+
+
+def serial_chains(
+    model: pin.Model, leaves: Sequence[str], mimic: Sequence[str] = (), min_joints: int = 1
+) -> list[SerialChain]:
+    """The serial chains of a tree: leaf links grouped by their moving joints from the root.
+
+    A two-arm robot, a mobile manipulator or an arm with a gripper has many leaf links
+    (fingers, sensors, wheels); leaves reached through the same moving joints form one chain.
+    Mimic joints are left out (they follow another joint; an arm cannot move them freely).
+    Chains with fewer than ``min_joints`` joints are dropped; longest chains first.
+    """
+    groups: dict[tuple[str, ...], list[str]] = {}
+    skip = set(mimic)
+    for leaf in leaves:
+        ids = [i for i, f in enumerate(model.frames) if f.name == leaf]
+        if not ids:
+            continue
+        body = next((i for i in ids if model.frames[i].type == pin.FrameType.BODY), ids[0])
+        joints = tuple(
+            model.names[j] for j in supporting_joints(model, body) if model.names[j] not in skip
+        )
+        if len(joints) >= min_joints:
+            groups.setdefault(joints, []).append(leaf)
+    chains = [
+        SerialChain(_suggested_tip(ends), joints, tuple(ends)) for joints, ends in groups.items()
+    ]
+    return sorted(chains, key=lambda c: (-len(c.joints), c.tip))
+
+
+def _suggested_tip(ends: Sequence[str]) -> str:
+    """The end-effector-like name among leaves (``*_tcp``, ``tool0``, ``*_gripper``...), else the first."""
+    for word in TIP_WORDS:
+        for end in ends:
+            if word in end.lower():
+                return end
+    return ends[0]

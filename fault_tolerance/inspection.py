@@ -8,10 +8,12 @@ from pathlib import Path
 import numpy as np
 
 from .catalog import catalog, example_robot_names, robot_path
+from .chains import serial_chains
 from .errors import RobotNotFound, URDFError
 from .failures import scenarios
 from .linalg import PIVOT_TOL, projection
-from .loading import load_arm
+from .loading import arm_from_description, is_description_path, load_arm
+from .models import build_model, read_description
 from .urdf import read_urdf
 
 
@@ -26,7 +28,7 @@ def urdf_path_of(target: str) -> Path:
         sub = Path(loader.path) / loader.urdf_subpath / loader.urdf_filename
         return Path(getModelPath(str(sub))) / sub
     path = Path(target).expanduser()
-    if not path.exists() and path.suffix.lower() not in (".urdf", ".xml"):
+    if not path.exists() and not is_description_path(path):
         raise RobotNotFound(target, list(catalog()) + example_robot_names())
     return path
 
@@ -38,18 +40,30 @@ def inspect_text(
     task=None,
     joints=None,
     package_dirs=None,
+    xacro_args=None,
 ) -> str:
-    """A readable description of a robot: the URDF tree (read with yourdfpy), chain, task, intolerable joints."""
-    path = urdf_path_of(target)
-    desc = read_urdf(path)
+    """A readable description of a robot: tree, serial chains, chain, task, intolerable joints.
+
+    ``target`` is a robot name, a URDF or a xacro file; the tree is read with yourdfpy from the
+    checked (expanded) text.
+    """
     named = target in catalog() or target in example_robot_names()
-    choose_tip = tip is None and not named and len(desc.leaves) > 1
-    # Pinocchio's checks first (their messages are the clearer), then the tree from yourdfpy
-    arm = (
-        None
-        if choose_tip
-        else load_arm(target, tip=tip, task=task, joints=joints, package_dirs=package_dirs)
-    )
+    if named:
+        path = urdf_path_of(target)
+        desc = read_urdf(path)
+        arm = load_arm(target, tip=tip, task=task, joints=joints, package_dirs=package_dirs)
+    else:
+        path = urdf_path_of(target)
+        if not path.is_file():
+            raise URDFError(f"{path}: no such URDF file")
+        desc = read_description(path, package_dirs, xacro_args)
+        choose_tip = tip is None and len(desc.leaves) > 1
+        # Pinocchio's checks first (their messages are the clearer), then the tree from yourdfpy
+        arm = (
+            None
+            if choose_tip
+            else arm_from_description(desc, tip, task, joints, package_dirs, xacro_args)
+        )
     import yourdfpy  # after the checks: a hostile file is refused without this import's cost
 
     try:  # yourdfpy parses the checked bytes, never the file itself
@@ -88,6 +102,7 @@ def inspect_text(
             + ", ".join(f"{a} follows {b}" for a, b in desc.mimic.items())
         )
     lines += ["", f"candidate tip frames (leaf links): {', '.join(desc.leaves)}"]
+    lines += _chain_lines(desc)
     if arm is None:
         lines.append(
             "no tip frame given and there are several leaf links: name one with --tip to "
@@ -128,6 +143,33 @@ def inspect_text(
     else:
         lines.append("not redundant for this task: any locked joint loses it")
     return "\n".join(lines)
+
+
+#: Most serial chains ``inspect`` lists.
+MAX_CHAINS_SHOWN = 12
+
+
+def _chain_lines(desc) -> list[str]:
+    """The serial chains of the tree, each with the ``--tip``/``--joints`` that selects it."""
+    model = build_model(desc)
+    chains = serial_chains(model, desc.leaves, tuple(desc.mimic), min_joints=2)
+    if not chains:
+        return []
+    lines = [
+        "",
+        "serial chains (leaf links grouped by their moving joints; mimic joints left out):",
+    ]
+    for c in chains[:MAX_CHAINS_SHOWN]:
+        others = [e for e in c.ends if e != c.tip]
+        more = ""
+        if others:
+            shown = ", ".join(others[:3]) + (f" +{len(others) - 3}" if len(others) > 3 else "")
+            more = f"; also ends at {shown}"
+        lines.append(f"  {len(c.joints)} joints{more}:")
+        lines.append(f"    {c.option()}")
+    if len(chains) > MAX_CHAINS_SHOWN:
+        lines.append(f"  ... and {len(chains) - MAX_CHAINS_SHOWN} shorter chains")
+    return lines
 
 
 #: Random configurations ``inspect`` draws to find structurally intolerable joints.

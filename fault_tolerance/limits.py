@@ -165,6 +165,8 @@ def guaranteed_speed(J, lo, hi, samples: int = 4000) -> float:
         return 0.0  # the image of any box lies in a subspace: some direction is never reached
     if comb(k, m - 1) <= MAX_FACETS:
         Y = _facet_normals(J)
+        if not len(Y):  # numerically no m-1 columns span a hyperplane: J is (nearly) rank-deficient
+            return 0.0
     else:
         Y = np.random.default_rng(0).normal(size=(samples, m))
         Y /= np.linalg.norm(Y, axis=1, keepdims=True)

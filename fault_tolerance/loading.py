@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import warnings
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -12,9 +12,10 @@ from .arm import Arm
 from .carried import remember, remember_example
 from .catalog import EXAMPLE_ROBOTS, catalog, example_robot_names, robot_path
 from .chains import active_q, reduce_model
-from .errors import RobotNotFound, URDFError
-from .models import load_urdf_models
-from .urdf import default_tip
+from .errors import InvalidInput, RobotNotFound, URDFError
+from .models import build_model, build_visuals, load_urdf_models, read_description
+from .sources import is_xacro
+from .urdf import URDFDescription, default_tip
 
 
 def load_arm(
@@ -24,18 +25,21 @@ def load_arm(
     task: str | Sequence[str] | None = None,
     joints: Sequence[str] | None = None,
     package_dirs: Sequence[str] | None = None,
+    xacro_args: Mapping[str, str] | None = None,
 ) -> Arm:
-    """Load an arm by catalog name, example-robot-data name or URDF path.
+    """Load an arm by catalog name, example-robot-data name, URDF or xacro path.
 
     Args:
         robot: ``"planar_3r"``, ``"spatial_4r"``, ``"powercube_3r"``, ``"iiwa"``, an
             example-robot-data name (``"panda"``, ``"ur5"``, ``"xarm7"``, ...) or the path of a
-            URDF file.
+            URDF file or a xacro file (``.xacro``, ``.urdf.xacro``; expanded without ROS).
         tip: Tip frame (default: the catalog's; for a URDF file its only leaf link, else an
             error listing the leaf links; for example-robot-data the preset or last frame).
         task: ``"planar"``, ``"position"``, ``"pose"`` or a list of rows among ``x y z rx ry rz``.
         joints: Active joint names; the others are fixed (default: the chain to the tip).
-        package_dirs: Folders where ``package://`` meshes of a URDF file are found.
+        package_dirs: Folders of the ROS packages that ``package://pkg/...`` and
+            ``$(find pkg)`` name: ``DIR/pkg``, or a ``DIR`` whose ``package.xml`` names ``pkg``.
+        xacro_args: Arguments of a xacro file, ``{"name": "value"}`` (``--xacro-arg name:=value``).
 
     Example:
         >>> arm = load_arm("planar_3r")
@@ -44,12 +48,24 @@ def load_arm(
     """
     name = str(robot)
     shipped = catalog()
+    path = Path(name).expanduser()
+    if name not in shipped and (is_description_path(path) or path.exists()):
+        if not path.is_file():
+            raise URDFError(f"{path}: no such URDF file")
+        desc = read_description(path, package_dirs, xacro_args)
+        return arm_from_description(desc, tip, task, joints, package_dirs, xacro_args)
+    if xacro_args:
+        raise InvalidInput(
+            f"xacro_args {sorted(xacro_args)} given for '{name}', which is not a xacro file"
+        )
     if name in shipped:
         return _load_shipped(name, shipped[name], tip, task, joints, package_dirs)
-    path = Path(name).expanduser()
-    if path.suffix.lower() in (".urdf", ".xml") or path.exists():
-        return _load_file(path, tip, task, joints, package_dirs)
     return _load_example_robot(name, tip, task, joints, shipped)
+
+
+def is_description_path(path: Path) -> bool:
+    """True for the file names of descriptions: ``.urdf``, ``.xml``, ``.xacro``, ``.urdf.xacro``."""
+    return path.suffix.lower() in (".urdf", ".xml") or is_xacro(path)
 
 
 def _load_shipped(name: str, entry: dict, tip, task, joints, package_dirs) -> Arm:
@@ -75,11 +91,18 @@ def _load_shipped(name: str, entry: dict, tip, task, joints, package_dirs) -> Ar
     return remember(arm, "shipped", desc.data, q_full)
 
 
-def _load_file(path: Path, tip, task, joints, package_dirs) -> Arm:
-    """An arm from a URDF file."""
-    if not path.is_file():
-        raise URDFError(f"{path}: no such URDF file")
-    model, visual, desc = load_urdf_models(path, package_dirs)
+def arm_from_description(
+    desc: URDFDescription,
+    tip: str | None = None,
+    task=None,
+    joints: Sequence[str] | None = None,
+    package_dirs: Sequence[str] | None = None,
+    xacro_args: Mapping[str, str] | None = None,
+) -> Arm:
+    """An arm from a checked description (:func:`~.models.read_description`)."""
+    path = desc.path
+    model = build_model(desc)
+    visual = build_visuals(model, desc, package_dirs)
     tip = default_tip(desc) if tip is None else tip
     model, visual = reduce_model(model, tip, joints, visual_model=visual, label=str(path))
     mimics = [j for j in model.names[1:] if j in desc.mimic]
@@ -93,12 +116,22 @@ def _load_file(path: Path, tip, task, joints, package_dirs) -> Arm:
         model,
         tip,
         "position" if task is None else task,
-        name=path.stem,
+        name=_stem(path.name),
         visual_model=visual,
-        source=str(path.resolve()),
+        source=str(Path(path).resolve()),
         package_dirs=package_dirs or (),
     )
+    arm.xacro_args = dict(xacro_args or {})
+    arm.description = desc
     return remember(arm, "file", desc.data)
+
+
+def _stem(name: str) -> str:
+    """``ur5e.urdf.xacro`` -> ``ur5e``."""
+    for suffix in (".xacro", ".urdf", ".xml"):
+        if name.lower().endswith(suffix):
+            name = name[: -len(suffix)]
+    return name
 
 
 def _load_example_robot(name: str, tip: str | None, task, joints, shipped: dict) -> Arm:
@@ -131,4 +164,5 @@ def arm_from_meta(meta: dict) -> Arm:
         task=meta.get("task"),
         joints=meta.get("joint_names"),
         package_dirs=meta.get("package_dirs") or None,
+        xacro_args=meta.get("xacro_args") or None,
     )

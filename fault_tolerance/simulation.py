@@ -399,6 +399,7 @@ def _finish(s: _Setup, state: _State, rec: dict, q0) -> Run:
         "robot": arm.name,
         "source": arm.source,
         "package_dirs": arm.package_dirs,
+        "xacro_args": arm.xacro_args,
         "tip": arm.tip,
         "task": list(arm.task),
         "joint_names": arm.joint_names,

@@ -27,7 +27,7 @@ import re
 import sys
 import tempfile
 from collections import Counter
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from pathlib import Path
 from typing import NamedTuple
 
@@ -59,34 +59,96 @@ def check_urdf_file(path: str | Path) -> bytes:
 
 
 def _checked(path: Path, data: bytes | None = None):
-    """The file's bytes (or ``data``, named ``path``) and its lxml root element, after the safety checks."""
+    """The bytes (prefixes declared), the lxml root element and the undeclared prefixes.
+
+    ``data`` is the text to check in place of the file's (a xacro expansion of ``path``).
+    """
     if data is None:
         if not path.is_file():
             raise URDFError(f"{path}: no such URDF file")
         size = path.stat().st_size
-    else:
-        size = len(data)
-    if size > MAX_URDF_BYTES:
-        raise URDFError(f"{path}: {size} bytes is larger than the {MAX_URDF_BYTES} bytes allowed")
-    if data is None:
+        if size > MAX_URDF_BYTES:
+            raise URDFError(
+                f"{path}: {size} bytes is larger than the {MAX_URDF_BYTES} bytes allowed"
+            )
         data = path.read_bytes()
+    data, prefixes, root = _checked_bytes(data, str(path))
+    if root.tag != "robot":
+        raise URDFError(f"{path}: the root element is <{root.tag}>, a URDF needs <robot>")
+    return data, root, prefixes
+
+
+def check_bytes(
+    data: bytes, where: str, *, require_robot: bool = True
+) -> tuple[bytes, tuple[str, ...]]:
+    """Safety checks of XML bytes (size, UTF-8, no DTD/entities, well-formed).
+
+    Returns the bytes, with a declaration added for each namespace prefix the text uses but never
+    declares (Gazebo/ROS extensions such as ``<gazebo:plugin>``; URDF readers ignore those
+    elements), and the prefixes so declared. ``where`` names the source in errors.
+    """
+    data, prefixes, root = _checked_bytes(data, where)
+    if require_robot and root.tag != "robot":
+        raise URDFError(f"{where}: the root element is <{root.tag}>, a URDF needs <robot>")
+    return data, prefixes
+
+
+def _checked_bytes(data: bytes, where: str):
+    if len(data) > MAX_URDF_BYTES:
+        raise URDFError(
+            f"{where}: {len(data)} bytes is larger than the {MAX_URDF_BYTES} bytes allowed"
+        )
     if data.startswith(_BOMS) or b"\x00" in data:
-        raise URDFError(f"{path}: not UTF-8 text (UTF-16/32 or binary); a URDF must be UTF-8")
+        raise URDFError(f"{where}: not UTF-8 text (UTF-16/32 or binary); a URDF must be UTF-8")
     try:
         data.decode("utf-8")
     except UnicodeDecodeError as err:
         raise URDFError(
-            f"{path}: not UTF-8 text (invalid byte at offset {err.start}); a URDF must be UTF-8"
+            f"{where}: not UTF-8 text (invalid byte at offset {err.start}); a URDF must be UTF-8"
         ) from None
     if _DTD.search(data):
-        raise URDFError(_DTD_MESSAGE.format(path=path))
-    root = _parse_safely(path, data)
+        raise URDFError(_DTD_MESSAGE.format(path=where))
+    data, prefixes, root = _parse_declaring_prefixes(where, data)
     docinfo = root.getroottree().docinfo
     if docinfo.doctype or docinfo.internalDTD is not None or docinfo.externalDTD is not None:
-        raise URDFError(_DTD_MESSAGE.format(path=path))
-    if root.tag != "robot":
-        raise URDFError(f"{path}: the root element is <{root.tag}>, a URDF needs <robot>")
-    return data, root
+        raise URDFError(_DTD_MESSAGE.format(path=where))
+    return data, prefixes, root
+
+
+_UNDECLARED = re.compile(r"Namespace prefix \S+ (?:on|for) \S+ is not defined")
+_ROOT_TAG = re.compile(rb"<(?![?!])[A-Za-z_][\w.:-]*")
+_COMMENT = re.compile(rb"<!--.*?-->", re.S)
+_USED_PREFIX = re.compile(
+    rb"<\s*/?\s*([A-Za-z_][\w.-]*):[A-Za-z_]|\s([A-Za-z_][\w.-]*):[A-Za-z_][\w.-]*\s*="
+)
+_DECLARED_PREFIX = re.compile(rb"xmlns:([A-Za-z_][\w.-]*)\s*=")
+
+
+def _parse_declaring_prefixes(where: str, data: bytes):
+    """Parse; if namespace prefixes are undeclared, declare them on the root element and retry."""
+    try:
+        return data, (), _parse_safely(where, data)
+    except URDFError as err:
+        if not _UNDECLARED.search(str(err.__cause__ or "")):
+            raise
+        text = _COMMENT.sub(b"", data)
+        used = {(a or b).decode() for a, b in _USED_PREFIX.findall(text)}
+        declared = {p.decode() for p in _DECLARED_PREFIX.findall(text)}
+        prefixes = sorted(used - declared - {"xml", "xmlns"})
+        root = _ROOT_TAG.search(data)
+        if not prefixes or root is None:
+            raise
+        decl = b"".join(f' xmlns:{p}="urn:undeclared:{p}"'.encode() for p in prefixes)
+        data = data[: root.end()] + decl + data[root.end() :]
+        return data, tuple(prefixes), _parse_safely(where, data)
+
+
+def prefix_notice(where: str, prefixes: Sequence[str]) -> str:
+    """The one warning for undeclared namespace prefixes."""
+    return (
+        f"{where}: XML namespace prefix(es) {list(prefixes)} used without a declaration "
+        "(Gazebo/ROS extensions); their elements are ignored"
+    )
 
 
 _DTD_MESSAGE = (
@@ -95,7 +157,7 @@ _DTD_MESSAGE = (
 )
 
 
-def _parse_safely(path: Path, data: bytes):
+def _parse_safely(path: Path | str, data: bytes):
     """Parse XML with lxml: entities unresolved, no DTD, no network, no huge trees."""
     from lxml import etree
 
@@ -125,6 +187,7 @@ class URDFDescription(NamedTuple):
     mimic: dict[str, str]  # mimic joint -> the joint it follows
     continuous: tuple[str, ...]  # continuous joints, read as revolute with limits ±π
     unlimited: tuple[str, ...]  # continuous joints without velocity/effort limits (kept infinite)
+    prefixes: tuple[str, ...] = ()  # undeclared XML namespace prefixes, declared to read the file
 
 
 def read_urdf(path: str | Path, data: bytes | None = None) -> URDFDescription:
@@ -142,7 +205,7 @@ def read_urdf(path: str | Path, data: bytes | None = None) -> URDFDescription:
         URDFError: naming the file, the element and what is allowed.
     """
     path = Path(path)
-    data, root = _checked(path, data)
+    data, root, prefixes = _checked(path, data)
     where = str(path)
     if not root.get("name"):
         raise URDFError(f'{where}: <robot> has no name; a URDF starts with <robot name="...">')
@@ -224,7 +287,7 @@ def read_urdf(path: str | Path, data: bytes | None = None) -> URDFDescription:
     xml = etree.tostring(root, encoding="unicode")
     leaves = tuple(lk for lk in links if lk not in parents)
     return URDFDescription(
-        path, data, xml, types, leaves, mimic, tuple(continuous), tuple(unlimited)
+        path, data, xml, types, leaves, mimic, tuple(continuous), tuple(unlimited), prefixes
     )
 
 

@@ -139,5 +139,5 @@ def test_a_warning_is_one_line_too(results):
     p = results["warning"]
     assert p.returncode == 0, p.stderr
     assert p.stderr.count("\n") == 1 and p.stderr.startswith("fault-tolerance: warning: ")
-    assert "meshy.urdf: visual geometry not loaded" in p.stderr and "--package-dir" in p.stderr
+    assert "meshy.urdf: 1 mesh file(s) not found" in p.stderr and "--package-dir" in p.stderr
     assert "chain to tip 'tool'" in p.stdout

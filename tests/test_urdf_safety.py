@@ -489,10 +489,10 @@ def test_missing_package_mesh_loads_without_visuals_and_warns(tmp_path):
     )
     path = write(tmp_path, "meshy.urdf", robot(*parts))
     with pytest.warns(
-        UserWarning, match=r"meshy.urdf: visual geometry not loaded.*no_pkg.*package-dir"
+        UserWarning, match=r"meshy.urdf: 1 mesh file\(s\) not found.*no_pkg.*package-dir"
     ):
         arm = ft.load_arm(str(path), task="planar")
-    assert arm.visual_model is None and arm.n == 3
+    assert arm.visual_model.ngeoms == 0 and arm.n == 3  # its only visual was that mesh
 
 
 def test_package_mesh_found_through_package_dirs(tmp_path):
@@ -553,14 +553,34 @@ def test_unknown_tip_lists_the_frames(tmp_path):
         ft.load_arm(str(gripper(tmp_path)), tip="hand")
 
 
-def test_tip_name_shared_by_a_link_and_a_joint_elsewhere_is_ambiguous(tmp_path):
-    """A link 'tool' and an unrelated joint 'tool' at another place: AmbiguousFrame (a
-    FrameNotFound) naming both, instead of silently taking the first."""
+def test_tip_name_shared_by_a_link_and_a_joint_elsewhere_is_the_link(tmp_path):
+    """A link 'tool' and an unrelated joint 'tool' at another place (as in real descriptions,
+    e.g. the SO-100's 'gripper'): the tip is the link, with a warning naming both frames."""
     parts = chain3()
     parts[3] = joint("tool", "l1", "l2")
     path = write(tmp_path, "clash.urdf", robot(*parts))
-    with pytest.raises(ft.FrameNotFound, match=r"'tool' is ambiguous.*JOINT.*BODY") as err:
-        ft.load_arm(str(path), tip="tool", task="planar")
+    with pytest.warns(
+        UserWarning, match=r"clash.urdf: frame name 'tool' is carried by 2 frames.*the link 'tool'"
+    ):
+        arm = ft.load_arm(str(path), tip="tool", task="planar")
+    ref = ft.load_arm(str(write(tmp_path, "plain.urdf", robot(*chain3()))), task="planar")
+    q = np.array([0.3, -0.7, 1.1])
+    np.testing.assert_allclose(arm.fk(q), ref.fk(q), atol=1e-12)  # the link, not the joint
+    assert arm.joint_names == ["joint1", "tool", "joint3"]
+
+
+def test_same_name_on_two_non_link_frames_is_ambiguous():
+    """Two frames of one name at different places, neither of them a link:
+    AmbiguousFrame (a FrameNotFound) naming both, instead of silently taking the first."""
+    import pinocchio as pin
+
+    from fault_tolerance.chains import frame_id
+
+    model = pin.buildSampleModelManipulator()
+    for joint_id, kind in ((1, pin.FrameType.OP_FRAME), (2, pin.FrameType.SENSOR)):
+        model.addFrame(pin.Frame("tcp", joint_id, 0, pin.SE3.Identity(), kind))
+    with pytest.raises(ft.FrameNotFound, match=r"'tcp' is ambiguous.*OP_FRAME.*SENSOR") as err:
+        frame_id(model, "tcp")
     assert type(err.value).__name__ == "AmbiguousFrame"
 
 

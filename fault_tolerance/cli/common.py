@@ -8,6 +8,7 @@ line on stderr naming the problem and what is allowed; ``--debug`` shows the tra
 from __future__ import annotations
 
 import argparse
+import re
 import sys
 import warnings
 from collections.abc import Callable
@@ -59,13 +60,10 @@ def add_robot_options(p: argparse.ArgumentParser) -> None:
         default=None,
         help="shipped or example-robot-data arm (see `fault-tolerance robots`)",
     )
-    src.add_argument("--urdf", default=None, help="path of a URDF file")
-    g.add_argument(
-        "--package-dir",
-        action="append",
-        default=[],
-        help="folder for package:// meshes (repeatable)",
+    src.add_argument(
+        "--urdf", default=None, help="path of a URDF or xacro file (.urdf, .xacro, .urdf.xacro)"
     )
+    add_source_options(g)
     g.add_argument(
         "--tip", default=None, help="tip frame (default: the catalog's, or the last frame)"
     )
@@ -80,9 +78,28 @@ def add_robot_options(p: argparse.ArgumentParser) -> None:
     )
 
 
+def add_source_options(g) -> None:
+    """``--package-dir`` and ``--xacro-arg`` (both repeatable)."""
+    g.add_argument(
+        "--package-dir",
+        action="append",
+        default=[],
+        help="folder of a ROS package named by package://pkg or $(find pkg): DIR/pkg, or DIR "
+        "whose package.xml names pkg (repeatable)",
+    )
+    g.add_argument(
+        "--xacro-arg",
+        action="append",
+        default=[],
+        metavar="NAME:=VALUE",
+        help="argument of a xacro file (repeatable)",
+    )
+
+
 def load_robot(args) -> object:
     """The arm the robot options describe."""
     from ..loading import load_arm
+    from ..sources import parse_xacro_args
 
     if args.robot is None and args.urdf is None:
         raise InvalidInput(
@@ -94,6 +111,7 @@ def load_robot(args) -> object:
         task=args.task,
         joints=names(args.joints),
         package_dirs=args.package_dir or None,
+        xacro_args=parse_xacro_args(args.xacro_arg) or None,
     )
 
 
@@ -250,8 +268,22 @@ def report_warnings(command: str, label: str, run_, arm) -> list[dict]:
 # -- parser and errors ----------------------------------------------------------------------
 
 
+#: Option values that begin with ``-`` and are numbers, not options: ``-0.21``, ``-1e-3``,
+#: ``-0.21,0.20,0.35``, ``-1.5:1.5,-2:2``. argparse's own pattern takes only a single plain number,
+#: so ``--x0 -0.21,0.20,0.35`` failed ("expected one argument").
+NEGATIVE_NUMBERS = re.compile(r"^-(\d|\.\d)[\d.eE+\-,:;]*$")
+
+
 class Parser(argparse.ArgumentParser):
-    """argparse with a one-line error message (exit code 2)."""
+    """argparse with a one-line error message (exit code 2); values may be negative numbers.
+
+    Every subcommand's parser is of this class (``add_subparsers`` uses the parent's class), so
+    any option taking numbers accepts ``--opt -1,2`` as well as ``--opt=-1,2``.
+    """
+
+    def __init__(self, *args, **kwargs) -> None:
+        super().__init__(*args, **kwargs)
+        self._negative_number_matcher = NEGATIVE_NUMBERS
 
     def error(self, message: str):  # type: ignore[override]
         """Exit 2 with one line on stderr."""

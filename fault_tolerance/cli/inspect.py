@@ -4,21 +4,26 @@ from __future__ import annotations
 
 import argparse
 
-from .common import FORMATTER, epilog, names
+from .common import FORMATTER, add_source_options, epilog, names
 
 NAME = "inspect"
 HELP = "kinematic tree, chosen chain and task, intolerable joints"
-EXAMPLE = "fault-tolerance inspect spatial_4r\n  fault-tolerance inspect my_arm.urdf --tip tool0"
+EXAMPLE = (
+    "fault-tolerance inspect spatial_4r\n  fault-tolerance inspect my_arm.urdf --tip tool0\n"
+    "  fault-tolerance inspect ur_description/urdf/ur5e.xacro --package-dir . --tip tool0"
+)
 
 
 def add_parser(sub) -> argparse.ArgumentParser:
     """The ``inspect`` sub-command."""
     s = sub.add_parser(NAME, help=HELP, epilog=epilog(EXAMPLE), formatter_class=FORMATTER)
-    s.add_argument("target", help="shipped / example-robot-data name or URDF path")
-    s.add_argument("--tip", default=None)
-    s.add_argument("--task", default=None)
-    s.add_argument("--joints", default=None)
-    s.add_argument("--package-dir", action="append", default=[])
+    s.add_argument("target", help="shipped / example-robot-data name, URDF or xacro path")
+    s.add_argument("--tip", default=None, help="tip frame (a link); see the serial chains listed")
+    s.add_argument(
+        "--task", default=None, help="planar | position | pose | rows among x,y,z,rx,ry,rz"
+    )
+    s.add_argument("--joints", default=None, help="active joints, comma-separated (others fixed)")
+    add_source_options(s)
     s.set_defaults(func=run)
     return s
 
@@ -26,6 +31,7 @@ def add_parser(sub) -> argparse.ArgumentParser:
 def run(args) -> int:
     """Print the kinematic tree, the chosen chain and task, and intolerable joints."""
     from ..inspection import inspect_text
+    from ..sources import parse_xacro_args
 
     print(
         inspect_text(
@@ -34,6 +40,7 @@ def run(args) -> int:
             task=args.task,
             joints=names(args.joints),
             package_dirs=args.package_dir or None,
+            xacro_args=parse_xacro_args(args.xacro_arg) or None,
         )
     )
     return 0

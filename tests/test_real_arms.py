@@ -1,0 +1,205 @@
+"""Real robot descriptions (tests/data/robots): each loads, inspects, simulates and replays.
+
+The descriptions come from public packages and repositories (manifest.json names each source);
+they are what users bring: xacro packages, two-arm trees, mobile manipulators, continuous joints,
+grippers with mimic joints, duplicate frame names. Meshes are not kept, so every load warns once
+that their visuals are left out; that warning is expected here and nothing else is.
+"""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+import warnings
+
+import numpy as np
+import pinocchio as pin
+import pytest
+from real_arms import ARMS, DATA, cli_args, load, package_dirs, source
+
+import fault_tolerance as ft
+from fault_tolerance.chains import serial_chains
+from fault_tolerance.models import build_model, read_description
+
+NAMES = sorted(ARMS)
+#: Samples with σ_min(J) below this are near-singular (the simulation flags < 1e-6; a real start
+#: should stay far from that).
+SIGMA_MIN_OK = 1e-3
+#: Largest position tracking error accepted along the run [m].
+TRACKING_OK = 1e-3
+
+
+def _description(name):
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        return read_description(source(name), package_dirs(name), ARMS[name]["xacro_args"] or None)
+
+
+def _cli(*args, cwd=None):
+    return subprocess.run(
+        [sys.executable, "-m", "fault_tolerance", *args],
+        capture_output=True,
+        text=True,
+        timeout=600,
+        cwd=cwd,
+    )
+
+
+def _only_expected_warnings(stderr: str) -> list[str]:
+    """The stderr lines that are not the expected warnings (missing meshes, a shared frame name)."""
+    return [
+        line
+        for line in stderr.splitlines()
+        if line.strip()
+        and not (
+            line.startswith("fault-tolerance: warning: ")
+            and ("mesh file(s) not found" in line or "is carried by 2 frames" in line)
+        )
+    ]
+
+
+# -- the data set covers what the issue asks for ------------------------------------------------
+
+
+def test_at_least_eight_real_arms_with_sources_and_licenses():
+    """Eight or more arms, each with its upstream source and license noted and its file present."""
+    assert len(ARMS) >= 8
+    for name, e in ARMS.items():
+        assert source(name).is_file(), name
+        assert e["upstream"] and e["license"], name
+    assert (DATA / "NOTES.md").is_file()
+    assert not list(DATA.rglob("*.stl")) + list(DATA.rglob("*.dae"))  # kinematics only
+
+
+def test_the_set_has_xacro_packages_two_arm_trees_continuous_mimic_and_shared_names():
+    """The properties the issue names hold in the files themselves, not only in the labels."""
+    descs = {name: _description(name) for name in NAMES}
+    xacro = [n for n in NAMES if ARMS[n]["source"].endswith(".xacro")]
+    continuous = [n for n, d in descs.items() if d.continuous]
+    mimic = [n for n, d in descs.items() if d.mimic]
+    shared = []
+    for n, d in descs.items():
+        from lxml import etree
+
+        root = etree.fromstring(d.data)
+        links = {lk.get("name") for lk in root.findall("link")}
+        if links & {j.get("name") for j in root.findall("joint")}:
+            shared.append(n)
+    two_arm = []
+    for n, d in descs.items():
+        chains = serial_chains(build_model(d), d.leaves, tuple(d.mimic), min_joints=6)
+        arms = {c.joints[-1] for c in chains}  # distinct last joints: distinct arms
+        if len(arms) >= 2 and len({c.joints[-6] for c in chains}) >= 2:
+            two_arm.append(n)
+    mobile = [n for n in NAMES if any("mobile" in c for c in ARMS[n]["covers"])]
+    assert len(xacro) >= 3 and {"ur5e", "fr3"} <= set(xacro)
+    assert {"pr2", "kinova"} <= set(continuous)
+    assert {"fr3", "baxter", "pr2"} <= set(mimic)
+    assert {"so100", "z1", "b1_z1"} <= set(shared)
+    assert {"baxter", "pr2", "fr3_duo"} <= set(two_arm)
+    assert {"pr2", "b1_z1"} <= set(mobile)
+
+
+# -- each arm ---------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_loads_with_the_manifest_options(name):
+    """The arm loads with its tip, task and joints; q0 fits and is inside the limits."""
+    e = ARMS[name]
+    arm = load(name)
+    q0 = np.array(e["q0"])
+    assert arm.tip == e["tip"] and arm.n == len(q0) and arm.redundancy >= 1
+    if e["joints"]:
+        assert arm.joint_names == e["joints"]
+    assert np.all((q0 >= arm.lower) & (q0 <= arm.upper))
+    assert np.all(np.isfinite(arm.fk(q0))) and arm.jacobian(q0).shape == (arm.m, arm.n)
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_only_the_missing_mesh_warning(name):
+    """Loading warns about the meshes we did not keep (their visuals left out) and nothing else
+    but a shared frame name where the file has one."""
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        _load_raw(name)
+    texts = [str(w.message) for w in caught]
+    assert any("mesh file(s) not found" in t for t in texts)
+    assert all("mesh file(s) not found" in t or "is carried by 2 frames" in t for t in texts), texts
+    assert sum("mesh file(s) not found" in t for t in texts) == 1
+
+
+def _load_raw(name):
+    e = ARMS[name]
+    return ft.load_arm(
+        source(name),
+        tip=e["tip"],
+        task=e["task"],
+        joints=e["joints"],
+        package_dirs=package_dirs(name),
+        xacro_args=e["xacro_args"] or None,
+    )
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_fk_is_pinocchios_on_the_full_model(name):
+    """The reduced arm's tip placement is the full model's at the same joint values (others
+    fixed at neutral): the reduction (with duplicate frame names renamed meanwhile) is exact."""
+    arm = load(name)
+    desc = _description(name)
+    full = build_model(desc)
+    q_full = pin.neutral(full)
+    q0 = np.array(ARMS[name]["q0"])
+    for jname, v in zip(arm.joint_names, q0, strict=True):
+        j = full.joints[full.getJointId(jname)]
+        if j.nq == 2:  # continuous joints are read as revolute, so nq == 1 always
+            raise AssertionError(jname)
+        q_full[j.idx_q] = v
+    data = full.createData()
+    pin.framesForwardKinematics(full, data, q_full)
+    fid = next(
+        i for i, f in enumerate(full.frames) if f.name == arm.tip and f.type == pin.FrameType.BODY
+    )
+    np.testing.assert_allclose(arm.placement(q0).homogeneous, data.oMf[fid].homogeneous, atol=1e-12)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", NAMES)
+def test_inspect_simulate_and_replay_from_the_command_line(name, tmp_path):
+    """``inspect`` (exit 0, the chain and serial chains listed), ``simulate`` from an explicit
+    regular start (inside the limits, never near-singular, position error < 1 mm) and
+    ``replay --html``; no Pinocchio exception or traceback on stderr."""
+    e = ARMS[name]
+    opts = cli_args(name)
+    target, rest = opts[1], opts[2:]  # inspect takes the file as its target, and no --lockable
+    if "--lockable" in rest:
+        rest = rest[: rest.index("--lockable")]
+    p = _cli("inspect", target, *rest)
+    assert p.returncode == 0, p.stderr
+    assert f"chain to tip '{e['tip']}'" in p.stdout and "serial chains" in p.stdout
+    assert not _only_expected_warnings(p.stderr), p.stderr
+
+    out = tmp_path / "run"
+    q0 = ",".join(repr(v) for v in e["q0"])
+    p = _cli(
+        "simulate", *opts, "--q0", q0, "--algorithms", "jvja", "--out", str(out), "--no-progress"
+    )
+    assert p.returncode == 0, p.stderr
+    assert not _only_expected_warnings(p.stderr), p.stderr
+    arm = load(name)
+    run = np.load(out / "jvja" / "run.npz")
+    q = run["q"]
+    assert np.all((q >= arm.lower - 1e-9) & (q <= arm.upper + 1e-9)), "a sample outside the limits"
+    assert run["sigma_min"].min() > SIGMA_MIN_OK
+    lin = [i for i, r in enumerate(arm.task) if r in ("x", "y", "z")]
+    pos_err = np.linalg.norm(run["x"][:, lin] - run["x_des"][:, lin], axis=1)
+    assert pos_err.max() < TRACKING_OK
+    summary = json.loads((out / "jvja" / "summary.json").read_text())
+    assert summary["summary"]["near_singular_samples"] == 0
+
+    html = tmp_path / "replay.html"
+    p = _cli("replay", str(out / "jvja"), "--html", str(html))
+    assert p.returncode == 0, p.stderr
+    assert not _only_expected_warnings(p.stderr), p.stderr
+    assert html.stat().st_size > 1000 and "<html" in html.read_text()[:2000].lower()
