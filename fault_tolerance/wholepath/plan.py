@@ -53,6 +53,13 @@ class Plan:
     fixed_start: bool
     info: dict = field(default_factory=dict)
 
+    @property
+    def warm_start_used(self) -> str | None:
+        """``"lnva"`` or ``"jvja"`` when that local run itself is the plan, else None."""
+        if self.method.startswith("warm start ("):
+            return self.method[len("warm start (") : -1]
+        return None
+
     def summary(self) -> dict:
         """JSON-able description (saved in a run's meta)."""
         return {
