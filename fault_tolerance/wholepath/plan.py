@@ -167,7 +167,9 @@ def _plan(prob, start, fixed, method, iterations, dp_step, dp_stage, bar, tic) -
     warm = cands[warm_name]
     info: dict = {}
     own_start = warm
-    if prob.arm.redundancy == 1 and method in ("auto", "dp"):
+    if warm.violation <= 1e-9 and warm.score <= 1e-24:  # λ ≡ 0 (eq. 8): nothing can beat it
+        info["zero_jump"] = True
+    elif prob.arm.redundancy == 1 and method in ("auto", "dp"):
         res = dp_plan(prob, warm.q, fixed_start=fixed, h=dp_step, stage_dt=dp_stage, progress=bar)
         if res is not None:
             q_start = start if fixed else res.q_ref[0]

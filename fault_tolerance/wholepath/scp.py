@@ -34,9 +34,11 @@ FD_STEP = 1e-6
 POS_MARGIN = 1e-4
 VEL_MARGIN = 1e-3
 #: Seconds OSQP may take on one QP with active limits (the step is then shortened instead).
-OSQP_TIME_LIMIT = 3.0
+OSQP_TIME_LIMIT = 1.5
 #: SCP stops when an accepted step improves the objective by less than this (relative).
 SCP_RTOL = 1e-4
+#: SCP stops after this many rejected steps in a row (each one shortens the step tenfold).
+MAX_REJECTED = 3
 
 
 class SCPResult(NamedTuple):
@@ -284,7 +286,7 @@ def scp(
         raise InvalidInput(f"proximal weight mu must be > 0, got {mu}")
     cur = warm
     history = [warm.score]
-    accepted = 0
+    accepted = rejected = 0
     it = 0
     for it in range(1, iterations + 1):
         lin = linearise(prob, cur)
@@ -305,13 +307,15 @@ def scp(
             gain = (cur.score - new.score) / max(abs(cur.score), 1e-300)
             cur = new
             accepted += 1
+            rejected = 0
             history.append(cur.score)
             mu = max(mu * 0.3, 1e-6 * W)
             if 0 <= gain < SCP_RTOL:
                 break
         else:
             mu *= 10.0
-            if mu > 1e6 * W:
+            rejected += 1
+            if mu > 1e6 * W or rejected >= MAX_REJECTED:
                 break
         if progress is not None:
             progress.update(1)
