@@ -10,7 +10,7 @@ feedback ``ẋ_cmd = ẋ_des + K_p (x_des − x(q))`` keeps the drift bounded.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -33,6 +33,11 @@ from .run import (  # noqa: F401 - re-exported: Run, ARRAYS and the flags used t
     write_atomic,
 )
 from .trajectories import TaskPath
+
+#: The whole-path planner's name (fault_tolerance.wholepath); not a per-step resolver.
+GLOBAL = "global"
+#: Every algorithm simulate runs: the resolvers and the global plan.
+ALGORITHMS = (*RESOLVERS, GLOBAL)
 
 #: Reduced robots whose smallest N[S, S] pivot falls below this are flagged near-intolerable; the
 #: pivots are damped there (``linalg.PIVOT_EPS``), so JVJA's rates and λ stay finite.
@@ -113,6 +118,7 @@ class _Setup:
     servo: ServoModel
     max_step: float  # [rad/s], MDA's null-space step
     vmax: np.ndarray  # joint velocity limits, inf where none is given
+    reference: np.ndarray | None = None  # the global plan's configurations, tracked (W3)
 
 
 @dataclass
@@ -131,7 +137,7 @@ def simulate(
     path: TaskPath,
     algorithm: str = "jvja",
     *,
-    q0: np.ndarray,
+    q0: np.ndarray | None = None,
     lockable=None,
     weights: Sequence[float] | None = None,
     response: str = "least_norm",
@@ -143,14 +149,17 @@ def simulate(
     lock_time: float | None = None,
     servo: ServoModel | None = None,
     progress=None,
+    plan_options: dict | None = None,
 ) -> Run:
     """Integrate ``algorithm`` along ``path`` from ``q0``; optionally lock a joint on the way.
 
     Args:
         arm: The arm.
         path: Task path with ``m`` coordinates, ``m`` = the arm's task size.
-        algorithm: ``"lnva"``, ``"jvja"`` or ``"mda"``.
-        q0: Initial configuration, shape (n,).
+        algorithm: ``"lnva"``, ``"jvja"``, ``"mda"`` or ``"global"`` (the whole-path plan of
+            :mod:`fault_tolerance.wholepath`, tracked in the null space, MATH.md (W3)).
+        q0: Initial configuration, shape (n,). Required, except for ``"global"``: without it the
+            global plan chooses its start on the self-motion of the path's first point.
         lockable: Joints that may lock (default: the arm's default lockable joints).
         weights: Scenario weights (default 1).
         response: Post-failure response, ``"least_norm"`` or ``"continuation"`` (MATH.md G3).
@@ -164,11 +173,54 @@ def simulate(
         servo: Joint servo model; default perfect rate tracking (``tau = 0``) without a lock and
             :class:`ServoModel()` with one.
         progress: A callable ``progress(k, K)`` or a tqdm-like object with ``update``.
+        plan_options: Options of the global plan (``objective``, ``method``, ``limits``,
+            ``rcn_max``, ``iterations``, ``dp_step``, ``dp_stage``; see
+            :func:`fault_tolerance.wholepath.plan_path`); only with ``"global"``.
     """
-    setup = _setup(
-        arm, path, algorithm, q0, lockable, weights, response, dt, duration, feedback_gain, gain,
-        lock_joint, lock_time, servo,
+    sim = dict(
+        lockable=lockable, weights=weights, response=response, dt=dt, duration=duration,
+        feedback_gain=feedback_gain, gain=gain, lock_joint=lock_joint, lock_time=lock_time,
+        servo=servo,
     )  # fmt: skip
+    if algorithm == GLOBAL:
+        from .wholepath.run import simulate_global
+
+        return simulate_global(arm, path, q0=q0, plan_options=plan_options, progress=progress, **sim)
+    if plan_options is not None:
+        raise InvalidInput(f"plan_options are options of algorithm 'global', not of '{algorithm}'")
+    if q0 is None:
+        raise InvalidInput(
+            f"simulate needs q0 for algorithm '{algorithm}' (only 'global' chooses its own start)"
+        )
+    return _simulate(arm, path, algorithm, q0=q0, progress=progress, **sim)
+
+
+def _simulate(
+    arm: Arm,
+    path: TaskPath,
+    algorithm: str,
+    *,
+    q0: np.ndarray,
+    lockable=None,
+    weights: Sequence[float] | None = None,
+    response: str = "least_norm",
+    dt: float = 1e-3,
+    duration: float | None = None,
+    feedback_gain: float = 0.0,
+    gain: float = MDA_GAIN,
+    lock_joint: str | int | None = None,
+    lock_time: float | None = None,
+    servo: ServoModel | None = None,
+    progress=None,
+    reference: np.ndarray | None = None,
+) -> Run:
+    """The loop of :func:`simulate`; with ``reference`` (the global plan) the rates track it."""
+    setup = _setup(
+        arm, path, "jvja" if reference is not None else algorithm, q0, lockable, weights,
+        response, dt, duration, feedback_gain, gain, lock_joint, lock_time, servo,
+    )  # fmt: skip
+    if reference is not None:
+        setup = replace(setup, algorithm=algorithm, reference=np.asarray(reference, dtype=float))
     q = arm.check_q(q0).copy()
     # an intolerable scenario is refused before any work; later, a path through a reduced
     # singularity gets damped pivots and FLAG_NEAR_INTOLERABLE instead of an exception
@@ -188,7 +240,7 @@ def _setup(
 ) -> _Setup:  # fmt: skip
     """Validate the options of :func:`simulate` (before any work)."""
     if algorithm not in RESOLVERS:
-        raise InvalidInput(f"algorithm '{algorithm}' is not one of {sorted(RESOLVERS)}")
+        raise InvalidInput(f"algorithm '{algorithm}' is not one of {list(ALGORITHMS)}")
     if path.m != arm.m:
         raise InvalidInput(
             f"the path has {path.m} coordinates, the task {'/'.join(arm.task)} has {arm.m}"
@@ -273,7 +325,9 @@ def _step(s: _Setup, state: _State, k: int, rec: dict) -> None:
     proj = projection(J)
     flag = FLAG_NEAR_SINGULAR if proj.sigma_min < SIGMA_EPS else 0
     planned = None
-    if not state.locked or state.lock_jump is None:
+    if s.reference is not None and (not state.locked or state.lock_jump is None):
+        planned = _tracking_rates(s, k, q, J, xd_cmd, proj)
+    elif not state.locked or state.lock_jump is None:
         planned = resolve(
             s.algorithm, J, xd_cmd, s.sc, response=s.response, arm=arm, q=q, gain=s.gain,
             tolerate=True, max_step=s.max_step, proj=proj,
@@ -369,6 +423,14 @@ def _finish(s: _Setup, state: _State, rec: dict, q0) -> Run:
         }
     qd_cmd = rec.pop("qd_cmd")
     return Run(meta=meta, qd_cmd=qd_cmd if servo_used else None, **rec)
+
+
+# MATH.md (W3): the plan's reference tracked in the null space; J q̇ = ẋ_cmd whatever the reference.
+def _tracking_rates(s: _Setup, k: int, q, J, xd_cmd, proj) -> np.ndarray:
+    """``J⁺ẋ_cmd + N (q_ref[k+1] − q)/dt``; past the reference's end, JVJA's rates."""
+    if k + 1 < len(s.reference):
+        return proj.Jpinv @ xd_cmd + proj.N @ ((s.reference[k + 1] - q) / s.dt)
+    return resolve("jvja", J, xd_cmd, s.sc, tolerate=True, proj=proj)
 
 
 def _tick(progress, k: int, total: int) -> None:
