@@ -56,8 +56,12 @@ def experiment_global(exp, *, duration: float | None = None, progress=None) -> t
     q0 = initial_posture(arm, np.array(exp.x0), [exp.joint]).q
     common = {"q0": q0, "lockable": [exp.joint], "feedback_gain": exp.feedback_gain}
     planned = simulate(arm, exp.path(T), "global", progress=progress, **common)
-    t_max = float(planned.t[int(np.argmax(planned.jvj))])
-    t_min = float(planned.t[int(np.argmin(planned.jvj))])
+    flat = float(np.ptp(planned.jvj)) <= 1e-12 * max(1.0, float(np.max(planned.jvj)))
+    if flat:  # λ ≡ const (eq. 8: a lone lockable joint is held still): lock at the paper's moments
+        t_max, t_min = (t * T / exp.duration for t in (exp.paper_t_max, exp.paper_t_min))
+    else:
+        t_max = float(planned.t[int(np.argmax(planned.jvj))])
+        t_min = float(planned.t[int(np.argmin(planned.jvj))])
     runs = {"planned": planned}
     for label, t_lock in (("largest jump", t_max), ("smallest jump", t_min)):
         runs[label] = simulate(
@@ -84,6 +88,7 @@ def experiment_global(exp, *, duration: float | None = None, progress=None) -> t
         "jvj_mean": {"global": float(np.mean(planned.jvj)), "lnva": float(np.mean(lnva.jvj))},
         "jvj_max": {"global": float(np.max(planned.jvj)), "lnva": float(np.max(lnva.jvj))},
         "method": planned.meta["global"]["method"],
+        "constant_jump": flat,
         "servo_model": exp.servo.describe() + f"; task feedback K_p = {exp.feedback_gain} 1/s",
     }
     return runs, entry
@@ -126,12 +131,24 @@ def report_section(beyond: dict) -> str:
         ]
     exp = beyond.get("experiment")
     if exp:
+        note = (
+            " The plan's jump is constant (zero: with joint 3 the only lockable joint the plan holds "
+            "it still, eq. (8)), so there is no largest or smallest moment; the lock happens at the "
+            "paper's moments (scaled to the run's length) instead."
+            if exp.get("constant_jump")
+            else ""
+        )
         lines += [
             "",
-            "**Power-Cube lock with the global plan.** "
-            f"Joint 3 locks at the plan's largest jump (t = {exp['t_max_jump']:.3f} s, "
-            f"λ = {exp['jump_at_max']:.4g}) and smallest (t = {exp['t_min_jump']:.3f} s, "
-            f"λ = {exp['jump_at_min']:.4g}); path-error peaks after the lock "
+            "**Power-Cube lock with the global plan.**" + note + " "
+            + (
+                f"Joint 3 locks at t = {exp['t_max_jump']:.3f} s and t = {exp['t_min_jump']:.3f} s; "
+                if exp.get("constant_jump")
+                else f"Joint 3 locks at the plan's largest jump (t = {exp['t_max_jump']:.3f} s, "
+                f"λ = {exp['jump_at_max']:.4g}) and smallest (t = {exp['t_min_jump']:.3f} s, "
+                f"λ = {exp['jump_at_min']:.4g}); "
+            )
+            + "path-error peaks after the lock "
             f"{1e3 * exp['path_error_peak_at_max']:.3f} mm and {1e3 * exp['path_error_peak_at_min']:.3f} mm. "
             f"Mean jump of the planned motion: global {exp['jvj_mean']['global']:.4g}, "
             f"LNVA {exp['jvj_mean']['lnva']:.4g} (method: {exp['method']}; {exp['servo_model']}).",

@@ -412,6 +412,7 @@ def reproduce(
     quick: bool = False,
     progress: bool = True,
     html: bool = False,
+    beyond: bool = True,
 ) -> dict:
     """Every case of the paper into ``out``: figures, runs, ``summary.json``, ``REPORT.md``.
 
@@ -421,6 +422,9 @@ def reproduce(
         quick: Shorter runs (0.25 s cases, 3 s experiment) for tests; the report says so.
         progress: Show a progress bar.
         html: Also write a self-contained meshcat replay (``replay.html``) for each JVJA run.
+        beyond: Also the section "beyond the paper" (:mod:`.beyond`): the whole-path plan against
+            LNVA, JVJA and MDA on every case and in the lock experiment (``beyond_the_paper`` in
+            summary.json, its own section of REPORT.md, figures ``beyond_*``).
 
     On Ctrl-C (or an error) the cases already finished stay on disk, ``summary.partial.json``
     lists what was and was not finished and what stopped the run, an existing ``summary.json`` is
@@ -449,6 +453,8 @@ def reproduce(
         total += int(round(T / 1e-3)) + 1 + 3 * (int(round((T + EXPERIMENT.after_lock) / 1e-3)) + 1)
     bar = _Progress(total, progress)
     summary: dict = {"cases": {}, "experiment": {}, "details": {}}
+    if beyond:
+        summary["beyond_the_paper"] = {"cases": {}}
     done: list[str] = []
     started = time.perf_counter()
     try:
@@ -468,6 +474,8 @@ def reproduce(
                 for label, run in res["runs"].items():
                     run.save(out / "runs" / "experiment" / label.replace(" ", "_"))
                 res["planned"].save(out / "runs" / "experiment" / "planned")
+                if beyond:
+                    _beyond_experiment(summary, out, exp_T, bar)
                 if html:
                     _html(
                         res["runs"]["largest jump"],
@@ -484,6 +492,8 @@ def reproduce(
                 plots.save_figure(plots.plot_comparison(res["runs"], case.title), out / key)
                 for alg, run in res["runs"].items():
                     run.save(out / "runs" / key / alg)
+                if beyond:
+                    _beyond_case(summary, out, case, res, bar)
                 if html:
                     _html(res["runs"]["jvja"], res["arm"], out / "runs" / key / "jvja")
             done.append(key)
@@ -513,11 +523,44 @@ def reproduce(
     write_atomic(out / "summary.json", json.dumps(summary, indent=2) + "\n")
     from .report import write_report
 
-    write_atomic(out / "REPORT.md", write_report(summary))
+    report = write_report(summary)
+    if beyond:
+        from .beyond import report_section
+
+        report = report.rstrip("\n") + "\n\n" + report_section(summary["beyond_the_paper"])
+    write_atomic(out / "REPORT.md", report)
     partial = out / "summary.partial.json"
     if partial.exists():
         partial.unlink()
     return summary
+
+
+def _beyond_case(summary: dict, out: Path, case: Case, res: dict, bar) -> None:
+    """The global plan of one case from the same start, saved beside the paper's runs."""
+    from . import plots
+    from .beyond import case_global
+
+    if hasattr(bar, "grow"):
+        bar.grow(len(res["runs"]["jvja"].t))
+    run, entry = case_global(case, res, progress=bar)
+    summary["beyond_the_paper"]["cases"][case.key] = entry
+    run.save(out / "runs" / case.key / "global")
+    runs = {"global": run, **res["runs"]}
+    plots.save_figure(plots.plot_comparison(runs, case.title + " — with the global plan"), out / f"beyond_{case.key}")
+
+
+def _beyond_experiment(summary: dict, out: Path, duration, bar) -> None:
+    """The Power-Cube lock experiment with the global plan."""
+    from . import plots
+    from .beyond import experiment_global
+
+    runs, entry = experiment_global(EXPERIMENT, duration=duration, progress=bar)
+    summary["beyond_the_paper"]["experiment"] = entry
+    for label, run in runs.items():
+        run.save(out / "runs" / "experiment_global" / label.replace(" ", "_"))
+    locks = {k: v for k, v in runs.items() if k != "planned"}
+    fig = plots.plot_lock(locks, "Power-Cube 3R, global plan, joint 3 locks")
+    plots.save_figure(fig, out / "beyond_fig9_10")
 
 
 def _html(run: Run, arm: Arm, folder: Path) -> None:

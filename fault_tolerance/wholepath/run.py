@@ -44,6 +44,13 @@ def _over_limits(arm, run, limits: bool) -> bool:
     return bool(fast or np.any(outside_limits(arm, run.q)))
 
 
+def _shows(progress) -> bool:
+    """Whether the caller's progress object is a visible bar (then the plan shows one too)."""
+    if progress is None or getattr(progress, "disable", False):
+        return False
+    return getattr(progress, "bar", True) is not None
+
+
 def simulate_global(arm, path, *, q0, plan_options, progress, **sim):
     """The global run (see the module doc): plan, run the plan, keep the best of it, LNVA, JVJA."""
     from ..simulation import _simulate, simulate
@@ -63,7 +70,7 @@ def simulate_global(arm, path, *, q0, plan_options, progress, **sim):
         dt=sim.get("dt", 1e-3),
         duration=sim.get("duration"),
         feedback_gain=sim.get("feedback_gain", 0.0),
-        progress=progress is not None,
+        progress=_shows(progress),
         **opts,
     )
     limits = opts.get("limits", True)
