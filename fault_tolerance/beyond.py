@@ -17,20 +17,25 @@ from .simulation import Run, simulate
 COMPARED = ("global", "lnva", "jvja", "mda")
 
 
-def _stats(run: Run) -> dict:
+def _stats(run: Run, arm) -> dict:
+    from .limits import outside_limits
+
     s = run.summary()
     return {
         k: s[k]
         for k in ("jvj_mean", "jvj_max", "rcn_mean", "rcn_max", "tracking_error_max")
         if k in s
-    } | {"over_speed_samples": s.get("over_speed_samples", 0)}
+    } | {
+        "over_speed_samples": s.get("over_speed_samples", 0),
+        "outside_position_limits_samples": int(np.count_nonzero(outside_limits(arm, run.q).any(axis=1))),
+    }
 
 
 def case_global(case, result: dict, *, progress=None) -> tuple[Run, dict]:
     """The global plan of a case from the start LNVA / JVJA / MDA used; its summary entry."""
     arm, path, q0 = result["arm"], result["path"], result["q0"]
     run = simulate(arm, path, "global", q0=q0, lockable=list(case.lockable), progress=progress)
-    algs = {"global": _stats(run)} | {a: _stats(r) for a, r in result["runs"].items()}
+    algs = {"global": _stats(run, arm)} | {a: _stats(r, arm) for a, r in result["runs"].items()}
     plan = run.meta["global"]
     best_local = min(algs[a]["jvj_mean"] for a in ("lnva", "jvja"))
     entry = {
@@ -101,7 +106,8 @@ def report_section(beyond: dict) -> str:
         "",
         "Not a claim of the paper. The global plan (`--algorithms global`, docs/MATH.md (W1)-(W5)) "
         "minimises the mean jump over the whole path under the same task constraint, tracking and "
-        "joint limits, from the same start as LNVA, JVJA and MDA. Mean / max λ [(rad/s)²], mean K.",
+        "joint limits, from the same start as LNVA, JVJA and MDA. Mean / max λ [(rad/s)²], mean K; "
+        "a * marks a run that leaves a joint's position limits or exceeds a velocity limit.",
         "",
         "| case | " + " | ".join(f"{a} mean λ / max λ / mean K" for a in COMPARED) + " | method "
         "| vs warm start | vs best local |",
@@ -111,8 +117,11 @@ def report_section(beyond: dict) -> str:
         cells = []
         for a in COMPARED:
             s = e["algorithms"].get(a)
+            out = s is not None and (s["over_speed_samples"] or s["outside_position_limits_samples"])
             cells.append(
-                "—" if s is None else f"{s['jvj_mean']:.4g} / {s['jvj_max']:.4g} / {s['rcn_mean']:.4g}"
+                "—"
+                if s is None
+                else f"{s['jvj_mean']:.4g} / {s['jvj_max']:.4g} / {s['rcn_mean']:.4g}" + "*" * bool(out)
             )
         lines.append(
             f"| {key} | "

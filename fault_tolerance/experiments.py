@@ -456,6 +456,7 @@ def reproduce(
     if beyond:
         summary["beyond_the_paper"] = {"cases": {}}
     done: list[str] = []
+    results: dict = {}  # the cases' runs, for the section beyond the paper
     started = time.perf_counter()
     try:
         for key in keys:
@@ -474,8 +475,6 @@ def reproduce(
                 for label, run in res["runs"].items():
                     run.save(out / "runs" / "experiment" / label.replace(" ", "_"))
                 res["planned"].save(out / "runs" / "experiment" / "planned")
-                if beyond:
-                    _beyond_experiment(summary, out, exp_T, bar)
                 if html:
                     _html(
                         res["runs"]["largest jump"],
@@ -493,19 +492,29 @@ def reproduce(
                 for alg, run in res["runs"].items():
                     run.save(out / "runs" / key / alg)
                 if beyond:
-                    _beyond_case(summary, out, case, res, bar)
+                    results[key] = res
                 if html:
                     _html(res["runs"]["jvja"], res["arm"], out / "runs" / key / "jvja")
             done.append(key)
         summary["checks"] = {"eq8": eq8_check(case_T), "step_time_us": step_timing()}
+        done.append("checks")
+        if beyond:  # after the paper's own sections, which are complete by now
+            bar.describe("beyond the paper")
+            for key, res in results.items():
+                _beyond_case(summary, out, CASES[key], res, bar)
+            if "experiment" in keys:
+                _beyond_experiment(summary, out, exp_T, bar)
+            done.append("beyond_the_paper")
     except BaseException as err:  # Ctrl-C or a failure: keep what is done, say what is not
         bar.close()
         partial = {
             "stopped_by": "interrupted (Ctrl-C)"
             if isinstance(err, KeyboardInterrupt)
             else f"{type(err).__name__}: {err}",
-            "finished": done,
-            "unfinished": [k for k in keys if k not in done] + ["checks"],
+            "finished": [k for k in done if k in keys],
+            "unfinished": [k for k in keys if k not in done]
+            + ([] if "checks" in done else ["checks"]),
+            "beyond_the_paper_finished": "beyond_the_paper" in done if beyond else None,
             **summary,
         }
         write_atomic(
