@@ -437,6 +437,7 @@ def reproduce(
     quick: bool = False,
     progress: bool = True,
     html: bool = False,
+    beyond: bool = True,
 ) -> dict:
     """Every case of the paper into ``out``: figures, runs, ``summary.json``, ``REPORT.md``.
 
@@ -446,6 +447,9 @@ def reproduce(
         quick: Shorter runs (0.25 s cases, 3 s experiment) for tests; the report says so.
         progress: Show a progress bar.
         html: Also write a self-contained meshcat replay (``replay.html``) for each JVJA run.
+        beyond: Also the section "beyond the paper" (:mod:`.beyond`): the whole-path plan against
+            LNVA, JVJA and MDA on every case and in the lock experiment (``beyond_the_paper`` in
+            summary.json, its own section of REPORT.md, figures ``beyond_*``).
 
     On Ctrl-C (or an error) the cases already finished stay on disk, ``summary.partial.json``
     lists what was and was not finished and what stopped the run, an existing ``summary.json`` is
@@ -474,7 +478,10 @@ def reproduce(
         total += int(round(T / 1e-3)) + 1 + 3 * (int(round((T + EXPERIMENT.after_lock) / 1e-3)) + 1)
     bar = _Progress(total, progress)
     summary: dict = {"cases": {}, "experiment": {}, "details": {}, "warnings": []}
+    if beyond:
+        summary["beyond_the_paper"] = {"cases": {}}
     done: list[str] = []
+    results: dict = {}  # the cases' runs, for the section beyond the paper
     started = time.perf_counter()
     try:
         for key in keys:
@@ -516,18 +523,30 @@ def reproduce(
                         out / "runs" / key / alg,
                         warnings=_warn(summary, f"{key}/{alg}", run, res["arm"]),
                     )
+                if beyond:
+                    results[key] = res
                 if html:
                     _html(res["runs"]["jvja"], res["arm"], out / "runs" / key / "jvja")
             done.append(key)
         summary["checks"] = {"eq8": eq8_check(case_T), "step_time_us": step_timing()}
+        done.append("checks")
+        if beyond:  # after the paper's own sections, which are complete by now
+            bar.describe("beyond the paper")
+            for key, res in results.items():
+                _beyond_case(summary, out, CASES[key], res, bar)
+            if "experiment" in keys:
+                _beyond_experiment(summary, out, exp_T, bar)
+            done.append("beyond_the_paper")
     except BaseException as err:  # Ctrl-C or a failure: keep what is done, say what is not
         bar.close()
         partial = {
             "stopped_by": "interrupted (Ctrl-C)"
             if isinstance(err, KeyboardInterrupt)
             else f"{type(err).__name__}: {err}",
-            "finished": done,
-            "unfinished": [k for k in keys if k not in done] + ["checks"],
+            "finished": [k for k in done if k in keys],
+            "unfinished": [k for k in keys if k not in done]
+            + ([] if "checks" in done else ["checks"]),
+            "beyond_the_paper_finished": "beyond_the_paper" in done if beyond else None,
             **summary,
         }
         write_atomic(
@@ -545,11 +564,44 @@ def reproduce(
     write_atomic(out / "summary.json", json.dumps(summary, indent=2) + "\n")
     from .report import write_report
 
-    write_atomic(out / "REPORT.md", write_report(summary))
+    report = write_report(summary)
+    if beyond:
+        from .beyond import report_section
+
+        report = report.rstrip("\n") + "\n\n" + report_section(summary["beyond_the_paper"])
+    write_atomic(out / "REPORT.md", report)
     partial = out / "summary.partial.json"
     if partial.exists():
         partial.unlink()
     return summary
+
+
+def _beyond_case(summary: dict, out: Path, case: Case, res: dict, bar) -> None:
+    """The global plan of one case from the same start, saved beside the paper's runs."""
+    from . import plots
+    from .beyond import case_global
+
+    if hasattr(bar, "grow"):
+        bar.grow(len(res["runs"]["jvja"].t))
+    run, entry = case_global(case, res, progress=bar)
+    summary["beyond_the_paper"]["cases"][case.key] = entry
+    run.save(out / "runs" / case.key / "global")
+    runs = {"global": run, **res["runs"]}
+    plots.save_figure(plots.plot_comparison(runs, case.title + " — with the global plan"), out / f"beyond_{case.key}")
+
+
+def _beyond_experiment(summary: dict, out: Path, duration, bar) -> None:
+    """The Power-Cube lock experiment with the global plan."""
+    from . import plots
+    from .beyond import experiment_global
+
+    runs, entry = experiment_global(EXPERIMENT, duration=duration, progress=bar)
+    summary["beyond_the_paper"]["experiment"] = entry
+    for label, run in runs.items():
+        run.save(out / "runs" / "experiment_global" / label.replace(" ", "_"))
+    locks = {k: v for k, v in runs.items() if k != "planned"}
+    fig = plots.plot_lock(locks, "Power-Cube 3R, global plan, joint 3 locks")
+    plots.save_figure(fig, out / "beyond_fig9_10")
 
 
 def _html(run: Run, arm: Arm, folder: Path) -> None:

@@ -19,11 +19,12 @@ import numpy as np
 
 from .simulation import Run, write_atomic
 
-COLORS = {"lnva": "#1f77b4", "jvja": "#d62728", "mda": "#2ca02c"}
+COLORS = {"lnva": "#1f77b4", "jvja": "#d62728", "mda": "#2ca02c", "global": "#9467bd"}
 LABELS = {
     "lnva": "LNVA (least norm)",
     "jvja": "JVJA (minimum jump)",
     "mda": "MDA (maximum dexterity)",
+    "global": "global (whole-path plan)",
 }
 
 

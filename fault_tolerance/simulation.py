@@ -10,7 +10,7 @@ feedback ``ẋ_cmd = ẋ_des + K_p (x_des − x(q))`` keeps the drift bounded.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -36,6 +36,10 @@ from .trajectories import TaskPath
 
 #: Values of ``simulate(engine=...)``.
 ENGINES = ("auto", "fast", "reference")
+#: The whole-path planner's name (fault_tolerance.wholepath); not a per-step resolver.
+GLOBAL = "global"
+#: Every algorithm simulate runs: the resolvers and the global plan.
+ALGORITHMS = (*RESOLVERS, GLOBAL)
 
 #: Reduced robots whose smallest N[S, S] pivot falls below this are flagged near-intolerable; the
 #: pivots are damped there (``linalg.PIVOT_EPS``), so JVJA's rates and λ stay finite.
@@ -116,6 +120,7 @@ class _Setup:
     servo: ServoModel
     max_step: float  # [rad/s], MDA's null-space step
     vmax: np.ndarray  # joint velocity limits, inf where none is given
+    reference: np.ndarray | None = None  # the global plan's configurations, tracked (W3)
 
 
 @dataclass
@@ -134,7 +139,7 @@ def simulate(
     path: TaskPath,
     algorithm: str = "jvja",
     *,
-    q0: np.ndarray,
+    q0: np.ndarray | None = None,
     lockable=None,
     weights: Sequence[float] | None = None,
     response: str = "least_norm",
@@ -147,14 +152,17 @@ def simulate(
     servo: ServoModel | None = None,
     progress=None,
     engine: str = "auto",
+    plan_options: dict | None = None,
 ) -> Run:
     """Integrate ``algorithm`` along ``path`` from ``q0``; optionally lock a joint on the way.
 
     Args:
         arm: The arm.
         path: Task path with ``m`` coordinates, ``m`` = the arm's task size.
-        algorithm: ``"lnva"``, ``"jvja"`` or ``"mda"``.
-        q0: Initial configuration, shape (n,).
+        algorithm: ``"lnva"``, ``"jvja"``, ``"mda"`` or ``"global"`` (the whole-path plan of
+            :mod:`fault_tolerance.wholepath`, tracked in the null space, MATH.md (W3)).
+        q0: Initial configuration, shape (n,). Required, except for ``"global"``: without it the
+            global plan chooses its start on the self-motion of the path's first point.
         lockable: Joints that may lock (default: the arm's default lockable joints).
         weights: Scenario weights (default 1).
         response: Post-failure response, ``"least_norm"`` or ``"continuation"`` (MATH.md G3).
@@ -172,6 +180,9 @@ def simulate(
             workspace) where it applies, the reference code elsewhere; ``"fast"``: the compiled
             sample or :class:`InvalidInput` saying why not; ``"reference"``: the plain reference
             code (:mod:`.planner`, :mod:`.indices`) at every sample. The numbers agree to 1e-9.
+        plan_options: Options of the global plan (``objective``, ``method``, ``limits``,
+            ``rcn_max``, ``iterations``, ``dp_step``, ``dp_stage``; see
+            :func:`fault_tolerance.wholepath.plan_path`); only with ``"global"``.
 
     Example:
         >>> import numpy as np, fault_tolerance as ft
@@ -185,10 +196,51 @@ def simulate(
     """
     if engine not in ENGINES:
         raise InvalidInput(f"engine {engine!r} is not one of {list(ENGINES)}")
-    setup = _setup(
-        arm, path, algorithm, q0, lockable, weights, response, dt, duration, feedback_gain, gain,
-        lock_joint, lock_time, servo,
+    sim = dict(
+        lockable=lockable, weights=weights, response=response, dt=dt, duration=duration,
+        feedback_gain=feedback_gain, gain=gain, lock_joint=lock_joint, lock_time=lock_time,
+        servo=servo,
     )  # fmt: skip
+    if algorithm == GLOBAL:
+        from .wholepath.run import simulate_global
+
+        return simulate_global(arm, path, q0=q0, plan_options=plan_options, progress=progress, **sim)
+    if plan_options is not None:
+        raise InvalidInput(f"plan_options are options of algorithm 'global', not of '{algorithm}'")
+    if q0 is None:
+        raise InvalidInput(
+            f"simulate needs q0 for algorithm '{algorithm}' (only 'global' chooses its own start)"
+        )
+    return _simulate(arm, path, algorithm, q0=q0, progress=progress, engine=engine, **sim)
+
+
+def _simulate(
+    arm: Arm,
+    path: TaskPath,
+    algorithm: str,
+    *,
+    q0: np.ndarray,
+    lockable=None,
+    weights: Sequence[float] | None = None,
+    response: str = "least_norm",
+    dt: float = 1e-3,
+    duration: float | None = None,
+    feedback_gain: float = 0.0,
+    gain: float = MDA_GAIN,
+    lock_joint: str | int | None = None,
+    lock_time: float | None = None,
+    servo: ServoModel | None = None,
+    progress=None,
+    reference: np.ndarray | None = None,
+    engine: str = "auto",
+) -> Run:
+    """The loop of :func:`simulate`; with ``reference`` (the global plan) the rates track it."""
+    setup = _setup(
+        arm, path, "jvja" if reference is not None else algorithm, q0, lockable, weights,
+        response, dt, duration, feedback_gain, gain, lock_joint, lock_time, servo,
+    )  # fmt: skip
+    if reference is not None:
+        setup = replace(setup, algorithm=algorithm, reference=np.asarray(reference, dtype=float))
     q = arm.check_q(q0).copy()
     # an intolerable scenario is refused before any work; later, a path through a reduced
     # singularity gets damped pivots and FLAG_NEAR_INTOLERABLE instead of an exception
@@ -197,7 +249,8 @@ def simulate(
     rec = _allocate(K1, arm.n, arm.m, setup.sc.f, dt)
     X, XD = sample_path(path, rec["t"], arm.m)
     state = _State(q=q, qd=np.zeros(arm.n), keep=np.arange(arm.n))
-    fast = _sampler(setup, rec, engine)
+    # the compiled sample knows the resolvers, not the tracking of a global plan's reference
+    fast = None if reference is not None else _sampler(setup, rec, engine)
     for k in range(K1):
         _maybe_lock(setup, state, k * dt)
         if fast is None or not fast.step(state, k, X[k], XD[k]):
@@ -226,7 +279,7 @@ def _setup(
 ) -> _Setup:  # fmt: skip
     """Validate the options of :func:`simulate` (before any work)."""
     if algorithm not in RESOLVERS:
-        raise InvalidInput(f"algorithm '{algorithm}' is not one of {sorted(RESOLVERS)}")
+        raise InvalidInput(f"algorithm '{algorithm}' is not one of {list(ALGORITHMS)}")
     if path.m != arm.m:
         raise InvalidInput(
             f"the path has {path.m} coordinates, the task {'/'.join(arm.task)} has {arm.m}"
@@ -327,7 +380,9 @@ def _step(s: _Setup, state: _State, k: int, rec: dict, x_des, xd_des) -> None:
     proj = projection(J)
     flag = FLAG_NEAR_SINGULAR if proj.sigma_min < SIGMA_EPS else 0
     planned = None
-    if not state.locked or state.lock_jump is None:
+    if s.reference is not None and (not state.locked or state.lock_jump is None):
+        planned = _tracking_rates(s, k, q, J, xd_cmd, proj)
+    elif not state.locked or state.lock_jump is None:
         planned = resolve(
             s.algorithm, J, xd_cmd, s.sc, response=s.response, arm=arm, q=q, gain=s.gain,
             tolerate=True, max_step=s.max_step, proj=proj,
@@ -426,6 +481,14 @@ def _finish(s: _Setup, state: _State, rec: dict, q0) -> Run:
     arrays["flags"] = arrays["flags"].astype(np.int64)
     qd_cmd = arrays.pop("qd_cmd")
     return Run(meta=meta, qd_cmd=qd_cmd if servo_used else None, **arrays)
+
+
+# MATH.md (W3): the plan's reference tracked in the null space; J q̇ = ẋ_cmd whatever the reference.
+def _tracking_rates(s: _Setup, k: int, q, J, xd_cmd, proj) -> np.ndarray:
+    """``J⁺ẋ_cmd + N (q_ref[k+1] − q)/dt``; past the reference's end, JVJA's rates."""
+    if k + 1 < len(s.reference):
+        return proj.Jpinv @ xd_cmd + proj.N @ ((s.reference[k + 1] - q) / s.dt)
+    return resolve("jvja", J, xd_cmd, s.sc, tolerate=True, proj=proj)
 
 
 def _tick(progress, k: int, total: int) -> None:

@@ -86,7 +86,12 @@ def test_self_motion_nodes_reach_the_task_point():
     (st,) = trace_stages(prob, np.array([50]), q0[None], h=0.02, max_nodes=2000)
     _, E = kinematics(prob, st.q, np.full(len(st.q), 50))
     assert np.max(np.linalg.norm(E, axis=1)) < 1e-9
-    assert np.isfinite(st.period)  # the spatial 4R's self-motion here is a closed curve
+    if np.isfinite(st.period):  # a closed curve: it ends next to where it began
+        assert np.linalg.norm(st.q[-1] - st.q[0]) < 0.05
+    else:  # an arc: both ends next to a position limit (±π here)
+        for end in (st.q[0], st.q[-1]):
+            assert np.min(np.minimum(end - prob.lower, prob.upper - end)) < 0.1
+    assert np.all((st.q >= prob.lower) & (st.q <= prob.upper))
 
 
 def _task_residual(prob, traj):
@@ -228,3 +233,63 @@ def test_example_robot_arms_global_not_above_local(robot, task):
     assert s["final"] <= min(s["lnva"], s["jvja"])
     assert plan.info["violations"][_cand(plan)] == 0.0
     assert np.array_equal(plan.q0, q0)
+
+
+# -- simulate(..., "global"), the CLI ---------------------------------------------------------
+
+
+def test_simulate_global_is_a_run_like_the_others():
+    """simulate(arm, path, "global") tracks the path as LNVA does and its mean jump is not above theirs."""
+    from fault_tolerance.simulation import simulate
+
+    arm, path, q0, lockable = _fig7(0.3)
+    runs = {a: simulate(arm, path, a, q0=q0, lockable=lockable) for a in ("lnva", "jvja", "global")}
+    g = runs["global"]
+    assert g.meta["algorithm"] == "global" and g.meta["global"]["method"]
+    assert np.array_equal(g.q[0], q0)
+    assert g.summary()["jvj_mean"] <= min(r.summary()["jvj_mean"] for r in runs.values())
+    assert g.summary()["tracking_error_max"] < 2 * runs["lnva"].summary()["tracking_error_max"] + 1e-6
+    J = np.array([arm.jacobian(q) for q in g.q])
+    xd = np.array([path.xdot(t) for t in g.t])
+    assert np.max(np.abs(np.einsum("kmn,kn->km", J, g.qd) - xd)) < 1e-9
+
+
+def test_simulate_global_free_start_and_lock():
+    """Without q0 the global plan picks its start at the path's first point; a lock run works too."""
+    from fault_tolerance.simulation import simulate
+
+    arm, path, q0, lockable = _fig7(0.2)
+    free = simulate(arm, path, "global", lockable=lockable)
+    assert np.linalg.norm(arm.task_error(path.x(0.0), free.q[0])) < 1e-9
+    lock = simulate(
+        arm, path, "global", q0=q0, lockable=lockable, lock_joint="joint2", lock_time=0.1
+    )
+    assert lock.meta["lock"]["joint"] == "joint2"
+    assert np.all(lock.qd[lock.t >= 0.1, 1] == 0.0)
+
+
+def test_simulate_refuses_plan_options_elsewhere_and_a_missing_q0():
+    """plan_options only with global; q0 required for the local planners; unknown options refused."""
+    from fault_tolerance.simulation import simulate
+
+    arm, path, q0, lockable = _fig7(0.05)
+    with pytest.raises(InvalidInput, match="plan_options"):
+        simulate(arm, path, "jvja", q0=q0, plan_options={"objective": "max"})
+    with pytest.raises(InvalidInput, match="needs q0"):
+        simulate(arm, path, "lnva")
+    with pytest.raises(InvalidInput, match="not known"):
+        simulate(arm, path, "global", q0=q0, plan_options={"speed": 3})
+
+
+def test_cli_simulate_global(tmp_path, capsys):
+    """fault-tolerance simulate --algorithms lnva,jvja,global writes a global run and prints it."""
+    from fault_tolerance.cli import main
+
+    rc = main(
+        ["simulate", "--robot", "spatial_4r", "--x0=-0.21,0.20,0.35", "--duration", "0.2",
+         "--algorithms", "lnva,jvja,global", "--no-progress", "--out", str(tmp_path)]
+    )  # fmt: skip
+    assert rc == 0
+    assert (tmp_path / "global" / "run.npz").is_file()
+    assert "global" in capsys.readouterr().out
+    assert main(["simulate", "--robot", "spatial_4r", "--algorithms", "gloabl", "--no-progress"]) == 2

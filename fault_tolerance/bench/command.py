@@ -76,6 +76,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="configurations of the batched-API row (Panda position task, five lockable "
         "joints; default 20000; 0 skips it)",
     )
+    parser.add_argument(
+        "--plan",
+        action="store_true",
+        help="time the whole-path planner (algorithm 'global') instead: planar 3R, spatial 4R, "
+        "Panda pose and position 1 s paths, with the issue's time targets and memory",
+    )
 
 
 def _arm_keys(robots: Sequence[str] | None) -> list[str]:
@@ -153,6 +159,8 @@ def _run(args: argparse.Namespace) -> int:
         a, b = (load(p) for p in args.compare)
         print(format_compare(compare(a, b), *args.compare))
         return 0
+    if args.plan:
+        return _run_plan(args)
     keys = _check(args)
 
     def progress(msg: str) -> None:
@@ -194,6 +202,28 @@ def _run(args: argparse.Namespace) -> int:
         write_json(args.json, data)
         print(f"\nwrote {args.json}")
     failed = [t for t in items if t["pass"] is False]
+    return 1 if (failed and args.strict) else 0
+
+
+def _run_plan(args: argparse.Namespace) -> int:
+    """``--plan``: the whole-path planner's cases (``--robots`` picks among them)."""
+    from .plan import PLAN_CASES, bench_plan, format_plan_table
+
+    keys = list(PLAN_CASES)
+    if args.robots:
+        keys = [k.strip() for item in args.robots for k in item.split(",") if k.strip()]
+        bad = [k for k in keys if k not in PLAN_CASES]
+        if bad:
+            raise InvalidInput(f"unknown planner case(s) {bad}; allowed: {list(PLAN_CASES)}")
+    rows = []
+    for key in keys:
+        print(f"  planning {key}", file=sys.stderr, flush=True)
+        rows.append(bench_plan(key))
+    print(format_plan_table(rows))
+    if args.json:
+        write_json(args.json, {"schema": SCHEMA, "machine": machine_info(), "plan": rows})
+        print(f"\nwrote {args.json}")
+    failed = [r for r in rows if not r["pass"]]
     return 1 if (failed and args.strict) else 0
 
 

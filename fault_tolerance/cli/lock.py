@@ -38,7 +38,7 @@ def add_parser(sub) -> argparse.ArgumentParser:
         default="max",
         help="lock time [s], or max / min: the moment of largest / smallest jump",
     )
-    s.add_argument("--algorithm", default="lnva", choices=["lnva", "jvja", "mda"])
+    s.add_argument("--algorithm", default="lnva", choices=["lnva", "jvja", "mda", "global"])
     s.add_argument("--tau", type=float, default=0.05, help="servo time constant [s] (default 0.05)")
     s.add_argument(
         "--accel-limit", type=float, default=float("inf"), help="servo acceleration limit [rad/s²]"

@@ -23,6 +23,11 @@ def add_parser(sub) -> argparse.ArgumentParser:
     s.add_argument("--cases", default=None, help="subset, e.g. fig2,fig4,experiment")
     s.add_argument("--quick", action="store_true", help="shortened runs (for tests)")
     s.add_argument("--html", action="store_true", help="also write meshcat replays (replay.html)")
+    s.add_argument(
+        "--no-beyond",
+        action="store_true",
+        help="skip the section 'beyond the paper' (the whole-path plan on every case)",
+    )
     s.add_argument("--no-progress", action="store_true")
     s.set_defaults(func=run)
     return s
@@ -36,7 +41,12 @@ def run(args) -> int:
     out = Path(args.out)
     try:
         summary = reproduce(
-            out, cases=cases, quick=args.quick, progress=not args.no_progress, html=args.html
+            out,
+            cases=cases,
+            quick=args.quick,
+            progress=not args.no_progress,
+            html=args.html,
+            beyond=not args.no_beyond,
         )
     except KeyboardInterrupt:
         print(

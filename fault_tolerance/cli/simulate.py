@@ -24,6 +24,7 @@ HELP = "one task run with one or several algorithms"
 EXAMPLE = (
     "fault-tolerance simulate --robot planar_3r --out out/fig2\n"
     "  fault-tolerance simulate --robot spatial_4r --x0 -0.21,0.20,0.35 --algorithms jvja,lnva --out out/4r\n"
+    "  fault-tolerance simulate --robot spatial_4r --x0=-0.21,0.20,0.35 --algorithms lnva,jvja,global\n"
     "  fault-tolerance simulate --robot panda --task position --lockable panda_joint2,panda_joint4 "
     "--radius 0.05 --rows y,z --out out/panda\n"
     "  fault-tolerance simulate --urdf my_arm.urdf --tip tool0 --task position --csv path.csv --out out/mine"
@@ -36,8 +37,12 @@ def add_parser(sub) -> argparse.ArgumentParser:
     add_robot_options(s)
     add_path_options(s)
     s.add_argument(
-        "--algorithms", default="lnva,jvja,mda", help="comma-separated among lnva,jvja,mda"
+        "--algorithms",
+        default="lnva,jvja,mda",
+        help="comma-separated among lnva,jvja,mda,global (global: the whole-path plan, "
+        "docs/MATH.md W1-W5; with --x0 and no --q0 it chooses its start on the self-motion of x0)",
     )
+    add_plan_options(s)
     s.add_argument("--out", default=None, help="output folder")
     s.add_argument(
         "--html", action="store_true", help="also write a self-contained replay.html per run"
@@ -47,14 +52,44 @@ def add_parser(sub) -> argparse.ArgumentParser:
     return s
 
 
+def add_plan_options(s) -> None:
+    """``--objective`` and ``--rcn-max`` of the global plan."""
+    g = s.add_argument_group("global plan")
+    g.add_argument(
+        "--objective",
+        default="mean",
+        choices=["mean", "max"],
+        help="what the global plan minimises: the mean (default) or the maximum of λ(t)",
+    )
+    g.add_argument(
+        "--rcn-max",
+        type=float,
+        default=None,
+        help="global plan: keep every reduced condition number k_S below this bound",
+    )
+
+
 def _algorithms(args) -> list[str]:
-    from ..planner import RESOLVERS
+    from ..simulation import ALGORITHMS
 
     algs = names(args.algorithms) or []
-    bad = [a for a in algs if a not in RESOLVERS]
+    bad = [a for a in algs if a not in ALGORITHMS]
     if bad or not algs:
-        raise InvalidInput(f"--algorithms {args.algorithms!r}: choose among {sorted(RESOLVERS)}")
+        raise InvalidInput(f"--algorithms {args.algorithms!r}: choose among {list(ALGORITHMS)}")
     return algs
+
+
+def _global_start(alg: str, args) -> dict:
+    """For ``global``: its plan options, and a free start (q0=None) when only --x0 was given."""
+    if alg != "global":
+        return {}
+    opts = {"objective": args.objective}
+    if args.rcn_max is not None:
+        opts["rcn_max"] = args.rcn_max
+    extra: dict = {"plan_options": opts}
+    if args.q0 is None and args.x0 is not None:
+        extra["q0"] = None  # free on the self-motion of x0: the plan chooses its start
+    return extra
 
 
 def run(args) -> int:
@@ -77,7 +112,7 @@ def run(args) -> int:
                 arm,
                 path,
                 alg,
-                q0=q0,
+                **{"q0": q0, **_global_start(alg, args)},
                 lockable=lockable,
                 dt=args.dt,
                 duration=args.duration,

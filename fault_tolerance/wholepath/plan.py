@@ -53,6 +53,13 @@ class Plan:
     fixed_start: bool
     info: dict = field(default_factory=dict)
 
+    @property
+    def warm_start_used(self) -> str | None:
+        """``"lnva"`` or ``"jvja"`` when that local run itself is the plan, else None."""
+        if self.method.startswith("warm start ("):
+            return self.method[len("warm start (") : -1]
+        return None
+
     def summary(self) -> dict:
         """JSON-able description (saved in a run's meta)."""
         return {
@@ -160,7 +167,9 @@ def _plan(prob, start, fixed, method, iterations, dp_step, dp_stage, bar, tic) -
     warm = cands[warm_name]
     info: dict = {}
     own_start = warm
-    if prob.arm.redundancy == 1 and method in ("auto", "dp"):
+    if warm.violation <= 1e-9 and warm.score <= 1e-24:  # λ ≡ 0 (eq. 8): nothing can beat it
+        info["zero_jump"] = True
+    elif prob.arm.redundancy == 1 and method in ("auto", "dp"):
         res = dp_plan(prob, warm.q, fixed_start=fixed, h=dp_step, stage_dt=dp_stage, progress=bar)
         if res is not None:
             q_start = start if fixed else res.q_ref[0]

@@ -76,8 +76,8 @@ def build_problem(
 ) -> PathProblem:
     """Sample ``path`` at ``k·dt`` (k = 0..steps) and collect limits and scenarios.
 
-    ``limits=True`` enforces the URDF's position and velocity limits (joints whose range spans a
-    full turn have no position limit; a velocity limit of 0 or inf counts as none).
+    ``limits=True`` enforces the URDF's position and velocity limits, as the bounded resolvers do
+    (:func:`fault_tolerance.limits.velocity_limits`: defaults where the URDF gives none).
     """
     sc = scenarios(
         arm.default_lockable if lockable is None else lockable,
@@ -93,13 +93,13 @@ def build_problem(
         raise InvalidInput("the path gives non-finite positions or velocities")
     n = arm.n
     lo, hi, vmax = np.full(n, -np.inf), np.full(n, np.inf), np.full(n, np.inf)
-    if limits:
-        span = arm.upper - arm.lower
-        bounded = np.isfinite(span) & (span < 2 * np.pi - 1e-3)
-        lo[bounded], hi[bounded] = arm.lower[bounded], arm.upper[bounded]
-        v = arm.velocity_limit
-        ok = np.isfinite(v) & (v > 0)
-        vmax[ok] = v[ok]
+    if limits:  # the same limits as the bounded resolvers (fault_tolerance.limits)
+        from ..bounded import NO_LIMIT
+        from ..limits import velocity_limits
+
+        lo = np.where(np.abs(arm.lower) < NO_LIMIT, arm.lower, -np.inf)
+        hi = np.where(np.abs(arm.upper) < NO_LIMIT, arm.upper, np.inf)
+        vmax = velocity_limits(arm)
     return PathProblem(
         arm, sc, dt, x_des, xd_des, float(feedback_gain), lo, hi, vmax, rcn_max, objective
     )

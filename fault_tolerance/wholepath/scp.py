@@ -31,12 +31,14 @@ from .problem import (
 #: Forward-difference step for the derivatives in q [rad].
 FD_STEP = 1e-6
 #: Slack kept from the limits in the QP (position [rad], velocity as a fraction of the limit).
-POS_MARGIN = 1e-4
+POS_MARGIN = 2e-3
 VEL_MARGIN = 1e-3
 #: Seconds OSQP may take on one QP with active limits (the step is then shortened instead).
-OSQP_TIME_LIMIT = 3.0
+OSQP_TIME_LIMIT = 1.5
 #: SCP stops when an accepted step improves the objective by less than this (relative).
 SCP_RTOL = 1e-4
+#: SCP stops after this many rejected steps in a row (each one shortens the step tenfold).
+MAX_REJECTED = 5
 
 
 class SCPResult(NamedTuple):
@@ -215,20 +217,43 @@ def build_qp(prob: PathProblem, traj: Trajectory, lin: _Linear, mu: float, fixed
     return QP(P, c, Aeq.tocsc(), beq, Ain, lin_, uin, nq)
 
 
-def solve_qp(qp: QP) -> np.ndarray | None:
-    """Solve the QP: the equality-constrained KKT system by sparse LU, and OSQP (warm-started
-    from it) only when its solution breaks an inequality. ``None`` when OSQP finds no solution."""
+def _kkt(P, c, Aeq, beq) -> np.ndarray:
+    """Minimiser of ½xᵀPx + cᵀx on ``Aeq x = beq`` from one sparse LU of the KKT matrix."""
     from scipy.sparse.linalg import spsolve
 
-    nx, me = qp.P.shape[0], qp.Aeq.shape[0]
-    KKT = sp.bmat([[qp.P, qp.Aeq.T], [qp.Aeq, -1e-12 * sp.eye(me)]], format="csc")
-    sol = spsolve(KKT, np.concatenate([-qp.c, qp.beq]))
-    x = sol[:nx]
-    if qp.Ain is None or not np.all(np.isfinite(x)):
-        return x if np.all(np.isfinite(x)) else None
+    nx, me = P.shape[0], Aeq.shape[0]
+    KKT = sp.bmat([[P, Aeq.T], [Aeq, -1e-12 * sp.eye(me)]], format="csc")
+    return spsolve(KKT, np.concatenate([-c, beq]))[:nx]
+
+
+def _violated(qp: QP, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     z = qp.Ain @ x
-    if np.all(z >= qp.lin - 1e-9) and np.all(z <= qp.uin + 1e-9) and qp.c[-1] != 1.0:
+    return z < qp.lin - 1e-9, z > qp.uin + 1e-9
+
+
+def solve_qp(qp: QP, rounds: int = 6) -> np.ndarray | None:
+    """Solve the QP: the equality-constrained KKT system by sparse LU; where its solution breaks
+    inequalities, those rows are held at their bounds and the system solved again (a few rounds of
+    an active-set guess); OSQP (warm-started) when that does not settle. ``None`` when nothing does.
+    The candidate is checked on its exact rollout anyway, so a feasible point suffices."""
+    x = _kkt(qp.P, qp.c, qp.Aeq, qp.beq)
+    if not np.all(np.isfinite(x)):
+        return None
+    if qp.Ain is None:
         return x
+    is_max = qp.c[-1] == 1.0
+    active = np.zeros(qp.Ain.shape[0], bool)
+    bound = np.zeros(qp.Ain.shape[0])
+    for _ in range(0 if is_max else rounds):
+        lo, hi = _violated(qp, x)
+        if not (lo.any() or hi.any()):
+            return x
+        bound = np.where(lo, qp.lin, np.where(hi, qp.uin, bound))
+        active |= lo | hi
+        A = sp.vstack([qp.Aeq, qp.Ain[active]], format="csc")
+        x = _kkt(qp.P, qp.c, A, np.concatenate([qp.beq, bound[active]]))
+        if not np.all(np.isfinite(x)):
+            break
     import osqp
 
     A = sp.vstack([qp.Aeq, qp.Ain], format="csc")
@@ -246,7 +271,8 @@ def solve_qp(qp: QP) -> np.ndarray | None:
         time_limit=OSQP_TIME_LIMIT,
         polishing=True,
     )
-    solver.warm_start(x=x)
+    if np.all(np.isfinite(x)):
+        solver.warm_start(x=x)
     res = solver.solve(raise_error=False)
     status = str(res.info.status).lower()
     if "solved" not in status or "unsolved" in status or res.x is None:
@@ -284,7 +310,7 @@ def scp(
         raise InvalidInput(f"proximal weight mu must be > 0, got {mu}")
     cur = warm
     history = [warm.score]
-    accepted = 0
+    accepted = rejected = 0
     it = 0
     for it in range(1, iterations + 1):
         lin = linearise(prob, cur)
@@ -305,13 +331,15 @@ def scp(
             gain = (cur.score - new.score) / max(abs(cur.score), 1e-300)
             cur = new
             accepted += 1
+            rejected = 0
             history.append(cur.score)
             mu = max(mu * 0.3, 1e-6 * W)
             if 0 <= gain < SCP_RTOL:
                 break
         else:
             mu *= 10.0
-            if mu > 1e6 * W:
+            rejected += 1
+            if mu > 1e6 * W or rejected >= MAX_REJECTED:
                 break
         if progress is not None:
             progress.update(1)
