@@ -349,9 +349,13 @@ def start_sensitivity(
     smaller along the task" should not hang on our choice of posture. The starts are spread over
     the points of the self-motion curves whose K is in its lowest quartile (the starts a planner
     following Sec. III.D would consider; from near-singular starts every algorithm's λ is dominated
-    by spikes). Returns, per start, the time-mean λ of both algorithms and the fraction of starts
-    where JVJA's is the smaller.
+    by spikes). Returns, per start, the time-mean λ of both algorithms, the diagnostics' warnings
+    of their runs and the fraction of starts where JVJA's is the smaller. A start whose runs have
+    warnings (over the velocity limit, RCN beyond the threshold, near-singular, off the path) is
+    *degenerate*: it is kept in ``starts`` with ``"degenerate": True`` and left out of the fraction.
     """
+    from .diagnostics import check_run
+
     arm, path = result["arm"], case.path(duration)
     curves = result["posture"].curves
     if not curves:
@@ -362,15 +366,27 @@ def start_sensitivity(
     picks = good[np.linspace(0, len(good) - 1, starts, endpoint=False).astype(int)]
     rows = []
     for q0 in picks:
-        means = {}
+        means, warned = {}, []
         for alg in ("lnva", "jvja"):
             run = simulate(arm, path, alg, q0=q0, lockable=list(case.lockable), progress=progress)
             means[alg] = float(np.mean(run.jvj))
+            warned += [f"{alg}: {w.message}" for w in check_run(run, arm)]
         rows.append(
-            {"q0": q0.tolist(), "jvj_mean_lnva": means["lnva"], "jvj_mean_jvja": means["jvja"]}
+            {
+                "q0": q0.tolist(),
+                "jvj_mean_lnva": means["lnva"],
+                "jvj_mean_jvja": means["jvja"],
+                "degenerate": bool(warned),
+                "warnings": warned,
+            }
         )
-    wins = sum(r["jvj_mean_jvja"] <= r["jvj_mean_lnva"] for r in rows)
-    return {"starts": rows, "jvja_smaller_fraction": wins / len(rows)}
+    kept = [r for r in rows if not r["degenerate"]]
+    wins = sum(r["jvj_mean_jvja"] <= r["jvj_mean_lnva"] for r in kept)
+    return {
+        "starts": rows,
+        "jvja_smaller_fraction": wins / len(kept) if kept else None,
+        "degenerate_starts": [i for i, r in enumerate(rows) if r["degenerate"]],
+    }
 
 
 def eq8_check(duration: float | None = None) -> dict:
@@ -403,6 +419,15 @@ def step_timing(repeats: int = 2000) -> dict:
 
 
 # -- the pipeline ------------------------------------------------------------------------------
+
+
+def _warn(summary: dict, name: str, run, arm) -> list[dict]:
+    """The diagnostics' warnings of one reproduced run, also listed in ``summary["warnings"]``."""
+    from .diagnostics import check_run
+
+    found = [w.as_dict() for w in check_run(run, arm)]
+    summary["warnings"] += [{"run": name, **w} for w in found]
+    return found
 
 
 def reproduce(
@@ -452,7 +477,7 @@ def reproduce(
         T = exp_T or EXPERIMENT.duration
         total += int(round(T / 1e-3)) + 1 + 3 * (int(round((T + EXPERIMENT.after_lock) / 1e-3)) + 1)
     bar = _Progress(total, progress)
-    summary: dict = {"cases": {}, "experiment": {}, "details": {}}
+    summary: dict = {"cases": {}, "experiment": {}, "details": {}, "warnings": []}
     if beyond:
         summary["beyond_the_paper"] = {"cases": {}}
     done: list[str] = []
@@ -473,8 +498,12 @@ def reproduce(
                 )
                 plots.save_figure(fig, out / "fig9_10")
                 for label, run in res["runs"].items():
-                    run.save(out / "runs" / "experiment" / label.replace(" ", "_"))
-                res["planned"].save(out / "runs" / "experiment" / "planned")
+                    name = f"experiment/{label.replace(' ', '_')}"
+                    run.save(out / "runs" / name, warnings=_warn(summary, name, run, res["arm"]))
+                res["planned"].save(
+                    out / "runs" / "experiment" / "planned",
+                    warnings=_warn(summary, "experiment/planned", res["planned"], res["arm"]),
+                )
                 if html:
                     _html(
                         res["runs"]["largest jump"],
@@ -490,7 +519,10 @@ def reproduce(
                 )
                 plots.save_figure(plots.plot_comparison(res["runs"], case.title), out / key)
                 for alg, run in res["runs"].items():
-                    run.save(out / "runs" / key / alg)
+                    run.save(
+                        out / "runs" / key / alg,
+                        warnings=_warn(summary, f"{key}/{alg}", run, res["arm"]),
+                    )
                 if beyond:
                     results[key] = res
                 if html:

@@ -125,8 +125,12 @@ class Run:
         return s
 
     # -- files -------------------------------------------------------------------------------
-    def save(self, folder: str | Path) -> Path:
-        """Write ``run.npz``, ``run.csv`` and ``summary.json`` into ``folder`` (atomically)."""
+    def save(self, folder: str | Path, *, warnings: list[dict] | None = None) -> Path:
+        """Write ``run.npz``, ``run.csv`` and ``summary.json`` into ``folder`` (atomically).
+
+        ``warnings``: what :func:`fault_tolerance.diagnostics.check_run` found (``as_dict()`` of
+        each), recorded in summary.json under ``"warnings"`` (absent when not checked).
+        """
         folder = output_folder(folder)
         arrays = {k: getattr(self, k) for k in ARRAYS}
         arrays.update(
@@ -136,9 +140,10 @@ class Run:
         np.savez_compressed(buf, meta=np.array(to_json(self.meta)), **arrays)
         write_atomic(folder / "run.npz", buf.getvalue())
         write_atomic(folder / "run.csv", self.to_csv())
-        write_atomic(
-            folder / "summary.json", to_json({"meta": self.meta, "summary": self.summary()})
-        )
+        record = {"meta": self.meta, "summary": self.summary()}
+        if warnings is not None:
+            record["warnings"] = list(warnings)
+        write_atomic(folder / "summary.json", to_json(record))
         return folder
 
     @classmethod

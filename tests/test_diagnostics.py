@@ -126,3 +126,14 @@ def test_servo_lag_is_a_tracking_error_not_a_lost_path(arm):
     run = simulate(arm, path, "jvja", q0=q0, lock_joint="joint2", lock_time=0.5, feedback_gain=10)
     kinds = [w.kind for w in dg.check_run(run, arm)]
     assert kinds == ["tracking"], kinds
+
+
+def test_report_leaves_degenerate_starts_out_and_names_them():
+    """A start whose runs broke a check is counted as left out, not averaged into the numbers."""
+    from fault_tolerance.report import _sensitivity_row
+
+    good = {"jvj_mean_lnva": 2.0, "jvj_mean_jvja": 1.0, "degenerate": False, "warnings": []}
+    bad = {"jvj_mean_lnva": 1.0, "jvj_mean_jvja": 900.0, "degenerate": True, "warnings": ["x"]}
+    row = _sensitivity_row("fig2", {"starts": [good, good, bad]})
+    assert row == "| fig2 | 100 % of 2 | 50.0 % | 1 of 3 |"
+    assert _sensitivity_row("fig2", {"starts": [bad]}) == "| fig2 | - | - | 1 of 1 |"

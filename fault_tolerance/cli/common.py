@@ -220,6 +220,33 @@ def bar(total: int, enabled: bool, desc: str):
     return tqdm(total=total, unit="step", desc=desc)
 
 
+def close_bars() -> None:
+    """Close every progress bar still drawn, so what is printed next starts on its own line.
+
+    A closed bar is drawn once more, finished, with its newline, and never redrawn: an error
+    raised while a bar is drawn then appears on a line of its own, once.
+    """
+    if "tqdm" not in sys.modules:
+        return
+    from tqdm.std import tqdm
+
+    for b in list(getattr(tqdm, "_instances", ())):
+        b.close()
+
+
+def report_warnings(command: str, label: str, run_, arm) -> list[dict]:
+    """Print one line on stderr per problem :mod:`~fault_tolerance.diagnostics` finds in ``run_``.
+
+    Returns the warnings as dicts for summary.json (``Run.save(..., warnings=...)``).
+    """
+    from ..diagnostics import check_run, warning_lines
+
+    found = check_run(run_, arm)
+    for line in warning_lines(label, found):
+        print(f"fault-tolerance {command}: {line}", file=sys.stderr)
+    return [w.as_dict() for w in found]
+
+
 # -- parser and errors ----------------------------------------------------------------------
 
 
@@ -239,14 +266,17 @@ def run_command(func: Callable, args: argparse.Namespace) -> int:
     try:
         return int(func(args) or 0)
     except FaultToleranceError as err:
+        close_bars()
         if args.debug:
             raise
         print(f"fault-tolerance {args.command}: error: {one_line(err)}", file=sys.stderr)
         return EXIT_BAD_INPUT
     except KeyboardInterrupt:
+        close_bars()
         print("interrupted", file=sys.stderr)
         return EXIT_INTERRUPTED
     except Exception as err:  # noqa: BLE001 - the last line of defence
+        close_bars()
         if args.debug:
             raise
         print(

@@ -15,6 +15,7 @@ from .common import (
     epilog,
     floats,
     load_robot,
+    report_warnings,
     start_and_path,
 )
 
@@ -114,15 +115,16 @@ def run(args) -> int:
         f"jump at the lock {s.get('jump_at_lock', 0.0):.4g} (rad/s)²; path error peak after the lock "
         f"{1e3 * s['path_error_peak_after_lock']:.3f} mm (before: {1e3 * s['path_error_max_before_lock']:.3f} mm)"
     )
+    found = report_warnings(NAME, args.algorithm, run_, arm)
     if args.out:
-        _write(run_, arm, joint, t_lock, Path(args.out), args.html)
+        _write(run_, arm, joint, t_lock, Path(args.out), args.html, found)
     return 0
 
 
-def _write(run_, arm, joint: str, t_lock: float, out: Path, html: bool) -> None:
+def _write(run_, arm, joint: str, t_lock: float, out: Path, html: bool, found) -> None:
     from .. import plots
 
-    run_.save(out)
+    run_.save(out, warnings=found)
     plots.save_figure(plots.plot_lock({f"{joint} locks at {t_lock:.2f} s": run_}), out / "lock")
     plots.save_figure(plots.plot_run(run_), out / "run")
     if html:

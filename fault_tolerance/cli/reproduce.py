@@ -55,6 +55,8 @@ def run(args) -> int:
             file=sys.stderr,
         )
         return EXIT_INTERRUPTED
+    for w in summary.get("warnings", []):
+        print(f"fault-tolerance reproduce: warning: {w['run']}: {w['message']}", file=sys.stderr)
     print(
         f"wrote {out}/summary.json, {out}/REPORT.md and figures in {summary['meta']['seconds']} s"
     )

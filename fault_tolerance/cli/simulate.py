@@ -15,6 +15,7 @@ from .common import (
     epilog,
     load_robot,
     names,
+    report_warnings,
     start_and_path,
 )
 
@@ -93,6 +94,7 @@ def _global_start(alg: str, args) -> dict:
 
 def run(args) -> int:
     """One task run per algorithm; files into --out."""
+    from ..diagnostics import check_run as check
     from ..planner import MDA_GAIN
     from ..run import output_folder
     from ..simulation import simulate
@@ -103,7 +105,7 @@ def run(args) -> int:
     out = output_folder(args.out) if args.out else None
     steps = int(round((args.duration or path.duration) / args.dt)) + 1
     progress = bar(steps * len(algs), not args.no_progress, "simulate")
-    runs, saved = {}, []
+    runs, saved, found = {}, [], {}
     try:
         for alg in algs:
             runs[alg] = simulate(
@@ -119,8 +121,9 @@ def run(args) -> int:
                 gain=MDA_GAIN if args.gain is None else args.gain,
                 progress=progress,
             )
+            found[alg] = check(runs[alg], arm)
             if out:
-                runs[alg].save(out / alg)
+                runs[alg].save(out / alg, warnings=[w.as_dict() for w in found[alg]])
                 saved.append(alg)
     except KeyboardInterrupt:
         if progress:
@@ -135,6 +138,8 @@ def run(args) -> int:
     if progress:
         progress.close()
     print_table(runs)
+    for alg, run_ in runs.items():
+        report_warnings(NAME, alg, run_, arm)
     if out:
         _write_figures(runs, arm, algs, out, args.html)
     return 0
