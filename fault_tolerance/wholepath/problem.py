@@ -119,9 +119,13 @@ def kinematics(prob: PathProblem, Q: np.ndarray, ks: np.ndarray) -> tuple[np.nda
     B, n = len(Q), arm.n
     J = np.empty((B, 6, n))
     M = np.empty((B, 3, 4))
+    frame = pin.computeFrameJacobian
+    oMf = data.oMf
     for b in range(B):
-        J[b] = pin.computeFrameJacobian(model, data, Q[b], fid, pin.LOCAL_WORLD_ALIGNED).reshape(6, n)
-        M[b] = data.oMf[fid].homogeneous[:3]
+        J[b] = frame(model, data, Q[b], fid, pin.LOCAL_WORLD_ALIGNED).reshape(6, n)
+        pl = oMf[fid]
+        M[b, :, :3] = pl.rotation
+        M[b, :, 3] = pl.translation
     full = np.zeros((B, 6))
     full[:, rows] = prob.x_des[ks]
     err = np.zeros((B, 6))
