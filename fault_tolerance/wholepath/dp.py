@@ -193,7 +193,7 @@ def _subdivide(prob, Q, k, parts: int, closed: bool) -> np.ndarray:
     fine = (Q[:-1, None, :] + s[None, :, None] * d[:, None, :]).reshape(-1, Q.shape[1])
     if not closed:
         fine = np.vstack([fine, Q[-1:]])
-    return _correct(prob, fine, np.full(len(fine), k), iters=1)  # O(h²) off: one step suffices
+    return _correct(prob, fine, np.full(len(fine), k))
 
 
 class NodeData(NamedTuple):
