@@ -93,19 +93,47 @@ def jvj(
         from .limits import jvj_under_limits
 
         return jvj_under_limits(
-            J, xdot, qd, lockable, bounds=bounds, weights=weights, response=response,
-            per_joint=per_joint, joint_names=joint_names,
+            J,
+            xdot,
+            qd,
+            lockable,
+            bounds=bounds,
+            weights=weights,
+            response=response,
+            per_joint=per_joint,
+            joint_names=joint_names,
         )
     J = np.asarray(J, dtype=float)
     sc = _scenarios(J, lockable, weights, joint_names)
     proj = projection(J)
     sc.check_tolerable(proj.N)
-    a = proj.Jpinv @ np.asarray(xdot, dtype=float)
-    qd = np.asarray(qd, dtype=float)
-    post = post_failure_rates(a, proj.N, sc, qd, response)
+    xdot, qd = np.asarray(xdot, dtype=float), np.asarray(qd, dtype=float)
+    if response == "continuation":
+        _check_rates(J, xdot, qd)
+    post = post_failure_rates(proj.Jpinv @ xdot, proj.N, sc, qd, response)
     if per_joint:
         return joint_jumps(post, qd)
-    return square_sum_jump(post, qd, sc.weights)
+    lam = square_sum_jump(post, qd, sc.weights)
+    if not np.isfinite(lam):  # λ is quadratic in (ẋ, q̇): beyond float64 for |ẋ| of ~1e154
+        raise InvalidInput(
+            f"the jump of these rates overflows float64 (|xdot| up to {np.abs(xdot).max():.3g}, "
+            f"|qd| up to {np.abs(qd).max():.3g}); scale xdot and qd down (λ scales as their square)"
+        )
+    return lam
+
+
+def _check_rates(J: np.ndarray, xdot: np.ndarray, qd: np.ndarray) -> None:
+    """The continuation response (G3) continues the rates ``qd``: they must satisfy J q̇ = ẋ."""
+    if qd.shape != (J.shape[1],) or xdot.shape != (J.shape[0],):
+        raise InvalidInput(f"qd must be ({J.shape[1]},) and xdot ({J.shape[0]},)")
+    res = float(np.linalg.norm(J @ qd - xdot))
+    scale = float(np.linalg.norm(xdot) + np.linalg.norm(J) * np.linalg.norm(qd))
+    if not res <= 1e-6 * scale + 1e-12:
+        raise InvalidInput(
+            f"response='continuation' continues the rates qd, which must track the task: "
+            f"‖J qd − xdot‖ = {res:.3g} (tolerance {1e-6 * scale + 1e-12:.3g}); pass the "
+            "rates actually commanded for xdot"
+        )
 
 
 # Eqn. (15)

@@ -97,14 +97,17 @@ def numpy_linalg() -> SimpleNamespace:
         return alpha * (a.T @ a if trans else a @ a.T)
 
     def dposv(a, b, lower=0, overwrite_a=0):
-        try:
+        try:  # info 1, as LAPACK's, instead of "Singular matrix": the caller falls back (damped)
             U = np.linalg.cholesky(a).T  # upper factor, G = UᵀU; raises unless G is PD
+            return U, np.linalg.solve(a, b), 0
         except np.linalg.LinAlgError:
             return a, b, 1
-        return U, np.linalg.solve(a, b), 0
 
     def dtrtri(c, lower=0, unitdiag=0, overwrite_c=0):
-        return np.triu(np.linalg.inv(c)), 0
+        try:
+            return np.triu(np.linalg.inv(c)), 0
+        except np.linalg.LinAlgError:
+            return c, 1
 
     def dgemm(alpha, a, b, beta, c):
         return beta * c + alpha * (a @ b)

@@ -167,7 +167,8 @@ def compiled_multi_step(ctrl) -> Callable[..., np.ndarray]:
     sets = -np.ones((sc.f, smax), dtype=np.int64)
     for k, S in enumerate(sc.sets):
         sets[k, : len(S)] = S
-    wrel = np.ascontiguousarray(sc.weights / sc.weights.sum())
+    w = sc.weights / sc.weights.max()  # scale-free; the sum cannot overflow
+    wrel = np.ascontiguousarray(w / w.sum())
     params = np.array([TRACE_MAX, ctrl._pivot_threshold, ctrl._rank_coef])
     ws = np.zeros(m * m + m * n + n + 2 * smax * smax + 2 * smax)
     cfj, ndarray = pin.computeFrameJacobian, np.ndarray

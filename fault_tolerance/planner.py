@@ -32,6 +32,11 @@ def _scenarios(J: np.ndarray, lockable, weights, joint_names) -> Scenarios:
     return scenarios(lockable, n, r=n - m, weights=weights, joint_names=joint_names)
 
 
+def _unit_weights(sc: Scenarios) -> np.ndarray:
+    """The weights over the largest: eq. (5) does not change, and their sum cannot overflow."""
+    return sc.weights / sc.weights.max()
+
+
 def lnva(
     J: np.ndarray, xdot: np.ndarray, lockable=None, *, proj: Projection | None = None
 ) -> np.ndarray:
@@ -74,21 +79,22 @@ def jvja(
     proj = proj or projection(J)
     N = proj.N
     a = proj.Jpinv @ xdot
+    w = _unit_weights(sc)
     pivots = damped_pivots(sc.pivots(N)) if tolerate else sc.check_tolerable(N)
     if response == "least_norm":
         if sc.singletons:
             c = np.zeros_like(a)
-            c[sc.columns] = sc.weights * a[sc.columns] / pivots
-            return a - N @ c / sc.weights.sum()
+            c[sc.columns] = w * a[sc.columns] / pivots
+            return a - N @ c / w.sum()
         shift = sum(
-            w * N[:, list(S)] @ np.linalg.solve(pivot_block(N, S, tolerate), a[list(S)])
-            for S, w in zip(sc.sets, sc.weights, strict=True)
+            wS * N[:, list(S)] @ np.linalg.solve(pivot_block(N, S, tolerate), a[list(S)])
+            for S, wS in zip(sc.sets, w, strict=True)
         )
-        return a - shift / sc.weights.sum()
+        return a - shift / w.sum()
     if response == "continuation":
         W = np.zeros_like(N)
-        for S, w in zip(sc.sets, sc.weights, strict=True):
-            W[np.ix_(S, S)] += w * np.linalg.inv(pivot_block(N, S, tolerate))
+        for S, wS in zip(sc.sets, w, strict=True):
+            W[np.ix_(S, S)] += wS * np.linalg.inv(pivot_block(N, S, tolerate))
         z = -np.linalg.pinv(N @ W @ N, rcond=1e-10, hermitian=True) @ (N @ W @ a)
         return a + N @ z
     raise InvalidInput(f"response {response!r} is not one of {RESPONSES}")
@@ -103,7 +109,8 @@ def jvja_explicit(J: np.ndarray, xdot: np.ndarray, lockable=None, *, weights=Non
     Jp = np.linalg.pinv(J)
     N = np.eye(J.shape[1]) - Jp @ J
     post = np.array([reduced_rates_explicit(J, xdot, S) for S in sc.sets])
-    mean = sc.weights @ post / sc.weights.sum()
+    w = _unit_weights(sc)
+    mean = w @ post / w.sum()
     return Jp @ xdot + N @ mean
 
 

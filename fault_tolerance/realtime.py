@@ -269,7 +269,8 @@ class Controller:
 
     def _init_scenario_tables(self) -> None:
         sc, n = self.scenarios, self.n
-        W = float(sc.weights.sum())
+        w = sc.weights / sc.weights.max()  # eq. (5) is scale-free; a sum of these cannot overflow
+        W = float(w.sum())
         self._singletons = sc.singletons
         self._uniform = bool(np.all(sc.weights == sc.weights[0]))
         self._all_uniform = False
@@ -284,14 +285,14 @@ class Controller:
             self._fw[0, cols] = 0.0
             if not self._uniform:
                 self._fw[1] = 0.0
-                self._fw[1, cols] = sc.weights / W
+                self._fw[1, cols] = w / W
         self._alpha = -1.0 / sc.f if (self._uniform and sc.singletons) else -1.0
         # Scenarios grouped by size for the batched (G1) solve: (columns (k, s), w / W (k,)).
         self._groups: list[tuple[np.ndarray, np.ndarray]] = []
         for size in sorted({len(S) for S in sc.sets}):
             members = [k for k, S in enumerate(sc.sets) if len(S) == size]
             idx = np.array([sc.sets[k] for k in members], dtype=int)
-            self._groups.append((idx, sc.weights[members] / W))
+            self._groups.append((idx, w[members] / W))
         # keep[k, 0, j] = 0 when joint j is locked in scenario k: J_S = J * keep[k] (column mask).
         keep = np.ones((sc.f, n))
         for k, S in enumerate(sc.sets):
@@ -443,7 +444,10 @@ class Controller:
         smin = np.maximum(sminr, smax / RCN_MAX)
         Ue = U[:, :, [m - 1, 0]]  # (f, m, 2): u of σ_max and of σ_min
         V = np.matmul(self._Jm.transpose(0, 2, 1), Ue)  # (f, n, 2): J_Sᵀ u
-        V /= np.maximum(np.stack([smax, sminr], axis=1), 1e-300)[:, None, :]
+        # v = J_Sᵀu / σ, normalised by its own length: finite (and unit) even where σ_min ≈ 0,
+        # so the step keeps a direction and is capped as planner.mda's (not dropped)
+        norms = np.sqrt(np.einsum("fns,fns->fs", V, V))
+        V /= np.where(norms > 0.0, norms, 1.0)[:, None, :]
         X = np.matmul(dJ.reshape(n * m, n), V).reshape(-1, n, m, 2)  # (∂J/∂q_j) v
         D = np.einsum("fjms,fms->fjs", X, Ue)  # (f, n, 2): ∂σ_max/∂q_j, ∂σ_min/∂q_j
         k = smax / smin

@@ -45,6 +45,10 @@ def covers(sc, algorithm: str, response: str) -> str | None:
         return "multi-joint scenarios (the reference handles them)"
     if algorithm not in METHODS:
         return f"algorithm {algorithm!r}"
+    with np.errstate(over="ignore"):
+        overflow = not np.isfinite(sc.weights.sum())
+    if overflow:
+        return "weights whose sum overflows (the reference rescales them)"
     return None
 
 
