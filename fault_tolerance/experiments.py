@@ -495,6 +495,7 @@ def reproduce(
                     res["runs"],
                     "Figs. 9-10 — Power-Cube 3R, LNVA, joint 3 locks "
                     "at the largest / smallest jump",
+                    planned=res["planned"],
                 )
                 plots.save_figure(fig, out / "fig9_10")
                 for label, run in res["runs"].items():

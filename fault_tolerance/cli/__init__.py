@@ -25,6 +25,7 @@ from .common import (
     lockable_of,
     run_command,
     start_and_path,
+    state_defaults,
 )
 
 __all__ = [
@@ -63,6 +64,7 @@ def build_parser() -> argparse.ArgumentParser:
     sub = p.add_subparsers(dest="command", metavar="COMMAND")
     for mod in COMMANDS:
         mod.add_parser(sub)
+    state_defaults(p)
     return p
 
 

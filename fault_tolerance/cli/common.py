@@ -161,7 +161,11 @@ def add_path_options(p: argparse.ArgumentParser) -> None:
         "--duration", type=float, default=None, help="run length [s] (default: the path's)"
     )
     g.add_argument(
-        "--feedback", type=float, default=None, help="task-space feedback gain K_p [1/s]"
+        "--feedback",
+        type=float,
+        default=None,
+        help="task-space feedback gain K_p [1/s] (default: 0 for simulate, as in the paper; "
+        "10 for lock)",
     )
     g.add_argument(
         "--response",
@@ -169,7 +173,9 @@ def add_path_options(p: argparse.ArgumentParser) -> None:
         choices=["least_norm", "continuation"],
         help="post-failure response of the reduced robot (MATH.md G3)",
     )
-    g.add_argument("--gain", type=float, default=None, help="MDA gain α (default planner.MDA_GAIN)")
+    from ..planner import MDA_GAIN
+
+    g.add_argument("--gain", type=float, default=None, help=f"MDA gain α (default: {MDA_GAIN:g})")
 
 
 def start_and_path(args, arm):
@@ -236,6 +242,38 @@ def bar(total: int, enabled: bool, desc: str):
     from tqdm.auto import tqdm
 
     return tqdm(total=total, unit="step", desc=desc)
+
+
+def _default_text(action: argparse.Action) -> str:
+    """How ``--help`` states an option's default when its help does not say it."""
+    d = action.default
+    if isinstance(action, argparse._StoreTrueAction):
+        return "off"
+    if d is None or d == []:
+        return "none"
+    if isinstance(d, float):
+        return f"{d:g}"
+    return str(d)
+
+
+def state_defaults(parser: argparse.ArgumentParser) -> None:
+    """Give every option of ``parser`` and its sub-commands a help text that states its default.
+
+    An option whose help already says ``default`` keeps it; the others get ``(default: X)``.
+    """
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            for sub in action.choices.values():
+                state_defaults(sub)
+            continue
+        if not action.option_strings or action.help == argparse.SUPPRESS:
+            continue
+        if isinstance(action, (argparse._HelpAction, argparse._VersionAction)):
+            continue
+        text = action.help or ""
+        if "default" not in text.lower():
+            text = f"{text} (default: {_default_text(action)})".strip()
+        action.help = text
 
 
 def close_bars() -> None:

@@ -18,11 +18,24 @@ def add_parser(sub) -> argparse.ArgumentParser:
     """The ``inspect`` sub-command."""
     s = sub.add_parser(NAME, help=HELP, epilog=epilog(EXAMPLE), formatter_class=FORMATTER)
     s.add_argument("target", help="shipped / example-robot-data name, URDF or xacro path")
-    s.add_argument("--tip", default=None, help="tip frame (a link); see the serial chains listed")
     s.add_argument(
-        "--task", default=None, help="planar | position | pose | rows among x,y,z,rx,ry,rz"
+        "--tip",
+        default=None,
+        help="tip frame (a link); see the serial chains listed (default: the catalog's, or the "
+        "last frame)",
     )
-    s.add_argument("--joints", default=None, help="active joints, comma-separated (others fixed)")
+    s.add_argument(
+        "--task",
+        default=None,
+        help="planar | position | pose | rows among x,y,z,rx,ry,rz (default: the catalog's, "
+        "else position)",
+    )
+    s.add_argument(
+        "--joints",
+        default=None,
+        help="active joints, comma-separated, others fixed (default: every joint of the chain "
+        "to the tip)",
+    )
     add_source_options(s)
     s.set_defaults(func=run)
     return s

@@ -36,26 +36,41 @@ def add_parser(sub) -> argparse.ArgumentParser:
     s.add_argument(
         "--at",
         default="max",
-        help="lock time [s], or max / min: the moment of largest / smallest jump",
+        help="lock time [s], or max / min: the moment of largest / smallest jump of the planned "
+        "run (default: max)",
     )
-    s.add_argument("--algorithm", default="lnva", choices=["lnva", "jvja", "mda", "global"])
+    s.add_argument(
+        "--algorithm",
+        default="lnva",
+        choices=["lnva", "jvja", "mda", "global"],
+        help="the planner before the lock (default: lnva, as in the paper's Sec. V)",
+    )
     s.add_argument("--tau", type=float, default=0.05, help="servo time constant [s] (default 0.05)")
     s.add_argument(
-        "--accel-limit", type=float, default=float("inf"), help="servo acceleration limit [rad/s²]"
+        "--accel-limit",
+        type=float,
+        default=float("inf"),
+        help="servo acceleration limit [rad/s²] (default: inf, no limit)",
     )
-    s.add_argument("--out", default=None)
+    s.add_argument("--out", default=None, help="output folder (default: none, nothing written)")
     s.add_argument("--html", action="store_true", help="also write a self-contained replay.html")
-    s.add_argument("--no-progress", action="store_true")
+    s.add_argument(
+        "--no-progress", action="store_true", help="no progress bar (default: the bar is shown)"
+    )
     s.set_defaults(func=run)
     return s
 
 
-def _lock_time(args, arm, path, q0, joint: str, duration: float, gain: dict) -> float:
-    """``--at``: a time, or the moment of the largest / smallest jump of the planned run."""
+def _lock_time(args, arm, path, q0, joint: str, duration: float, gain: dict):
+    """``--at``: a time, or the moment of the largest / smallest jump of the planned run.
+
+    Returns ``(t_lock, planned)``; ``planned`` is the run without a lock (``None`` for a time).
+    """
+    from ..plots import planned_jump
     from ..simulation import simulate
 
     if args.at not in ("max", "min"):
-        return float(floats(args.at, "--at")[0])
+        return float(floats(args.at, "--at")[0]), None
     planned = simulate(
         arm,
         path,
@@ -69,10 +84,11 @@ def _lock_time(args, arm, path, q0, joint: str, duration: float, gain: dict) -> 
     )
     k = int(np.argmax(planned.jvj) if args.at == "max" else np.argmin(planned.jvj))
     t_lock = float(planned.t[k])
-    print(
-        f"{args.at} jump of {joint} in the planned run at t = {t_lock:.3f} s (λ = {planned.jvj[k]:.4g})"
+    print(  # the λ the figure's last panel marks (plots.planned_jump)
+        f"{args.at} jump of {joint} in the planned run at t = {t_lock:.3f} s "
+        f"(λ = {planned_jump(planned, t_lock):.4g})"
     )
-    return t_lock
+    return t_lock, planned
 
 
 def run(args) -> int:
@@ -89,7 +105,7 @@ def run(args) -> int:
     feedback = 10.0 if args.feedback is None else args.feedback
     gain = {} if args.gain is None else {"gain": args.gain}
     duration = args.duration or path.duration
-    t_lock = _lock_time(args, arm, path, q0, joint, duration, gain)
+    t_lock, planned = _lock_time(args, arm, path, q0, joint, duration, gain)
     progress = bar(int(round(duration / args.dt)) + 1, not args.no_progress, "lock")
     run_ = simulate(
         arm,
@@ -117,15 +133,16 @@ def run(args) -> int:
     )
     found = report_warnings(NAME, args.algorithm, run_, arm)
     if args.out:
-        _write(run_, arm, joint, t_lock, Path(args.out), args.html, found)
+        _write(run_, arm, joint, t_lock, Path(args.out), args.html, found, planned)
     return 0
 
 
-def _write(run_, arm, joint: str, t_lock: float, out: Path, html: bool, found) -> None:
+def _write(run_, arm, joint: str, t_lock: float, out: Path, html: bool, found, planned) -> None:
     from .. import plots
 
     run_.save(out, warnings=found)
-    plots.save_figure(plots.plot_lock({f"{joint} locks at {t_lock:.2f} s": run_}), out / "lock")
+    fig = plots.plot_lock({f"{joint} locks at {t_lock:.2f} s": run_}, planned=planned)
+    plots.save_figure(fig, out / "lock")
     plots.save_figure(plots.plot_run(run_), out / "run")
     if html:
         from ..viz import export_html

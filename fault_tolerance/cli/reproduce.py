@@ -28,7 +28,9 @@ def add_parser(sub) -> argparse.ArgumentParser:
         action="store_true",
         help="skip the section 'beyond the paper' (the whole-path plan on every case)",
     )
-    s.add_argument("--no-progress", action="store_true")
+    s.add_argument(
+        "--no-progress", action="store_true", help="no progress bar (default: the bar is shown)"
+    )
     s.set_defaults(func=run)
     return s
 

@@ -43,11 +43,15 @@ def add_parser(sub) -> argparse.ArgumentParser:
         "docs/MATH.md W1-W5; with --x0 and no --q0 it chooses its start on the self-motion of x0)",
     )
     add_plan_options(s)
-    s.add_argument("--out", default=None, help="output folder")
+    s.add_argument(
+        "--out", default=None, help="output folder (default: none, only the table is printed)"
+    )
     s.add_argument(
         "--html", action="store_true", help="also write a self-contained replay.html per run"
     )
-    s.add_argument("--no-progress", action="store_true")
+    s.add_argument(
+        "--no-progress", action="store_true", help="no progress bar (default: the bar is shown)"
+    )
     s.set_defaults(func=run)
     return s
 
