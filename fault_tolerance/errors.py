@@ -100,7 +100,7 @@ class IntolerableAtStart(IntolerableFailure):
             advice = f"choose another start (--q0/--x0) or remove {names} from the lockable joints"
         else:
             advice = (
-                f"a start that works: --q0 {','.join(f'{v:.4f}' for v in self.q0)}"
+                f"a start that works: --q0 {','.join(f'{v:.6f}' for v in self.q0)}"
                 + (f" ({why})" if why else "")
                 + f"; or remove {names} from the lockable joints"
             )

@@ -412,14 +412,16 @@ _EXPLAINING = False
 
 
 def explain_intolerable(
-    arm: Arm, lockable, err: IntolerableFailure, **start_options
+    arm: Arm, lockable, err: IntolerableFailure, *, x0=None, fallback_path=None, **start_options
 ) -> IntolerableFailure:
     """``err`` (a scenario intolerable at some start) as a structural or an at-this-start error.
 
     Structural (:class:`~.errors.StructurallyIntolerable`): the scenario is intolerable at every
     sampled configuration; no start helps. Otherwise (:class:`~.errors.IntolerableAtStart`) a start
-    that works is proposed: :func:`default_start` for the same lockable joints (``start_options``
-    are passed on).
+    that works is proposed: :func:`default_start` for the same lockable joints, first at the same
+    start point ``x0`` (other postures on its self-motion), then, if none works there, anywhere
+    (with ``fallback_path``, a callable ``x0 -> TaskPath``, as the task to check). ``start_options``
+    (``path``, ``algorithms``, simulation options) are passed on.
     """
     global _EXPLAINING
     if _EXPLAINING:  # the proposal's own checks never explain again
@@ -428,19 +430,34 @@ def explain_intolerable(
     if joints in intolerable_everywhere(arm, [joints]):
         return StructurallyIntolerable(joints, err.pivot, STRUCTURAL_SAMPLES)
     _EXPLAINING = True
+    choice, where = None, ""
     try:
-        choice = default_start(arm, lockable, **start_options)
-    except FaultToleranceError:
-        choice = None
+        if x0 is not None:
+            choice, where = _try_start(arm, lockable, x0=x0, **start_options), "same start point"
+        if choice is None:
+            start_options["path"] = fallback_path
+            choice = _try_start(arm, lockable, **start_options)
+            where = "another start point"
     finally:
         _EXPLAINING = False
-    why = None if choice is None else f"tool at x0 = {np.round(choice.x0, 4).tolist()}"
-    return IntolerableAtStart(joints, err.pivot, None if choice is None else choice.q0, why or "")
+    why = "" if choice is None else f"{where}, tool at x0 = {np.round(choice.x0, 4).tolist()}"
+    return IntolerableAtStart(joints, err.pivot, None if choice is None else choice.q0, why)
 
 
-def check_start(arm: Arm, sc: Scenarios, q0: np.ndarray, **start_options) -> None:
-    """Raise the explained error of :func:`explain_intolerable` if a scenario is intolerable at q0."""
+def _try_start(arm, lockable, **options) -> StartChoice | None:
+    try:
+        return default_start(arm, lockable, **options)
+    except FaultToleranceError:
+        return None
+
+
+def check_start(arm: Arm, sc: Scenarios, q0: np.ndarray, **explain_options) -> None:
+    """Raise the explained error of :func:`explain_intolerable` if a scenario is intolerable at q0.
+
+    ``explain_options`` go to :func:`explain_intolerable` (``x0``, ``path``, ``fallback_path``,
+    ``algorithms``, simulation options) for the start it proposes.
+    """
     try:
         sc.check_tolerable(projection(arm.jacobian(q0)).N)
     except IntolerableFailure as err:
-        raise explain_intolerable(arm, sc, err, **start_options) from None
+        raise explain_intolerable(arm, sc, err, **explain_options) from None

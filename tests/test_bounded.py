@@ -29,9 +29,14 @@ def qp_ref(H, c, J, xdot, lo, hi, keep=None):
 def feasible(J, xdot, lo, hi, keep=None):
     n = J.shape[1]
     keep = np.arange(n) if keep is None else np.asarray(keep)
-    res = linprog(np.zeros(len(keep)), A_eq=J[:, keep], b_eq=xdot,
-                  bounds=list(zip(lo[keep], hi[keep], strict=True)), method="highs",
-                  options={"primal_feasibility_tolerance": 1e-10})
+    res = linprog(
+        np.zeros(len(keep)),
+        A_eq=J[:, keep],
+        b_eq=xdot,
+        bounds=list(zip(lo[keep], hi[keep], strict=True)),
+        method="highs",
+        options={"primal_feasibility_tolerance": 1e-10},
+    )
     return res.status == 0
 
 
@@ -47,10 +52,12 @@ def random_problem(rng, m, n, tight):
 
 def reduced_refs(J, xdot, sets, lo, hi):
     n = J.shape[1]
-    return np.array([
-        qp_ref(np.eye(n), np.zeros(n), J, xdot, lo, hi, [j for j in range(n) if j not in S])
-        for S in sets
-    ])
+    return np.array(
+        [
+            qp_ref(np.eye(n), np.zeros(n), J, xdot, lo, hi, [j for j in range(n) if j not in S])
+            for S in sets
+        ]
+    )
 
 
 def check_scaled(J, xdot, out, lo, hi):
@@ -108,8 +115,10 @@ def test_jvja_least_norm_equals_qp(m, n, tight, weights):
         assert abs(lam(out.qd) - lam(ref)) <= REL * lam(ref)
         assert np.allclose(out.qd, ref, atol=1e-7)
         # inside the box and no reduced bound: the unbounded JVJA unchanged
-        if not out.active.any() and np.all(post >= lo) and np.allclose(
-            post, reduced_refs(J, xd, sets, lo - 1e9, hi + 1e9)
+        if (
+            not out.active.any()
+            and np.all(post >= lo)
+            and np.allclose(post, reduced_refs(J, xd, sets, lo - 1e9, hi + 1e9))
         ):
             assert np.allclose(out.qd, ft.jvja(J, xd, sets, weights=w), atol=1e-10)
 

@@ -117,3 +117,13 @@ def test_intolerable_at_this_start_proposes_a_start_that_works():
     q0 = np.array(info.value.q0)
     assert sc.pivots(projection(arm.jacobian(q0)).N).min() >= st.PIVOT_MARGIN
     assert st.inside_limits(arm, q0, st.LIMIT_MARGIN)
+
+
+def test_proposal_keeps_the_start_point_when_it_can():
+    """Given the start point, the proposed start is another posture at that same point."""
+    arm = ft.load_arm("panda", task="position")
+    sc = lockable_scenarios(arm, [("panda_joint2", "panda_joint4")])
+    x0 = arm.fk(arm.q_reference)
+    with pytest.raises(ft.IntolerableAtStart, match="same start point") as info:
+        st.check_start(arm, sc, arm.q_reference, x0=x0, algorithms=("lnva",))
+    np.testing.assert_allclose(arm.fk(np.array(info.value.q0)), x0, atol=1e-8)
