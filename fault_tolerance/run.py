@@ -48,7 +48,7 @@ ARRAYS = (
     "sigma_min",
     "flags",
 )
-OPTIONAL_ARRAYS = ("qd_cmd",)
+OPTIONAL_ARRAYS = ("qd_cmd", "orientation_error")
 
 #: Bits of ``Run.flags``.
 FLAG_NEAR_SINGULAR = (
@@ -70,7 +70,8 @@ class Run:
         qd: Joint rates [rad/s] (actual), shape (K, n).
         x: Task position of the tip, shape (K, m).
         x_des: Desired task position, shape (K, m).
-        error: Task-space error ``‖x − x_des‖`` [m], shape (K,).
+        error: Position error ``‖p − p_des‖`` of the task's linear rows [m], shape (K,) (pose
+            tasks: the orientation error is apart, never added; no linear rows: zeros).
         jvj: Square-sum joint velocity jump λ(t), eq. (9)/(10) [(rad/s)²], shape (K,).
         jvj_parts: Its per-scenario parts ``w_S ‖ˢq̇' − q̇‖²``, shape (K, f).
         rcn: Reduced condition numbers, eq. (15), shape (K, f).
@@ -79,6 +80,8 @@ class Run:
         flags: Bit flags per sample (:data:`FLAG_NEAR_SINGULAR`, ...), shape (K,).
         meta: How the run was made (robot, algorithm, dt, path, lockable joints, lock, ...).
         qd_cmd: Commanded rates when a servo model is used, shape (K, n), else None.
+        orientation_error: Orientation error of the task's angular rows [rad] (with all three:
+            the angle of the remaining rotation), shape (K,); None without angular rows.
     """
 
     t: np.ndarray
@@ -95,6 +98,7 @@ class Run:
     flags: np.ndarray
     meta: dict = field(default_factory=dict)
     qd_cmd: np.ndarray | None = None
+    orientation_error: np.ndarray | None = None
 
     # -- summary -----------------------------------------------------------------------------
     def summary(self) -> dict:
@@ -106,6 +110,7 @@ class Run:
             "rcn_max": float(np.max(self.K)),
             "tracking_error_max": float(np.max(self.error)),
             "tracking_error_final": float(self.error[-1]),
+            **self._orientation_summary(),
             "near_singular_samples": int(np.count_nonzero(self.flags & FLAG_NEAR_SINGULAR)),
             "near_intolerable_samples": int(np.count_nonzero(self.flags & FLAG_NEAR_INTOLERABLE)),
             "step_limited_samples": int(np.count_nonzero(self.flags & FLAG_STEP_LIMITED)),
@@ -123,6 +128,15 @@ class Run:
             )
             s["jump_at_lock"] = lock.get("jump")
         return s
+
+    def _orientation_summary(self) -> dict:
+        """``orientation_error_max`` / ``_final`` [rad] for tasks with angular rows, else nothing."""
+        if self.orientation_error is None:
+            return {}
+        return {
+            "orientation_error_max": float(np.max(self.orientation_error)),
+            "orientation_error_final": float(self.orientation_error[-1]),
+        }
 
     # -- files -------------------------------------------------------------------------------
     def save(self, folder: str | Path, *, warnings: list[dict] | None = None) -> Path:
@@ -166,19 +180,27 @@ class Run:
         return cls(meta=meta, **arrays)
 
     def to_csv(self) -> str:
-        """One row per sample: t, q_*, qd_*, x_*, x_des_*, error, jvj, K, flags."""
+        """One row per sample: t, q_*, qd_*, x_*, x_des_*, error, jvj, K, flags.
+
+        ``error`` is the position error [m]; tasks with angular rows add ``orientation_error``
+        [rad] after it.
+        """
         joints = self.meta.get("joint_names") or [f"j{i}" for i in range(self.q.shape[1])]
         rows = self.meta.get("task") or [f"x{i}" for i in range(self.x.shape[1])]
+        ori = [] if self.orientation_error is None else [self.orientation_error]
         header = (
             ["t"]
             + [f"q_{j}" for j in joints]
             + [f"qd_{j}" for j in joints]
             + [f"x_{r}" for r in rows]
             + [f"xdes_{r}" for r in rows]
-            + ["error", "jvj", "K", "flags"]
+            + ["error"]
+            + ["orientation_error"] * len(ori)
+            + ["jvj", "K", "flags"]
         )
         table = np.column_stack(
-            [self.t, self.q, self.qd, self.x, self.x_des, self.error, self.jvj, self.K, self.flags]
+            [self.t, self.q, self.qd, self.x, self.x_des, self.error, *ori, self.jvj, self.K]
+            + [self.flags]
         )
         out = io.StringIO()
         w = csv.writer(out, lineterminator="\n")

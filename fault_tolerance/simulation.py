@@ -32,6 +32,7 @@ from .run import (  # noqa: F401 - re-exported: Run, ARRAYS and the flags used t
     output_folder,
     write_atomic,
 )
+from .task_errors import angular_mask, error_norms
 from .trajectories import TaskPath
 
 #: Values of ``simulate(engine=...)``.
@@ -204,7 +205,9 @@ def simulate(
     if algorithm == GLOBAL:
         from .wholepath.run import simulate_global
 
-        return simulate_global(arm, path, q0=q0, plan_options=plan_options, progress=progress, **sim)
+        return simulate_global(
+            arm, path, q0=q0, plan_options=plan_options, progress=progress, **sim
+        )
     if plan_options is not None:
         raise InvalidInput(f"plan_options are options of algorithm 'global', not of '{algorithm}'")
     if q0 is None:
@@ -480,6 +483,9 @@ def _finish(s: _Setup, state: _State, rec: dict, q0) -> Run:
     arrays = {k: np.ascontiguousarray(rec[k]) for k in ("t", *HISTORIES)}
     arrays["flags"] = arrays["flags"].astype(np.int64)
     qd_cmd = arrays.pop("qd_cmd")
+    if angular_mask(arm.task).any():  # metres and radians apart, never added (docs/MATH.md)
+        err = np.array([arm.task_error(xd, q) for xd, q in zip(arrays["x_des"], arrays["q"])])
+        arrays["error"], arrays["orientation_error"] = error_norms(arm.task, err)
     return Run(meta=meta, qd_cmd=qd_cmd if servo_used else None, **arrays)
 
 

@@ -42,6 +42,7 @@ from .failures import Scenarios
 from .indices import condition_numbers, reduced_singular_values
 from .linalg import PIVOT_TOL, projection
 from .posture import RCN_THRESHOLD, initial_posture, joint_distance, lockable_scenarios
+from .task_errors import error_norms
 
 #: Distance a start keeps from every joint limit, as a fraction of the joint's range.
 LIMIT_MARGIN = 0.05
@@ -60,8 +61,6 @@ MAX_CANDIDATES = 3
 SEED_SAMPLES = 200
 #: Random regular configurations at which a scenario must be intolerable to count as structural.
 STRUCTURAL_SAMPLES = 50
-
-_ANGULAR = ("rx", "ry", "rz")
 
 
 @dataclass(frozen=True)
@@ -158,9 +157,9 @@ def run_problem(arm: Arm, run) -> str | None:
         return f"leaves the joint limits at t = {run.t[k]:.3f} s"
     if np.any(run.flags & FLAG_NEAR_SINGULAR):
         return "passes near a singularity of J"
-    pos, ori = task_error_parts(arm.task, run.x_des, run.x, arm=arm, q=run.q)
-    if pos.max() > ERROR_TOL:
-        return f"position error reaches {1e3 * pos.max():.3g} mm"
+    if run.error.max() > ERROR_TOL:
+        return f"position error reaches {1e3 * run.error.max():.3g} mm"
+    ori = run.orientation_error
     if ori is not None and ori.max() > ERROR_TOL:
         return f"orientation error reaches {ori.max():.3g} rad"
     return None
@@ -183,11 +182,8 @@ def task_error_parts(task, x_des, x, *, arm: Arm | None = None, q=None):
     """Position error [m] and orientation error [rad] (``None`` without angular rows) per sample.
 
     With ``arm`` and ``q`` the angular part is the rotation that remains (``Arm.task_error``);
-    otherwise the difference of the rotation-vector rows.
+    otherwise the difference of the rotation-vector rows. See :mod:`.task_errors`.
     """
-    task = tuple(task)
-    lin = [i for i, r in enumerate(task) if r not in _ANGULAR]
-    ang = [i for i, r in enumerate(task) if r in _ANGULAR]
     x_des, x = np.atleast_2d(x_des), np.atleast_2d(x)
     if arm is not None and q is not None:
         err = np.array(
@@ -195,9 +191,7 @@ def task_error_parts(task, x_des, x, *, arm: Arm | None = None, q=None):
         )
     else:
         err = x_des - x
-    pos = np.linalg.norm(err[:, lin], axis=1) if lin else np.zeros(len(err))
-    ori = np.linalg.norm(err[:, ang], axis=1) if ang else None
-    return pos, ori
+    return error_norms(tuple(task), err)
 
 
 def default_path(arm: Arm, x0: np.ndarray, radius: float = DEFAULT_RADIUS):
@@ -317,6 +311,7 @@ def default_start(
         **sim_options: Passed to :func:`~.simulation.simulate` (``dt``, ``feedback_gain``, ...).
 
     Raises:
+        StructurallyIntolerable: a lockable scenario loses the task at every configuration.
         InvalidInput: no start passed the checks (the message gives the last reason).
 
     Example:
@@ -327,6 +322,13 @@ def default_start(
         True
     """
     sc = lockable_scenarios(arm, lockable)
+    structural = intolerable_everywhere(arm, sc)
+    if structural:  # no start can help: say so rather than search
+        S = structural[0]
+        k = [tuple(sc.name(T)) for T in sc.sets].index(S)
+        J = arm.jacobian(arm.random_q(np.random.default_rng(seed)))
+        pivot = float(sc.pivots(projection(J).N)[k])
+        raise StructurallyIntolerable(S, pivot, STRUCTURAL_SAMPLES)
     if hasattr(path, "x") and hasattr(path, "xdot"):  # a ready TaskPath fixes the start point
         fixed, x0 = path, np.asarray(path.x0, dtype=float)  # type: ignore[union-attr]
         make = lambda _x0: fixed  # noqa: E731

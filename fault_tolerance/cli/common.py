@@ -138,7 +138,10 @@ def add_path_options(p: argparse.ArgumentParser) -> None:
     g.add_argument(
         "--x0",
         default=None,
-        help="start point (task coordinates); the start posture is the minimum-RCN one",
+        help="start point (task coordinates); the start posture is the minimum-RCN one. Without "
+        "--x0 and --q0 a start is chosen that is inside the limits, regular, with every lockable "
+        "joint tolerable, and runs the task cleanly (docs/MATH.md, 'The default start'); it is "
+        "printed",
     )
     g.add_argument("--q0", default=None, help="start configuration (rad), used as given")
     g.add_argument(
@@ -171,7 +174,7 @@ def add_path_options(p: argparse.ArgumentParser) -> None:
         "--response",
         default="least_norm",
         choices=["least_norm", "continuation"],
-        help="post-failure response of the reduced robot (MATH.md G3)",
+        help="post-failure response of the reduced robot (docs/MATH.md, G3)",
     )
     from ..planner import MDA_GAIN
 
@@ -179,59 +182,10 @@ def add_path_options(p: argparse.ArgumentParser) -> None:
 
 
 def start_and_path(args, arm):
-    """``(q0, path)`` from the options (posture search when only ``x0`` is known)."""
-    from ..catalog import catalog
-    from ..posture import initial_posture
-    from ..trajectories import CirclePath, load_csv
+    """``(q0, path, lockable)`` from the options (see :func:`.start_options.choose_start`)."""
+    from .start_options import choose_start
 
-    entry = catalog().get(arm.name) if arm.source == arm.name else None
-    if not (np.isfinite(args.dt) and args.dt > 0):
-        raise InvalidInput(f"--dt must be a finite number > 0 [s], got {args.dt}")
-    if args.duration is not None and not (np.isfinite(args.duration) and args.duration > 0):
-        raise InvalidInput(f"--duration must be a finite number > 0 [s], got {args.duration}")
-    lockable = lockable_of(args, arm)
-    q0 = None if args.q0 is None else arm.check_q(floats(args.q0, "--q0"))
-    if args.csv:
-        path = load_csv(args.csv, rows=list(arm.task) if len(arm.task) else None)
-        x0 = path.x0
-    else:
-        if args.x0 is not None:
-            x0 = floats(args.x0, "--x0")
-        elif q0 is not None:
-            x0 = arm.fk(q0)
-        elif entry and "x0" in entry:
-            x0 = np.array(entry["x0"], dtype=float)
-        else:
-            q0 = arm.q_reference
-            x0 = arm.fk(q0)
-        if len(x0) != arm.m:
-            raise InvalidInput(
-                f"--x0 has {len(x0)} numbers; task {'/'.join(arm.task)} needs {arm.m}"
-            )
-        spec = (entry or {}).get("path", {})
-        if args.rows:
-            chosen = names(args.rows) or []
-            if len(chosen) != 2 or any(r not in arm.task for r in chosen) or chosen[0] == chosen[1]:
-                raise InvalidInput(
-                    f"--rows must name two different task rows among {list(arm.task)}, got '{args.rows}'"
-                )
-            rows = (arm.task.index(chosen[0]), arm.task.index(chosen[1]))
-        else:
-            rows = tuple(spec.get("rows", (0, 1) if arm.m >= 2 else (0, 0)))
-        if arm.m < 2:
-            raise InvalidInput("a circle needs at least two task rows; give a path with --csv")
-        radius = args.radius if args.radius is not None else spec.get("radius", 0.05)
-        omega = args.omega if args.omega is not None else spec.get("omega", 2 * np.pi)
-        duration = spec.get("duration", 1.0)
-        path = CirclePath(
-            x0, radius, omega, args.duration or duration, rows=rows, sign=spec.get("sign", 1.0)
-        )
-    if q0 is None:
-        q0 = initial_posture(arm, x0, lockable).q
-    elif np.linalg.norm(arm.task_error(x0, q0)) > 1e-6:
-        raise InvalidInput(
-            f"--q0 puts the tool at {arm.fk(q0).round(4).tolist()}, not at the path's start {np.round(x0, 4).tolist()}"
-        )
+    q0, path, lockable, _ = choose_start(args, arm)
     return q0, path, lockable
 
 

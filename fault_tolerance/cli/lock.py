@@ -7,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..errors import InvalidInput
 from .common import (
     FORMATTER,
     add_path_options,
@@ -16,8 +17,8 @@ from .common import (
     floats,
     load_robot,
     report_warnings,
-    start_and_path,
 )
+from .start_options import choose_start
 
 NAME = "lock"
 HELP = "a run in which a joint locks (servo model on)"
@@ -97,14 +98,29 @@ def run(args) -> int:
     from ..simulation import ServoModel, simulate
 
     arm = load_robot(args)
-    q0, path, lockable = start_and_path(args, arm)
     joint = arm.joint_names[arm.joint_index(args.joint)]
     servo = ServoModel(tau=args.tau, accel_limit=args.accel_limit)
     if args.out:
         output_folder(args.out)  # refuse a bad --out before the runs
     feedback = 10.0 if args.feedback is None else args.feedback
     gain = {} if args.gain is None else {"gain": args.gain}
+    # the start is checked with the planned (lock-free) run; the locking joint must be tolerable
+    q0, path, lockable, choice = choose_start(
+        args,
+        arm,
+        [args.algorithm],
+        extra_lockable=[joint],
+        duration=args.duration,
+        response=args.response,
+        **gain,
+    )
     duration = args.duration or path.duration
+    if args.at not in ("max", "min"):
+        t_at = float(floats(args.at, "--at")[0])
+        if not 0 <= t_at <= duration:
+            raise InvalidInput(f"lock time must be within [0, {duration}] s, got {t_at}")
+    if choice is not None:
+        print(choice.reason())
     t_lock, planned = _lock_time(args, arm, path, q0, joint, duration, gain)
     progress = bar(int(round(duration / args.dt)) + 1, not args.no_progress, "lock")
     run_ = simulate(
@@ -131,6 +147,12 @@ def run(args) -> int:
         f"jump at the lock {s.get('jump_at_lock', 0.0):.4g} (rad/s)²; path error peak after the lock "
         f"{1e3 * s['path_error_peak_after_lock']:.3f} mm (before: {1e3 * s['path_error_max_before_lock']:.3f} mm)"
     )
+    if run_.orientation_error is not None:  # radians apart from metres
+        after = run_.t >= t_lock
+        print(
+            f"orientation error peak after the lock {1e3 * run_.orientation_error[after].max():.3f} "
+            f"mrad (whole run: {1e3 * s['orientation_error_max']:.3f} mrad)"
+        )
     found = report_warnings(NAME, args.algorithm, run_, arm)
     if args.out:
         _write(run_, arm, joint, t_lock, Path(args.out), args.html, found, planned)

@@ -16,8 +16,8 @@ from .common import (
     load_robot,
     names,
     report_warnings,
-    start_and_path,
 )
+from .start_options import choose_start
 
 NAME = "simulate"
 HELP = "one task run with one or several algorithms"
@@ -104,27 +104,39 @@ def run(args) -> int:
     from ..simulation import simulate
 
     arm = load_robot(args)
-    q0, path, lockable = start_and_path(args, arm)
     algs = _algorithms(args)
+    options = {
+        "duration": args.duration,
+        "feedback_gain": args.feedback or 0.0,
+        "response": args.response,
+        "gain": MDA_GAIN if args.gain is None else args.gain,
+    }
     out = output_folder(args.out) if args.out else None
+    stepwise = [a for a in algs if a != "global"] or ["jvja"]  # the start is checked with these
+    q0, path, lockable, choice = choose_start(args, arm, stepwise, **options)
+    checked = {} if choice is None else choice.runs  # the default start's checks ran these
+    if choice is not None:
+        print(choice.reason())
     steps = int(round((args.duration or path.duration) / args.dt)) + 1
     progress = bar(steps * len(algs), not args.no_progress, "simulate")
     runs, saved, found = {}, [], {}
     try:
         for alg in algs:
-            runs[alg] = simulate(
-                arm,
-                path,
-                alg,
-                **{"q0": q0, **_global_start(alg, args)},
-                lockable=lockable,
-                dt=args.dt,
-                duration=args.duration,
-                feedback_gain=args.feedback or 0.0,
-                response=args.response,
-                gain=MDA_GAIN if args.gain is None else args.gain,
-                progress=progress,
-            )
+            if alg in checked:
+                runs[alg] = checked[alg]
+                if progress:
+                    progress.update(steps)
+            else:
+                runs[alg] = simulate(
+                    arm,
+                    path,
+                    alg,
+                    **{"q0": q0, **_global_start(alg, args)},
+                    lockable=lockable,
+                    dt=args.dt,
+                    progress=progress,
+                    **options,
+                )
             found[alg] = check(runs[alg], arm)
             if out:
                 runs[alg].save(out / alg, warnings=[w.as_dict() for w in found[alg]])
@@ -165,13 +177,17 @@ def _write_figures(runs, arm, algs, out, html: bool) -> None:
 
 
 def print_table(runs) -> None:
-    """λ and K statistics and the tracking error of each run, one line per algorithm."""
+    """λ and K statistics, position error [m] (and orientation error [rad]) of each run."""
+    summaries = {alg: run_.summary() for alg, run_ in runs.items()}
+    angular = any("orientation_error_max" in s for s in summaries.values())
     print(
-        f"{'algorithm':10} {'λ mean':>10} {'λ max':>10} {'K mean':>10} {'K max':>10} {'track err max [m]':>18}"
-    )
-    for alg, run_ in runs.items():
-        s = run_.summary()
+        f"{'algorithm':10} {'λ mean':>10} {'λ max':>10} {'K mean':>10} {'K max':>10} "
+        f"{'pos err max [m]':>16}" + (f" {'ori err max [rad]':>18}" if angular else "")
+        + "   (λ in (rad/s)²)"
+    )  # fmt: skip
+    for alg, s in summaries.items():
+        ori = f" {s.get('orientation_error_max', float('nan')):18.3g}" if angular else ""
         print(
             f"{alg:10} {s['jvj_mean']:10.4g} {s['jvj_max']:10.4g} {s['rcn_mean']:10.4g} "
-            f"{s['rcn_max']:10.4g} {s['tracking_error_max']:18.3g}"
+            f"{s['rcn_max']:10.4g} {s['tracking_error_max']:16.3g}" + ori
         )

@@ -54,7 +54,9 @@ def add_parser(sub) -> argparse.ArgumentParser:
         help="artificial limits lo:hi per joint, written --limits=-1:1,... (default: URDF)",
     )
     s.add_argument("--deg", action="store_true", help="--limits in degrees")
-    s.add_argument("--grid", type=int, default=None, help="points per axis (planar 201, spatial 24)")
+    s.add_argument(
+        "--grid", type=int, default=None, help="points per axis (planar 201, spatial 24)"
+    )
     s.add_argument("--samples", type=int, default=None, help="self-motion / configuration samples")
     s.add_argument("--theta-samples", type=int, default=None, help="sampled lock angles")
     s.add_argument("--chunks", type=int, default=None, help="chunks of a planar map (default 16)")

@@ -1,0 +1,105 @@
+"""Where a command's run starts: ``--q0``, ``--x0``, ``--csv``, or the default start.
+
+:func:`choose_start` is shared by ``simulate`` and ``lock``. A given start (``--q0``, ``--x0`` or
+the first point of a ``--csv`` path) is used as given or through the posture search, and a
+lockable joint intolerable there is refused with an error that says whether it is structural or
+proposes a start that works. Without one, :func:`~fault_tolerance.start.default_start` chooses the
+start (docs/MATH.md, "The default start") and one line says which and why.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..errors import InvalidInput
+from .common import floats, lockable_of, names
+
+
+def choose_start(args, arm, algorithms=("jvja",), extra_lockable=(), **sim_options):
+    """``(q0, path, lockable, choice)`` from the options.
+
+    ``algorithms`` and ``sim_options`` (``dt``, ``feedback_gain``, ...) are those of the runs that
+    follow: the default start is checked by running them, and ``choice.runs`` holds those runs
+    (``choice`` is ``None`` for a given start). The command prints ``choice.reason()`` (one line)
+    once its inputs are all checked, so bad input still gives nothing on stdout. ``extra_lockable``: joints that must be tolerable
+    at the start as well (``lock --joint``).
+    """
+    from ..catalog import catalog
+    from ..posture import initial_posture, lockable_scenarios
+    from ..start import check_start, default_start
+    from ..trajectories import load_csv
+
+    entry = catalog().get(arm.name) if arm.source == arm.name else None
+    if not (np.isfinite(args.dt) and args.dt > 0):
+        raise InvalidInput(f"--dt must be a finite number > 0 [s], got {args.dt}")
+    if args.duration is not None and not (np.isfinite(args.duration) and args.duration > 0):
+        raise InvalidInput(f"--duration must be a finite number > 0 [s], got {args.duration}")
+    lockable = lockable_of(args, arm)
+    start_lockable = _with_joints(arm, lockable, extra_lockable)
+    q0 = None if args.q0 is None else arm.check_q(floats(args.q0, "--q0"))
+    circle = _circle_maker(args, arm, entry)
+    options = {"algorithms": tuple(algorithms), "dt": args.dt, **sim_options}
+    if args.csv or args.x0 is not None or q0 is not None:
+        if args.csv:
+            path = load_csv(args.csv, rows=list(arm.task) if len(arm.task) else None)
+        else:
+            x0 = floats(args.x0, "--x0") if args.x0 is not None else arm.fk(q0)
+            if len(x0) != arm.m:
+                raise InvalidInput(
+                    f"--x0 has {len(x0)} numbers; task {'/'.join(arm.task)} needs {arm.m}"
+                )
+            path = circle(x0)
+        if q0 is None:
+            q0 = initial_posture(arm, path.x0, start_lockable).q
+        elif np.linalg.norm(arm.task_error(path.x0, q0)) > 1e-6:
+            raise InvalidInput(
+                f"--q0 puts the tool at {arm.fk(q0).round(4).tolist()}, not at the path's start "
+                f"{np.round(path.x0, 4).tolist()}"
+            )
+        sc = lockable_scenarios(arm, start_lockable)
+        check_start(arm, sc, q0, x0=path.x0, path=path, fallback_path=circle, **options)
+        return q0, path, lockable, None
+    x0 = np.array(entry["x0"], dtype=float) if entry and "x0" in entry else None
+    choice = default_start(arm, start_lockable, x0=x0, path=circle, **options)
+    return choice.q0, circle(choice.x0), lockable, choice
+
+
+def _with_joints(arm, lockable, joints) -> list:
+    """``lockable`` (``None``: the arm's default) with the single-joint scenarios ``joints`` added."""
+    items = list(arm.default_lockable if lockable is None else lockable)
+    for j in joints:
+        if j not in items and (j,) not in items:
+            items.append(j)
+    return items
+
+
+def _circle_maker(args, arm, entry):
+    """A callable ``x0 -> CirclePath`` from ``--radius/--omega/--rows/--duration`` and the catalog."""
+    from ..trajectories import CirclePath
+
+    spec = (entry or {}).get("path", {})
+    if args.rows:
+        chosen = names(args.rows) or []
+        if len(chosen) != 2 or any(r not in arm.task for r in chosen) or chosen[0] == chosen[1]:
+            raise InvalidInput(
+                f"--rows must name two different task rows among {list(arm.task)}, "
+                f"got '{args.rows}'"
+            )
+        rows = (arm.task.index(chosen[0]), arm.task.index(chosen[1]))
+    else:
+        rows = tuple(spec.get("rows", (0, 1)))
+    if arm.m < 2 and not args.csv:
+        raise InvalidInput("a circle needs at least two task rows; give a path with --csv")
+    radius = args.radius if args.radius is not None else spec.get("radius", 0.05)
+    omega = args.omega if args.omega is not None else spec.get("omega", 2 * np.pi)
+    duration = args.duration or spec.get("duration", 1.0)
+    sign = spec.get("sign", 1.0)
+
+    def circle(x0):
+        if arm.m < 2:
+            return None
+        return CirclePath(
+            np.asarray(x0, dtype=float), radius, omega, duration, rows=rows, sign=sign
+        )
+
+    return circle
