@@ -24,9 +24,9 @@ from .common import (
     load_robot,
     lockable_of,
     run_command,
-    start_and_path,
     state_defaults,
 )
+from .start_options import choose_start, start_and_path
 
 __all__ = [
     "COMMANDS",
@@ -34,6 +34,7 @@ __all__ = [
     "add_path_options",
     "add_robot_options",
     "build_parser",
+    "choose_start",
     "load_robot",
     "lockable_of",
     "main",

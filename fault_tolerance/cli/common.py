@@ -181,14 +181,6 @@ def add_path_options(p: argparse.ArgumentParser) -> None:
     g.add_argument("--gain", type=float, default=None, help=f"MDA gain α (default: {MDA_GAIN:g})")
 
 
-def start_and_path(args, arm):
-    """``(q0, path, lockable)`` from the options (see :func:`.start_options.choose_start`)."""
-    from .start_options import choose_start
-
-    q0, path, lockable, _ = choose_start(args, arm)
-    return q0, path, lockable
-
-
 def bar(total: int, enabled: bool, desc: str):
     """A tqdm progress bar of ``total`` steps, or ``None`` when not ``enabled``."""
     if not enabled:
@@ -320,3 +312,12 @@ def one_line(message) -> str:
 
 def _warning_line(message, category, filename, lineno, file=None, line=None) -> None:
     print(f"fault-tolerance: warning: {one_line(message)}", file=sys.stderr)
+
+
+def __getattr__(name: str):
+    """``start_and_path`` moved to :mod:`.start_options` (old import path kept)."""
+    if name == "start_and_path":
+        from .start_options import start_and_path
+
+        return start_and_path
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -64,6 +64,12 @@ def choose_start(args, arm, algorithms=("jvja",), extra_lockable=(), **sim_optio
     return choice.q0, circle(choice.x0), lockable, choice
 
 
+def start_and_path(args, arm):
+    """``(q0, path, lockable)`` from the options (see :func:`choose_start`)."""
+    q0, path, lockable, _ = choose_start(args, arm)
+    return q0, path, lockable
+
+
 def _with_joints(arm, lockable, joints) -> list:
     """``lockable`` (``None``: the arm's default) with the single-joint scenarios ``joints`` added."""
     items = list(arm.default_lockable if lockable is None else lockable)
