@@ -59,6 +59,8 @@ MAX_SEEDS = 6
 MAX_CANDIDATES = 3
 #: Configurations near mid-range drawn to find well-conditioned seeds.
 SEED_SAMPLES = 200
+#: Longest stretch of the task [s] a candidate start is checked over.
+CHECK_HORIZON = 2.0
 #: Random regular configurations at which a scenario must be intolerable to count as structural.
 STRUCTURAL_SAMPLES = 50
 
@@ -78,6 +80,7 @@ class StartChoice:
         algorithms: Algorithms whose runs were checked (empty: no path was checked).
         tried: Candidates simulated before this one was accepted (itself included).
         note: A caveat, e.g. that no candidate kept the RCN below the threshold.
+        checked: Seconds of the task that were checked when that is less than all of it.
         runs: The checked runs from ``q0`` by algorithm (reuse them instead of simulating again).
     """
 
@@ -91,12 +94,15 @@ class StartChoice:
     algorithms: tuple[str, ...]
     tried: int
     note: str = ""
+    checked: float | None = None
     runs: dict = field(default_factory=dict, repr=False, compare=False)
 
     def reason(self) -> str:
         """One line: the start and why it was chosen."""
         checked = (
-            f"; the task runs from it with {'/'.join(self.algorithms)} inside the limits, "
+            "; the task runs from it"
+            + (f" (its first {self.checked:g} s checked)" if self.checked else "")
+            + f" with {'/'.join(self.algorithms)} inside the limits, "
             f"regular, largest k_S {self.run_rcn_max:.3g}"
             if self.algorithms
             else ""
@@ -292,6 +298,7 @@ def default_start(
     algorithms: Sequence[str] = ("jvja",),
     max_seeds: int = MAX_SEEDS,
     seed: int = 0,
+    horizon: float = CHECK_HORIZON,
     **sim_options,
 ) -> StartChoice:
     """A start inside the limits, regular, with every lockable joint tolerable, that runs the task.
@@ -308,6 +315,8 @@ def default_start(
         algorithms: Algorithms whose runs must stay inside the limits and regular.
         max_seeds: Regular seeds tried at most (without ``x0``).
         seed: Seed of the random seeds (the choice is reproducible).
+        horizon: Longest stretch of the task checked [s]; a longer task is checked over its
+            first ``horizon`` seconds only (its checked runs are then not kept in ``runs``).
         **sim_options: Passed to :func:`~.simulation.simulate` (``dt``, ``feedback_gain``, ...).
 
     Raises:
@@ -345,17 +354,20 @@ def default_start(
     last, tried, fallback = "no regular configuration found within the joint limits", 0, None
     for seed_q, point, origin in sources:
         task = make(point)
+        options, checked = _horizon(task, sim_options, horizon)
         for _, q in _candidates(arm, point, sc, seed_q):
             tried += 1
             problem, caveat, worst, runs = (
                 (None, None, 0.0, {})
                 if task is None
-                else _check(arm, q, task, tuple(algorithms), sc, sim_options)
+                else _check(arm, q, task, tuple(algorithms), sc, options)
             )
             if problem:
                 last = f"the start {np.round(q, 3).tolist()} {problem}"
                 continue
             choice = _choice(arm, q, point, sc, worst, origin, task, algorithms, tried, runs)
+            if checked is not None:  # only the first seconds ran: nothing to reuse
+                choice = replace(choice, runs={}, checked=checked)
             if caveat is None:
                 return choice
             if fallback is None or worst < fallback.run_rcn_max:
@@ -367,6 +379,16 @@ def default_start(
         f"no start {where} for {arm.name} passed the checks ({last}); give --q0 or --x0, a smaller "
         "path (--radius) or fewer lockable joints"
     )
+
+
+def _horizon(task, sim_options: dict, horizon: float) -> tuple[dict, float | None]:
+    """Simulation options that run at most ``horizon`` seconds of ``task``; the cap, if it acts."""
+    if task is None:
+        return sim_options, None
+    duration = sim_options.get("duration") or task.duration
+    if duration <= horizon:
+        return sim_options, None
+    return {**sim_options, "duration": horizon}, float(horizon)
 
 
 def _choice(arm, q, point, sc, worst, origin, task, algorithms, tried, runs) -> StartChoice:
