@@ -31,7 +31,18 @@ def test_readme_python_blocks_run(tmp_path, monkeypatch):
 
 @pytest.mark.parametrize(
     "module",
-    ["arm", "loading", "indices", "planner", "realtime", "failures", "trajectories", "simulation"],
+    [
+        "arm",
+        "loading",
+        "indices",
+        "planner",
+        "realtime",
+        "failures",
+        "trajectories",
+        "simulation",
+        "start",
+        "task_errors",
+    ],
 )
 def test_docstring_examples(module):
     """The >>> examples in the module's docstrings hold."""
