@@ -484,7 +484,9 @@ def _finish(s: _Setup, state: _State, rec: dict, q0) -> Run:
     arrays["flags"] = arrays["flags"].astype(np.int64)
     qd_cmd = arrays.pop("qd_cmd")
     if angular_mask(arm.task).any():  # metres and radians apart, never added (docs/MATH.md)
-        err = np.array([arm.task_error(xd, q) for xd, q in zip(arrays["x_des"], arrays["q"])])
+        err = np.array(
+            [arm.task_error(xd, q) for xd, q in zip(arrays["x_des"], arrays["q"], strict=True)]
+        )
         arrays["error"], arrays["orientation_error"] = error_norms(arm.task, err)
     return Run(meta=meta, qd_cmd=qd_cmd if servo_used else None, **arrays)
 
