@@ -106,6 +106,14 @@ def staged_folder(
         _fsync(parent)
 
 
+def check_target(target: str | Path, replaceable: Iterable[str] = ()) -> Path:
+    """Refuse early (before a long computation) a ``target`` that :func:`staged_folder` would refuse."""
+    target = check_path_names(Path(target))
+    _make_parent(target)
+    _check_replaceable(target, set(replaceable))
+    return target
+
+
 def write_record(folder: str | Path, **extra) -> dict:
     """Write the completion record of ``folder``: size and SHA-256 of each file (recursively)."""
     folder = Path(folder)

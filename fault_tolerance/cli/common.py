@@ -8,6 +8,7 @@ line on stderr naming the problem and what is allowed; ``--debug`` shows the tra
 from __future__ import annotations
 
 import argparse
+import errno
 import re
 import sys
 import warnings
@@ -180,6 +181,7 @@ def add_path_options(p: argparse.ArgumentParser) -> None:
 
 def start_and_path(args, arm):
     """``(q0, path)`` from the options (posture search when only ``x0`` is known)."""
+    from ..budget import run_samples
     from ..catalog import catalog
     from ..posture import initial_posture
     from ..trajectories import CirclePath, load_csv
@@ -226,6 +228,7 @@ def start_and_path(args, arm):
         path = CirclePath(
             x0, radius, omega, args.duration or duration, rows=rows, sign=spec.get("sign", 1.0)
         )
+    run_samples(args.dt, args.duration or path.duration)  # a run too long is refused before work
     if q0 is None:
         q0 = initial_posture(arm, x0, lockable).q
     elif np.linalg.norm(arm.task_error(x0, q0)) > 1e-6:
@@ -349,6 +352,10 @@ def run_command(func: Callable, args: argparse.Namespace) -> int:
         close_bars()
         if args.debug:
             raise
+        if isinstance(err, OSError) and err.errno in _REFUSED_BY_THE_SYSTEM:
+            # the file system refused (full, read-only, permissions, a name too long): not a bug
+            print(f"fault-tolerance {args.command}: error: {one_line(err)}", file=sys.stderr)
+            return EXIT_BAD_INPUT
         print(
             f"fault-tolerance {args.command}: unexpected error: {type(err).__name__}: "
             f"{one_line(err)} (run with --debug for the traceback)",
@@ -357,6 +364,12 @@ def run_command(func: Callable, args: argparse.Namespace) -> int:
         return EXIT_FAILURE
     finally:
         warnings.showwarning = shown
+
+
+#: errno values of an OSError that mean the system refused the output, not that the code is wrong.
+_REFUSED_BY_THE_SYSTEM = frozenset(
+    {errno.ENOSPC, errno.EDQUOT, errno.EROFS, errno.EACCES, errno.EPERM, errno.ENAMETOOLONG}
+)
 
 
 def one_line(message) -> str:
