@@ -151,6 +151,7 @@ def test_reproduce_cases_lists(cases, capsys, tmp_path_factory):
     assert rc == 2 and not (out / "summary.json").exists(), (argv, err)
 
 
+@pytest.mark.slow
 @FUZZ
 @given(
     name=st.one_of(
@@ -165,6 +166,16 @@ def test_output_names(name, capsys, tmp_path_factory):
     argv = ["simulate", "--robot", "planar_3r", "--no-progress", "--duration", "0.005"]
     argv += ["--algorithms", "lnva", "--out", str(root / name)]
     check(*call(argv, capsys), argv)
+
+
+def test_a_name_too_long_is_exit_2(capsys, tmp_path):
+    """--out with a 300-byte name: exit 2, one line naming the limit, nothing created."""
+    argv = ["simulate", "--robot", "planar_3r", "--no-progress", "--q0", "0.3,1.2,1.0"]
+    argv += ["--duration", "0.005", "--out", str(tmp_path / ("n" * 300))]
+    rc, err = call(argv, capsys)
+    check(rc, err, argv)
+    assert rc == 2 and "longer than this file system allows" in err
+    assert list(tmp_path.iterdir()) == []
 
 
 # -- saved runs -----------------------------------------------------------------------------------
