@@ -3,9 +3,9 @@
 Usage: python scripts/urdf_scaling.py 50 100 200 400 [--timeout 600]
 
 Each command runs in its own process (``/usr/bin/time``-free: the child's peak RSS comes from
-``resource.getrusage(RUSAGE_CHILDREN)``); the chain alternates z and y axes, 0.1 m links, so every
-N gives a spatial arm with redundancy N - 3 for the position task. This measurement sets
-``urdf.MAX_URDF_JOINTS``.
+``resource.getrusage(RUSAGE_CHILDREN)``, a running maximum); the chain alternates z and y axes, so every
+N gives a spatial arm with redundancy N - 3 for the position task. This measurement set
+``arm.MAX_ACTIVE_JOINTS`` (200): past it the commands exit 2 at once.
 """
 
 from __future__ import annotations
@@ -64,8 +64,18 @@ def main() -> None:
             commands = {
                 "inspect": ["inspect", str(path)],
                 "simulate": [
-                    "simulate", "--urdf", str(path), "--task", "position", "--duration", "0.01",
-                    "--algorithms", "jvja", "--no-progress", "--out", f"{tmp}/out{n}",
+                    "simulate",
+                    "--urdf",
+                    str(path),
+                    "--task",
+                    "position",
+                    "--duration",
+                    "0.01",
+                    "--algorithms",
+                    "jvja",
+                    "--no-progress",
+                    "--out",
+                    f"{tmp}/out{n}",
                 ],
             }
             for name, args in commands.items():
