@@ -191,3 +191,23 @@ def test_a_full_disk_gives_exit_2_and_leaves_the_earlier_result(tiny_fs, command
     assert (folder / RECORD).exists()
     assert_whole(folder)
     assert not [p.name for p in tiny_fs.rglob(".*") if p.is_dir()]
+
+
+@pytest.mark.parametrize("command", ["workspace", "design"])
+def test_workspace_and_design_refuse_a_second_writer(tmp_path, command):
+    """workspace / design --out DIR while another process writes DIR: exit 2 naming its pid."""
+    out = tmp_path / "ws"
+    holder = subprocess.Popen(
+        [sys.executable, "-c", "import sys, time\nfrom fault_tolerance.results import FolderLock\n"
+         "with FolderLock(sys.argv[1]):\n    print('locked', flush=True)\n    time.sleep(60)",
+         str(out)],
+        stdout=subprocess.PIPE, text=True, cwd=ROOT,
+    )  # fmt: skip
+    try:
+        assert holder.stdout.readline().strip() == "locked"
+        r = run([command, "--robot", "planar_3r", "--no-progress", "--out", str(out)])
+        assert r.returncode == 2 and f"pid {holder.pid}" in r.stderr, r.stderr
+        assert r.stderr.count("\n") == 1
+    finally:
+        holder.kill()
+        holder.wait()
