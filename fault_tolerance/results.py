@@ -349,7 +349,9 @@ def in_progress(folder: str | Path, **info) -> Iterator[Path]:
     stopped (Ctrl-C, an error) or killed, so a reader knows the folder's top-level summary is not
     the final one of this command.
     """
-    folder = Path(folder)
+    folder = check_path_names(Path(folder))
+    if folder.exists() and not folder.is_dir():
+        raise InvalidInput(f"{folder}: exists and is not a folder; choose a folder for the output")
     with FolderLock(folder):
         marker = folder / IN_PROGRESS
         text = {
