@@ -51,10 +51,36 @@ def measure(args: list[str], timeout: float) -> tuple[float, float, int]:
     return seconds, max(peak, before) / 1024, rc
 
 
+DATA = """
+import resource, sys, time
+from pathlib import Path
+from fault_tolerance.models import build_model
+from fault_tolerance.urdf import read_urdf
+model = build_model(read_urdf(Path(sys.argv[1])))
+t = time.perf_counter()
+data = model.createData()
+print(time.perf_counter() - t, resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024)
+"""
+
+
+def measure_data(path: Path, timeout: float) -> tuple[float, float]:
+    """(seconds, peak RSS [MiB]) of Pinocchio's ``createData`` for the whole chain, in a child."""
+    r = subprocess.run(
+        [sys.executable, "-c", DATA, str(path)], capture_output=True, text=True, timeout=timeout
+    )
+    if r.returncode != 0:
+        return float("nan"), float("nan")
+    seconds, mib = (float(v) for v in r.stdout.split())
+    return seconds, mib
+
+
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("sizes", type=int, nargs="+")
     p.add_argument("--timeout", type=float, default=600.0)
+    p.add_argument(
+        "--no-data", action="store_true", help="skip Pinocchio's createData (N³ memory!)"
+    )
     a = p.parse_args()
     print(f"{'N':>6} {'command':10} {'seconds':>8} {'peak MiB':>9} {'exit':>5}")
     with tempfile.TemporaryDirectory() as tmp:
@@ -78,6 +104,9 @@ def main() -> None:
                     f"{tmp}/out{n}",
                 ],
             }
+            if not a.no_data:
+                s, mib = measure_data(path, a.timeout)
+                print(f"{n:6d} {'createData':10} {s:8.2f} {mib:9.0f} {'':>5}", flush=True)
             for name, args in commands.items():
                 s, mib, rc = measure(args, a.timeout)
                 print(f"{n:6d} {name:10} {s:8.2f} {mib:9.0f} {rc:5d}", flush=True)
