@@ -48,9 +48,9 @@ _PER_SAMPLE = (6, 3, 2, 2)
 def run_samples(dt: float, duration: float) -> int:
     """Samples of a run of ``duration`` [s] at step ``dt`` [s], or InvalidInput past the limit."""
     if not (math.isfinite(dt) and dt > 0):
-        raise InvalidInput(f"dt (--dt) must be a finite number > 0 [s], got {dt}")
+        raise InvalidInput(f"dt must be a finite number > 0 [s] (--dt), got {dt}")
     if not (math.isfinite(duration) and duration > 0):
-        raise InvalidInput(f"duration (--duration) must be a finite number > 0 [s], got {duration}")
+        raise InvalidInput(f"duration must be a finite number > 0 [s] (--duration), got {duration}")
     steps = duration / dt
     if not steps < MAX_RUN_SAMPLES:  # also catches inf
         raise InvalidInput(

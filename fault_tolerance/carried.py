@@ -289,3 +289,18 @@ def _resolve_mesh(name: str, roots: Sequence[Path]) -> tuple[Path | None, str]:
             if candidate.is_file() and candidate.is_relative_to(real):
                 return candidate, ""
     return None, "not found inside the package folders given"
+
+
+def arm_of_run(run, package_dirs: Sequence[str | Path] = (), where: str = "the run"):
+    """The arm ``run`` was made with, rebuilt from the record it carries (never from a path in it).
+
+    Raises:
+        InvalidInput: the run carries no arm (made by hand, or by an older version): pass the arm.
+    """
+    record = getattr(run, "arm_record", None)
+    if record is None:
+        raise InvalidInput(
+            f"{where} carries no arm (it was built by hand or saved by an older version); pass "
+            "the arm it was made with (arm=...) or simulate it again"
+        )
+    return arm_from_record(record, package_dirs, where=where)

@@ -20,6 +20,7 @@ from .linalg import projection
 from .loading import load_arm
 from .planner import MDA_GAIN, jump_reduction
 from .posture import RCN_THRESHOLD, initial_posture, plan
+from .results import check_path_names, in_progress
 from .run import Run
 from .simulation import ServoModel, simulate
 from .trajectories import CirclePath
@@ -455,17 +456,31 @@ def reproduce(
     lists what was and was not finished and what stopped the run, an existing ``summary.json`` is
     left as it was, and the exception is raised again.
     """
+    keys = _case_keys(cases)
+    check_path_names(out)
+    with in_progress(out):  # locked, and marked in progress until summary.json is final
+        return _reproduce(output_folder(out), keys, quick, progress, html, beyond)
+
+
+def _case_keys(cases: list[str] | None) -> list[str]:
+    """The cases to run (all when None); an empty list or an unknown name is refused."""
+    from .errors import InvalidInput
+
+    keys = list(CASES) + ["experiment"] if cases is None else list(cases)
+    unknown = [k for k in keys if k not in CASES and k != "experiment"]
+    allowed = list(CASES) + ["experiment"]
+    if unknown:
+        raise InvalidInput(f"unknown case(s) {unknown}; choose among {allowed}")
+    if not keys or len(set(keys)) != len(keys):
+        raise InvalidInput(f"case list {keys}: name each case once, among {allowed}")
+    return keys
+
+
+def _reproduce(
+    out: Path, keys: list[str], quick: bool, progress: bool, html: bool, beyond: bool
+) -> dict:
     from . import plots
 
-    keys = list(CASES) + ["experiment"] if not cases else list(cases)
-    unknown = [k for k in keys if k not in CASES and k != "experiment"]
-    if unknown or not keys:
-        from .errors import InvalidInput
-
-        raise InvalidInput(
-            f"unknown case(s) {unknown or keys}; choose among {list(CASES) + ['experiment']}"
-        )
-    out = output_folder(out)
     case_T = 0.25 if quick else None
     exp_T = 3.0 if quick else None
     total = sum(  # three algorithms, then LNVA and JVJA from the other starts
@@ -500,17 +515,16 @@ def reproduce(
                 plots.save_figure(fig, out / "fig9_10")
                 for label, run in res["runs"].items():
                     name = f"experiment/{label.replace(' ', '_')}"
-                    run.save(out / "runs" / name, warnings=_warn(summary, name, run, res["arm"]))
+                    page = html and label == "largest jump"
+                    run.save(
+                        out / "runs" / name,
+                        extras=_html(run, res["arm"]) if page else None,
+                        warnings=_warn(summary, name, run, res["arm"]),
+                    )
                 res["planned"].save(
                     out / "runs" / "experiment" / "planned",
                     warnings=_warn(summary, "experiment/planned", res["planned"], res["arm"]),
                 )
-                if html:
-                    _html(
-                        res["runs"]["largest jump"],
-                        res["arm"],
-                        out / "runs" / "experiment" / "largest_jump",
-                    )
             else:
                 case = CASES[key]
                 res = run_case(case, duration=case_T, progress=bar)
@@ -520,14 +534,14 @@ def reproduce(
                 )
                 plots.save_figure(plots.plot_comparison(res["runs"], case.title), out / key)
                 for alg, run in res["runs"].items():
+                    page = html and alg == "jvja"
                     run.save(
                         out / "runs" / key / alg,
+                        extras=_html(run, res["arm"]) if page else None,
                         warnings=_warn(summary, f"{key}/{alg}", run, res["arm"]),
                     )
                 if beyond:
                     results[key] = res
-                if html:
-                    _html(res["runs"]["jvja"], res["arm"], out / "runs" / key / "jvja")
             done.append(key)
         summary["checks"] = {"eq8": eq8_check(case_T), "step_time_us": step_timing()}
         done.append("checks")
@@ -605,7 +619,12 @@ def _beyond_experiment(summary: dict, out: Path, duration, bar) -> None:
     plots.save_figure(fig, out / "beyond_fig9_10")
 
 
-def _html(run: Run, arm: Arm, folder: Path) -> None:
-    from .viz import export_html
+def _html(run: Run, arm: Arm):
+    """``extras`` for :meth:`Run.save`: the run's replay page, written with the run."""
 
-    export_html(run, folder / "replay.html", arm=arm)
+    def write(folder: Path) -> None:
+        from .viz import export_html
+
+        export_html(run, folder / "replay.html", arm=arm)
+
+    return write

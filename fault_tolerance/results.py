@@ -106,6 +106,14 @@ def staged_folder(
         _fsync(parent)
 
 
+def check_target(target: str | Path, replaceable: Iterable[str] = ()) -> Path:
+    """Refuse early (before a long computation) a ``target`` that :func:`staged_folder` would refuse."""
+    target = check_path_names(Path(target))
+    _make_parent(target)
+    _check_replaceable(target, set(replaceable))
+    return target
+
+
 def write_record(folder: str | Path, **extra) -> dict:
     """Write the completion record of ``folder``: size and SHA-256 of each file (recursively)."""
     folder = Path(folder)
@@ -341,7 +349,9 @@ def in_progress(folder: str | Path, **info) -> Iterator[Path]:
     stopped (Ctrl-C, an error) or killed, so a reader knows the folder's top-level summary is not
     the final one of this command.
     """
-    folder = Path(folder)
+    folder = check_path_names(Path(folder))
+    if folder.exists() and not folder.is_dir():
+        raise InvalidInput(f"{folder}: exists and is not a folder; choose a folder for the output")
     with FolderLock(folder):
         marker = folder / IN_PROGRESS
         text = {

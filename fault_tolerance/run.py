@@ -3,7 +3,8 @@
 A :class:`Run` holds the time histories (configuration, rates, task position and error, the
 square-sum jump λ(t) with its per-scenario parts, the reduced condition numbers and K(t)) and a
 ``meta`` dict that says how it was made. It saves to and loads from a folder with ``run.npz``,
-``run.csv`` and ``summary.json``, each written atomically (:mod:`.files`).
+``run.csv`` and ``summary.json``, whole or not at all (:mod:`.results`): written aside, recorded,
+moved into place; a load verifies the record and checks the file as untrusted (:mod:`.runfile`).
 """
 
 from __future__ import annotations
@@ -11,6 +12,7 @@ from __future__ import annotations
 import csv
 import io
 import json
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -18,6 +20,8 @@ import numpy as np
 
 from .errors import InvalidInput
 from .files import output_folder, to_json, write_atomic
+from .results import staged_folder, verify_folder
+from .runfile import read_run_file
 
 __all__ = [
     "ARRAYS",
@@ -49,6 +53,11 @@ ARRAYS = (
     "flags",
 )
 OPTIONAL_ARRAYS = ("qd_cmd", "orientation_error")
+#: Files a run folder may hold (an older run's folder with only these may be replaced).
+RUN_FILES = frozenset(
+    {"run.npz", "run.csv", "summary.json", "run.png", "run.svg", "lock.png", "lock.svg",
+     "replay.html"}
+)  # fmt: skip
 
 #: Bits of ``Run.flags``.
 FLAG_NEAR_SINGULAR = (
@@ -80,6 +89,8 @@ class Run:
         flags: Bit flags per sample (:data:`FLAG_NEAR_SINGULAR`, ...), shape (K,).
         meta: How the run was made (robot, algorithm, dt, path, lockable joints, lock, ...).
         qd_cmd: Commanded rates when a servo model is used, shape (K, n), else None.
+        arm_record: The arm the run was made with (:func:`~.carried.arm_record`: checked URDF
+            text, tip, task, joints), so that a replay needs no file named in the run.
         orientation_error: Orientation error of the task's angular rows [rad] (with all three:
             the angle of the remaining rotation), shape (K,); None without angular rows.
     """
@@ -98,6 +109,7 @@ class Run:
     flags: np.ndarray
     meta: dict = field(default_factory=dict)
     qd_cmd: np.ndarray | None = None
+    arm_record: dict | None = None
     orientation_error: np.ndarray | None = None
 
     # -- summary -----------------------------------------------------------------------------
@@ -139,45 +151,62 @@ class Run:
         }
 
     # -- files -------------------------------------------------------------------------------
-    def save(self, folder: str | Path, *, warnings: list[dict] | None = None) -> Path:
-        """Write ``run.npz``, ``run.csv`` and ``summary.json`` into ``folder`` (atomically).
+    def save(
+        self,
+        folder: str | Path,
+        extras: Callable[[Path], None] | None = None,
+        *,
+        warnings: list[dict] | None = None,
+    ) -> Path:
+        """Write the run into ``folder``, whole or not at all (:func:`~.results.staged_folder`).
 
+        ``run.npz`` (arrays, ``meta`` and the carried arm), ``run.csv`` and ``summary.json`` are
+        written into a staging folder, then ``extras(staging)`` may add files that belong with the
+        run (plots, a replay page); the completion record is written last and the folder moved
+        into place. An existing run there is replaced whole; the folder is locked meanwhile.
         ``warnings``: what :func:`fault_tolerance.diagnostics.check_run` found (``as_dict()`` of
         each), recorded in summary.json under ``"warnings"`` (absent when not checked).
         """
-        folder = output_folder(folder)
+        folder = Path(folder)
+        with staged_folder(folder, replaceable=RUN_FILES) as tmp:
+            self.write(tmp, warnings=warnings)
+            if extras is not None:
+                extras(tmp)
+        return folder
+
+    def write(self, folder: Path, *, warnings: list[dict] | None = None) -> None:
+        """The run's files into an existing ``folder`` (no staging; :meth:`save` stages)."""
         arrays = {k: getattr(self, k) for k in ARRAYS}
         arrays.update(
             {k: getattr(self, k) for k in OPTIONAL_ARRAYS if getattr(self, k) is not None}
         )
+        if self.arm_record is not None:
+            arrays["arm"] = np.array(json.dumps(self.arm_record))
         buf = io.BytesIO()
         np.savez_compressed(buf, meta=np.array(to_json(self.meta)), **arrays)
-        write_atomic(folder / "run.npz", buf.getvalue())
-        write_atomic(folder / "run.csv", self.to_csv())
+        (folder / "run.npz").write_bytes(buf.getvalue())
+        (folder / "run.csv").write_text(self.to_csv(), encoding="utf-8")
         record = {"meta": self.meta, "summary": self.summary()}
         if warnings is not None:
             record["warnings"] = list(warnings)
-        write_atomic(folder / "summary.json", to_json(record))
-        return folder
+        (folder / "summary.json").write_text(to_json(record), encoding="utf-8")
 
     @classmethod
     def load(cls, folder: str | Path) -> Run:
-        """Read a run saved by :meth:`save` (a folder or its ``run.npz``)."""
+        """Read a run saved by :meth:`save` (a folder or its ``run.npz``), checked as untrusted.
+
+        The folder must be whole (its completion record matches ``run.npz``); sizes, shapes,
+        types and metadata are checked before use (:func:`~.runfile.read_run_file`). Any problem
+        is one line of :class:`~.errors.FaultToleranceError`.
+        """
         path = Path(folder)
-        if path.is_dir():
-            path = path / "run.npz"
-        if not path.is_file():
+        if path.name == "run.npz" and not path.is_dir():
+            path = path.parent
+        if not (path / "run.npz").is_file():
             raise InvalidInput(f"{path}: no saved run here (expected a folder with run.npz)")
-        try:
-            with np.load(path, allow_pickle=False) as z:
-                arrays = {k: z[k] for k in z.files if k != "meta"}
-                meta = json.loads(str(z["meta"]))
-        except (OSError, ValueError, KeyError) as err:
-            raise InvalidInput(f"{path}: not a readable run file ({err})") from err
-        missing = [k for k in ARRAYS if k not in arrays]
-        if missing:
-            raise InvalidInput(f"{path}: run file lacks arrays {missing}")
-        return cls(meta=meta, **arrays)
+        verify_folder(path, files=["run.npz"])
+        arrays, meta, arm = read_run_file(path / "run.npz", ARRAYS)
+        return cls(meta=meta, arm_record=arm, **arrays)
 
     def to_csv(self) -> str:
         """One row per sample: t, q_*, qd_*, x_*, x_des_*, error, jvj, K, flags.

@@ -15,6 +15,8 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from .arm import Arm
+from .budget import check_run, run_samples
+from .carried import arm_record
 from .errors import InvalidInput
 from .failures import Scenarios, scenarios
 from .indices import RESPONSES, condition_numbers, post_failure_rates, reduced_singular_values
@@ -90,11 +92,7 @@ class ServoModel:
 
 
 def _check_time(dt: float, duration: float) -> int:
-    if not (np.isfinite(dt) and dt > 0):
-        raise InvalidInput(f"dt must be a finite number > 0, got {dt}")
-    if not (np.isfinite(duration) and duration > 0):
-        raise InvalidInput(f"duration must be a finite number > 0, got {duration}")
-    steps = int(round(duration / dt))
+    steps = run_samples(dt, duration) - 1  # refuses non-finite times and too many samples
     if steps < 1:
         raise InvalidInput(
             f"dt = {dt} s is longer than the run ({duration} s); choose dt <= duration"
@@ -299,6 +297,7 @@ def _setup(
         weights=weights,
         joint_names=arm.joint_names,
     )
+    check_run(dt, duration, arm.n, arm.m, sc.f)  # the arrays fit, before they are allocated
     lock_col = None
     if lock_joint is not None:
         lock_col = arm.joint_index(lock_joint)
@@ -488,7 +487,12 @@ def _finish(s: _Setup, state: _State, rec: dict, q0) -> Run:
             [arm.task_error(xd, q) for xd, q in zip(arrays["x_des"], arrays["q"], strict=True)]
         )
         arrays["error"], arrays["orientation_error"] = error_norms(arm.task, err)
-    return Run(meta=meta, qd_cmd=qd_cmd if servo_used else None, **arrays)
+    return Run(
+        meta=meta,
+        qd_cmd=qd_cmd if servo_used else None,
+        arm_record=arm_record(arm),
+        **arrays,
+    )
 
 
 # MATH.md (W3): the plan's reference tracked in the null space; J q̇ = ẋ_cmd whatever the reference.

@@ -225,9 +225,12 @@ def load_csv(path: str | Path, rows: Sequence[str] | None = None) -> SampledPath
     Raises:
         InvalidInput: naming the file, the line and the problem.
     """
+    from .budget import MAX_PATH_FILE_BYTES, check_file_size
+
     path = Path(path)
     if not path.is_file():
         raise InvalidInput(f"{path}: no such CSV file")
+    check_file_size(path, MAX_PATH_FILE_BYTES, "path file (--csv)")
     try:
         header, data = _read_csv_rows(path)
     except UnicodeDecodeError as err:
@@ -265,8 +268,16 @@ def _read_csv_rows(path: Path) -> tuple[list[str], list[tuple[int, list[float]]]
         twice = sorted({h for h in header if header.count(h) > 1})
         if twice:
             raise InvalidInput(f"{path}: columns {twice} appear twice in the header {header}")
+        if len(header) > 64:
+            raise InvalidInput(f"{path}: {len(header)} columns; a path has at most 64")
+        from .budget import MAX_RUN_SAMPLES
+
         data: list[tuple[int, list[float]]] = []
         for lineno, row in enumerate(reader, start=2):
+            if len(data) > MAX_RUN_SAMPLES:
+                raise InvalidInput(
+                    f"{path}: more than {MAX_RUN_SAMPLES:,} rows; a path file may have at most that"
+                )
             if not row or all(not c.strip() for c in row):
                 continue
             if len(row) != len(header):

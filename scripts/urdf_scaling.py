@@ -3,9 +3,9 @@
 Usage: python scripts/urdf_scaling.py 50 100 200 400 [--timeout 600]
 
 Each command runs in its own process (``/usr/bin/time``-free: the child's peak RSS comes from
-``resource.getrusage(RUSAGE_CHILDREN)``); the chain alternates z and y axes, 0.1 m links, so every
-N gives a spatial arm with redundancy N - 3 for the position task. This measurement sets
-``urdf.MAX_URDF_JOINTS``.
+``resource.getrusage(RUSAGE_CHILDREN)``, a running maximum); the chain alternates z and y axes, so every
+N gives a spatial arm with redundancy N - 3 for the position task. This measurement set
+``arm.MAX_ACTIVE_JOINTS`` (200): past it the commands exit 2 at once.
 """
 
 from __future__ import annotations
@@ -51,10 +51,36 @@ def measure(args: list[str], timeout: float) -> tuple[float, float, int]:
     return seconds, max(peak, before) / 1024, rc
 
 
+DATA = """
+import resource, sys, time
+from pathlib import Path
+from fault_tolerance.models import build_model
+from fault_tolerance.urdf import read_urdf
+model = build_model(read_urdf(Path(sys.argv[1])))
+t = time.perf_counter()
+data = model.createData()
+print(time.perf_counter() - t, resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024)
+"""
+
+
+def measure_data(path: Path, timeout: float) -> tuple[float, float]:
+    """(seconds, peak RSS [MiB]) of Pinocchio's ``createData`` for the whole chain, in a child."""
+    r = subprocess.run(
+        [sys.executable, "-c", DATA, str(path)], capture_output=True, text=True, timeout=timeout
+    )
+    if r.returncode != 0:
+        return float("nan"), float("nan")
+    seconds, mib = (float(v) for v in r.stdout.split())
+    return seconds, mib
+
+
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("sizes", type=int, nargs="+")
     p.add_argument("--timeout", type=float, default=600.0)
+    p.add_argument(
+        "--no-data", action="store_true", help="skip Pinocchio's createData (N³ memory!)"
+    )
     a = p.parse_args()
     print(f"{'N':>6} {'command':10} {'seconds':>8} {'peak MiB':>9} {'exit':>5}")
     with tempfile.TemporaryDirectory() as tmp:
@@ -64,10 +90,23 @@ def main() -> None:
             commands = {
                 "inspect": ["inspect", str(path)],
                 "simulate": [
-                    "simulate", "--urdf", str(path), "--task", "position", "--duration", "0.01",
-                    "--algorithms", "jvja", "--no-progress", "--out", f"{tmp}/out{n}",
+                    "simulate",
+                    "--urdf",
+                    str(path),
+                    "--task",
+                    "position",
+                    "--duration",
+                    "0.01",
+                    "--algorithms",
+                    "jvja",
+                    "--no-progress",
+                    "--out",
+                    f"{tmp}/out{n}",
                 ],
             }
+            if not a.no_data:
+                s, mib = measure_data(path, a.timeout)
+                print(f"{n:6d} {'createData':10} {s:8.2f} {mib:9.0f} {'':>5}", flush=True)
             for name, args in commands.items():
                 s, mib, rc = measure(args, a.timeout)
                 print(f"{n:6d} {name:10} {s:8.2f} {mib:9.0f} {rc:5d}", flush=True)

@@ -114,3 +114,23 @@ def test_too_large_or_foreign_members_are_refused(tmp_path, monkeypatch):
     path.write_bytes(b"PK\x03\x04 not really a zip")
     with pytest.raises(InvalidInput, match="not a readable run file"):
         budget.npz_members(path)
+
+
+def test_path_files_are_bounded(tmp_path, monkeypatch):
+    """A CSV path larger than MAX_PATH_FILE_BYTES, or with more rows than a run may have samples,
+    or with too many columns is refused before it is parsed whole."""
+    from fault_tolerance.trajectories import load_csv
+
+    path = tmp_path / "p.csv"
+    path.write_text("t,x,y\n" + "".join(f"{i * 1e-3},0.3,0\n" for i in range(50)))
+    assert len(load_csv(path).t) == 50
+    monkeypatch.setattr(budget, "MAX_PATH_FILE_BYTES", 100)
+    with pytest.raises(InvalidInput, match="at most 100"):
+        load_csv(path)
+    monkeypatch.undo()
+    monkeypatch.setattr(budget, "MAX_RUN_SAMPLES", 10)
+    with pytest.raises(InvalidInput, match="more than 10 rows"):
+        load_csv(path)
+    path.write_text("t," + ",".join(f"c{i}" for i in range(70)) + "\n")
+    with pytest.raises(InvalidInput, match="70|71 columns"):
+        load_csv(path)

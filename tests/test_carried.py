@@ -165,3 +165,38 @@ def test_check_record_needs_an_object():
     """A record that is not a JSON object is refused."""
     with pytest.raises(InvalidInput, match="not an object"):
         check_record([1, 2], "run")
+
+
+def test_replay_of_a_redirected_run_reads_nothing_it_names(package, tmp_path, capsys):
+    """A received run whose meta names another URDF and package folder, and whose carried URDF
+    names a secret mesh: `replay` rebuilds the planar arm from the carried text, warns about the
+    mesh, and the page embeds nothing of the secret file (exit 0)."""
+    import base64
+    import json
+
+    from fault_tolerance.cli import main
+    from fault_tolerance.results import write_record
+    from fault_tolerance.run import Run
+
+    secret = package / "secret.stl"
+    secret.write_text(STL.replace("solid t", "solid TOPSECRET"))
+    assert main(["simulate", "--robot", "planar_3r", "--no-progress", "--duration", "0.02",
+                 "--algorithms", "lnva", "--out", str(tmp_path / "out")]) == 0  # fmt: skip
+    folder = tmp_path / "out" / "lnva"
+    run = Run.load(folder)
+    run.meta["source"] = str(secret)
+    run.meta["package_dirs"] = [str(package), "/"]
+    run.arm_record["urdf"] = meshy_urdf([str(secret), "package://arm_description/../../secret.stl"])
+    run.arm_record.update(tip="tool", q_full=None, kind="file")
+    run.write(folder)
+    write_record(folder)
+    capsys.readouterr()
+    page = tmp_path / "r.html"
+    rc = main(["replay", str(folder), "--html", str(page)])
+    err = capsys.readouterr().err
+    assert rc == 0, err
+    assert "not a package:// name" in err and err.count("\n") == 1
+    html = page.read_text()
+    assert "TOPSECRET" not in html and str(secret) not in html
+    assert base64.b64encode(secret.read_bytes()).decode()[:40] not in html
+    assert json.loads(json.dumps(run.meta))["source"] == str(secret)  # kept as information only

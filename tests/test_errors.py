@@ -300,6 +300,11 @@ def test_loading_a_run_that_is_not_there_is_refused(tmp_path):
     with pytest.raises(ft.InvalidInput, match="no saved run here"):
         Run.load(tmp_path)
     (tmp_path / "run.npz").write_bytes(b"garbage")
+    with pytest.raises(ft.FaultToleranceError, match="no completion record"):
+        Run.load(tmp_path)  # not written whole by Run.save
+    from fault_tolerance.results import write_record
+
+    write_record(tmp_path)  # a record that matches the garbage: the file itself is refused
     with pytest.raises(ft.InvalidInput, match="not a readable run file"):
         Run.load(tmp_path)
 

@@ -191,3 +191,45 @@ def test_ctrl_c_stops_the_live_replay_with_exit_130(saved_run):
     assert stderr.count("\n") == 1 and "Traceback" not in stderr and "interrupted" in stderr
     gone, alive = psutil.wait_procs(children, timeout=10)
     assert not alive
+
+
+@pytest.mark.browser
+def test_dns_rebinding_in_chromium(saved_run):
+    """A real browser that resolves an outside name to 127.0.0.1 (DNS rebinding, emulated with
+    Chromium's host resolver rules) gets 403 for the viewer page, and a page of that name cannot
+    open the websocket; the same browser on 127.0.0.1 loads the viewer."""
+    from test_viz import CHROMIUM, CHROMIUM_ARGS, _browser_missing
+
+    from fault_tolerance import viz
+
+    reason = _browser_missing()
+    if reason:
+        pytest.skip(reason)
+    from playwright.sync_api import sync_playwright
+
+    run, arm, _ = saved_run
+    url, server = viz.serve(run, arm, fps=10)
+    port = urlparse(url).port
+    rules = "--host-resolver-rules=MAP rebind.test 127.0.0.1"
+    try:
+        with sync_playwright() as p:
+            browser = p.chromium.launch(
+                executable_path=str(CHROMIUM), args=[*CHROMIUM_ARGS, rules], headless=True
+            )
+            page = browser.new_page()
+            assert page.goto(url).status == 200
+            foreign = page.goto(f"http://rebind.test:{port}/static/")
+            assert foreign.status == 403
+            opened = page.evaluate(
+                """(port) => new Promise(done => {
+                    const ws = new WebSocket(`ws://127.0.0.1:${port}/`);
+                    ws.onopen = () => done("open");
+                    ws.onerror = () => done("refused");
+                    setTimeout(() => done("timeout"), 10000);
+                })""",
+                port,
+            )
+            assert opened == "refused"
+            browser.close()
+    finally:
+        server.close()

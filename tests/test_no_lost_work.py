@@ -97,30 +97,31 @@ def test_write_atomic_replaces_the_whole_file(tmp_path):
     assert target.read_bytes() == b"\x00\x01" and leftovers(target.parent) == []
 
 
-def test_run_save_failing_on_the_last_file_keeps_the_earlier_ones(tmp_path, planar_3r, monkeypatch):
-    """A save that fails on summary.json (the last file): run.npz and run.csv are complete, the
-    previous summary.json is intact."""
-    run = simulation.simulate(
-        planar_3r.arm, experiments.CASES["fig2"].path(0.02), "lnva", q0=np.array([0.3, 1.2, 1.0])
-    )
+def test_run_save_failing_on_the_last_file_keeps_the_earlier_run_whole(
+    tmp_path, planar_3r, monkeypatch
+):
+    """A save that fails on summary.json (the last file, disk full): the folder still holds the
+    earlier run, whole (it loads, its record verifies), and nothing of the new one; the disk error
+    is the toolkit's one-line OutputError."""
+    from fault_tolerance.errors import OutputError
+    from fault_tolerance.results import verify_folder
+
+    path = experiments.CASES["fig2"].path(0.02)
+    first = simulation.simulate(planar_3r.arm, path, "lnva", q0=np.array([0.3, 1.2, 1.0]))
+    second = simulation.simulate(planar_3r.arm, path, "jvja", q0=np.array([0.3, 1.2, 1.0]))
     folder = tmp_path / "run"
-    folder.mkdir()
-    (folder / "summary.json").write_bytes(OLD)
-    real = run_module.write_atomic
+    first.save(folder)
 
-    def failing(path, data):
-        if Path(path).name == "summary.json":
-            raise OSError(28, "No space left on device")
-        return real(path, data)
+    def full(self):
+        raise OSError(28, "No space left on device")
 
-    monkeypatch.setattr(run_module, "write_atomic", failing)
-    with pytest.raises(OSError):
-        run.save(folder)
+    monkeypatch.setattr(Run, "summary", full)
+    with pytest.raises(OutputError, match="no space left"):
+        second.save(folder)
     monkeypatch.undo()
-    loaded = Run.load(folder)
-    np.testing.assert_array_equal(loaded.q, run.q)
-    assert (folder / "run.csv").read_text() == run.to_csv()
-    assert (folder / "summary.json").read_bytes() == OLD
+    verify_folder(folder)
+    assert Run.load(folder).meta["algorithm"] == "lnva"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["run"]
 
 
 @pytest.mark.parametrize(

@@ -8,6 +8,7 @@ line on stderr naming the problem and what is allowed; ``--debug`` shows the tra
 from __future__ import annotations
 
 import argparse
+import errno
 import re
 import sys
 import warnings
@@ -295,6 +296,10 @@ def run_command(func: Callable, args: argparse.Namespace) -> int:
         close_bars()
         if args.debug:
             raise
+        if isinstance(err, OSError) and err.errno in _REFUSED_BY_THE_SYSTEM:
+            # the file system refused (full, read-only, permissions, a name too long): not a bug
+            print(f"fault-tolerance {args.command}: error: {one_line(err)}", file=sys.stderr)
+            return EXIT_BAD_INPUT
         print(
             f"fault-tolerance {args.command}: unexpected error: {type(err).__name__}: "
             f"{one_line(err)} (run with --debug for the traceback)",
@@ -303,6 +308,12 @@ def run_command(func: Callable, args: argparse.Namespace) -> int:
         return EXIT_FAILURE
     finally:
         warnings.showwarning = shown
+
+
+#: errno values of an OSError that mean the system refused the output, not that the code is wrong.
+_REFUSED_BY_THE_SYSTEM = frozenset(
+    {errno.ENOSPC, errno.EDQUOT, errno.EROFS, errno.EACCES, errno.EPERM, errno.ENAMETOOLONG}
+)
 
 
 def one_line(message) -> str:

@@ -54,6 +54,13 @@ def _task(args, arm):
 
 def run(args) -> int:
     """Design search into ``--out``: design.json and design.png."""
+    from ..results import FolderLock
+
+    with FolderLock(args.out):  # a second writer of --out exits 2 naming this one
+        return _run(args)
+
+
+def _run(args) -> int:
     from ..design_search import design
 
     if args.task not in (None, "circle", "planar"):  # design's --task names the task path

@@ -93,15 +93,24 @@ def _lock_time(args, arm, path, q0, joint: str, duration: float, gain: dict):
 
 
 def run(args) -> int:
-    """A run in which a joint locks (at a time, or at the largest / smallest jump)."""
-    from ..run import output_folder
+    """A run in which a joint locks; ``--out`` is locked while written and appears whole."""
+    from ..results import FolderLock, check_path_names, check_target
+    from ..run import RUN_FILES
+
+    if not args.out:
+        return _run(args)
+    out = check_path_names(Path(args.out))
+    with FolderLock(out):
+        check_target(out, RUN_FILES)  # refuse a bad --out before the runs
+        return _run(args)
+
+
+def _run(args) -> int:
     from ..simulation import ServoModel, simulate
 
     arm = load_robot(args)
     joint = arm.joint_names[arm.joint_index(args.joint)]
     servo = ServoModel(tau=args.tau, accel_limit=args.accel_limit)
-    if args.out:
-        output_folder(args.out)  # refuse a bad --out before the runs
     feedback = 10.0 if args.feedback is None else args.feedback
     gain = {} if args.gain is None else {"gain": args.gain}
     # the start is checked with the planned (lock-free) run; the locking joint must be tolerable
@@ -162,12 +171,14 @@ def run(args) -> int:
 def _write(run_, arm, joint: str, t_lock: float, out: Path, html: bool, found, planned) -> None:
     from .. import plots
 
-    run_.save(out, warnings=found)
-    fig = plots.plot_lock({f"{joint} locks at {t_lock:.2f} s": run_}, planned=planned)
-    plots.save_figure(fig, out / "lock")
-    plots.save_figure(plots.plot_run(run_), out / "run")
-    if html:
-        from ..viz import export_html
+    def extras(folder: Path) -> None:  # written with the run, in its staging folder
+        title = f"{joint} locks at {t_lock:.2f} s"
+        plots.save_figure(plots.plot_lock({title: run_}, planned=planned), folder / "lock")
+        plots.save_figure(plots.plot_run(run_), folder / "run")
+        if html:
+            from ..viz import export_html
 
-        export_html(run_, out / "replay.html", arm=arm)
+            export_html(run_, folder / "replay.html", arm=arm)
+
+    run_.save(out, extras=extras, warnings=found)
     print(f"wrote {out}/ (run.npz, run.csv, summary.json, lock.png/.svg)")

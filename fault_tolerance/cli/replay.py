@@ -22,6 +22,13 @@ def add_parser(sub) -> argparse.ArgumentParser:
     g.add_argument("--open", action="store_true", help="serve it on 127.0.0.1 and print the URL")
     g.add_argument("--html", default=None, help="write one self-contained HTML file")
     s.add_argument("--speed", type=float, default=1.0, help="playback speed factor (default 1)")
+    s.add_argument(
+        "--package-dir",
+        action="append",
+        default=[],
+        help="folder where package:// meshes of the run's arm may be read (repeatable); no other "
+        "file is opened: the arm is rebuilt from the URDF text the run carries",
+    )
     s.set_defaults(func=run)
     return s
 
@@ -30,4 +37,10 @@ def run(args) -> int:
     """Meshcat replay of a saved run."""
     from ..viz import replay_main
 
-    return replay_main(args.run, open=args.open, html=args.html, speed=args.speed)
+    return replay_main(
+        args.run,
+        open=args.open,
+        html=args.html,
+        speed=args.speed,
+        package_dirs=args.package_dir,
+    )

@@ -6,6 +6,7 @@ import argparse
 import sys
 from pathlib import Path
 
+from ..errors import InvalidInput
 from .common import EXIT_INTERRUPTED, FORMATTER, epilog, names
 
 NAME = "reproduce"
@@ -40,6 +41,11 @@ def run(args) -> int:
     from ..experiments import reproduce
 
     cases = names(args.cases)
+    if cases == []:
+        raise InvalidInput(
+            f"--cases {args.cases!r} names no case; give a subset like fig2,experiment or leave "
+            "--cases out for all"
+        )
     out = Path(args.out)
     try:
         summary = reproduce(

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+from pathlib import Path
 
 from ..errors import InvalidInput
 from .common import (
@@ -97,8 +98,20 @@ def _global_start(alg: str, args) -> dict:
 
 
 def run(args) -> int:
-    """One task run per algorithm; files into --out."""
+    """One task run per algorithm; files into --out (locked while written, each run whole)."""
+    from ..results import FolderLock, check_path_names
+
+    if not args.out:
+        return _run(args, None)
+    out = check_path_names(Path(args.out))
+    with FolderLock(out):
+        return _run(args, out)
+
+
+def _run(args, out: Path | None) -> int:
+    from ..budget import check_run
     from ..diagnostics import check_run as check
+    from ..failures import scenarios
     from ..planner import MDA_GAIN
     from ..run import output_folder
     from ..simulation import simulate
@@ -111,13 +124,15 @@ def run(args) -> int:
         "response": args.response,
         "gain": MDA_GAIN if args.gain is None else args.gain,
     }
-    out = output_folder(args.out) if args.out else None
+    out = output_folder(out) if out else None
     stepwise = [a for a in algs if a != "global"] or ["jvja"]  # the start is checked with these
     q0, path, lockable, choice = choose_start(args, arm, stepwise, **options)
     checked = {} if choice is None else choice.runs  # the default start's checks ran these
+    duration = args.duration or path.duration
+    f = scenarios(lockable, arm.n, r=arm.redundancy, joint_names=arm.joint_names).f
+    steps = check_run(args.dt, duration, arm.n, arm.m, f, runs=len(algs))  # all kept in memory
     if choice is not None:
         print(choice.reason())
-    steps = int(round((args.duration or path.duration) / args.dt)) + 1
     progress = bar(steps * len(algs), not args.no_progress, "simulate")
     runs, saved, found = {}, [], {}
     try:
@@ -138,8 +153,12 @@ def run(args) -> int:
                     **options,
                 )
             found[alg] = check(runs[alg], arm)
-            if out:
-                runs[alg].save(out / alg, warnings=[w.as_dict() for w in found[alg]])
+            if out:  # the run, its plot and page appear together, whole
+                runs[alg].save(
+                    out / alg,
+                    extras=_extras(runs[alg], arm, args.html),
+                    warnings=[w.as_dict() for w in found[alg]],
+                )
                 saved.append(alg)
     except KeyboardInterrupt:
         if progress:
@@ -157,23 +176,27 @@ def run(args) -> int:
     for alg, run_ in runs.items():
         report_warnings(NAME, alg, run_, arm)
     if out:
-        _write_figures(runs, arm, algs, out, args.html)
+        from .. import plots
+
+        title = f"{arm.name}: {', '.join(algs)}"
+        plots.save_figure(plots.plot_comparison(runs, title), out / "comparison")
+        print(f"wrote {out}/ (run.npz, run.csv, summary.json per algorithm; comparison.png/.svg)")
     return 0
 
 
-def _write_figures(runs, arm, algs, out, html: bool) -> None:
-    from .. import plots
+def _extras(run_, arm, html: bool):
+    """What :meth:`Run.save` adds to a run's folder: its plot, and its replay page if asked."""
 
-    plots.save_figure(
-        plots.plot_comparison(runs, f"{arm.name}: {', '.join(algs)}"), out / "comparison"
-    )
-    for alg, run_ in runs.items():
-        plots.save_figure(plots.plot_run(run_), out / alg / "run")
+    def write(folder: Path) -> None:
+        from .. import plots
+
+        plots.save_figure(plots.plot_run(run_), folder / "run")
         if html:
             from ..viz import export_html
 
-            export_html(run_, out / alg / "replay.html", arm=arm)
-    print(f"wrote {out}/ (run.npz, run.csv, summary.json per algorithm; comparison.png/.svg)")
+            export_html(run_, folder / "replay.html", arm=arm)
+
+    return write
 
 
 def print_table(runs) -> None:

@@ -24,6 +24,7 @@ def choose_start(args, arm, algorithms=("jvja",), extra_lockable=(), **sim_optio
     once its inputs are all checked, so bad input still gives nothing on stdout. ``extra_lockable``: joints that must be tolerable
     at the start as well (``lock --joint``).
     """
+    from ..budget import run_samples
     from ..catalog import catalog
     from ..posture import initial_posture, lockable_scenarios
     from ..start import check_start, default_start
@@ -56,10 +57,13 @@ def choose_start(args, arm, algorithms=("jvja",), extra_lockable=(), **sim_optio
                 f"--q0 puts the tool at {arm.fk(q0).round(4).tolist()}, not at the path's start "
                 f"{np.round(path.x0, 4).tolist()}"
             )
+        run_samples(args.dt, args.duration or path.duration)  # a run too long: refused first
         sc = lockable_scenarios(arm, start_lockable)
         check_start(arm, sc, q0, x0=path.x0, path=path, fallback_path=circle, **options)
         return q0, path, lockable, None
     x0 = np.array(entry["x0"], dtype=float) if entry and "x0" in entry else None
+    if arm.m >= 2:  # a run too long is refused before the search
+        run_samples(args.dt, args.duration or circle(np.zeros(arm.m)).duration)
     choice = default_start(arm, start_lockable, x0=x0, path=circle, **options)
     return choice.q0, circle(choice.x0), lockable, choice
 

@@ -67,6 +67,13 @@ def add_parser(sub) -> argparse.ArgumentParser:
 
 def run(args) -> int:
     """Failure-tolerant workspace of one arm into ``--out``."""
+    from ..results import FolderLock
+
+    with FolderLock(args.out):  # a second writer of --out exits 2 naming this one
+        return _run(args)
+
+
+def _run(args) -> int:
     from ..workspace import failure_tolerant_workspace
 
     arm = load_robot(args)

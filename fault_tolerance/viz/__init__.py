@@ -36,13 +36,13 @@ from __future__ import annotations
 
 import sys
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import IO, Any, NamedTuple
 
 from ..arm import Arm
 from ..errors import FaultToleranceError, InvalidInput
-from ..simulation import write_atomic
+from ..files import write_atomic
 from .collect import describe_runs, run_folders
 from .geometry import (  # noqa: F401 - public constants, importable as fault_tolerance.viz.X
     BACKGROUND,
@@ -76,13 +76,15 @@ def replay(
     port: int | None = None,
     meshes: str = "compact",
     dt: float | None = None,
+    package_dirs: Sequence[str | Path] = (),
 ) -> Replay:
     """Replay ``run`` in the browser: a self-contained HTML file, a live viewer, or both.
 
     Args:
         run: A Run, the folder it was saved to, a folder of run folders (one command's runs,
             shown together), a list or dict of runs, an array q (K, n) with ``dt``, or ``(t, q)``.
-        arm: The arm (default: ``arm_from_meta(run.meta)``).
+        arm: The arm (default: rebuilt from each run's carried URDF text, meshes only from
+            ``package_dirs`` and installed robot data; :mod:`~fault_tolerance.carried`).
         speed: Replay speed factor (1: real time).
         fps: Animation frames per replay second.
         open: Start a live meshcat server on 127.0.0.1 (stop it with ``result.server.close()``).
@@ -90,10 +92,13 @@ def replay(
         port: Web port of the live server (default: the first free one from 7000).
         meshes: ``"compact"`` or ``"original"`` (see :func:`export_html`).
         dt: Time step [s] when ``run`` is an array of joint positions.
+        package_dirs: Folders where ``package://`` meshes of the run's arm may be read.
     """
     if not open and html is None:
         raise InvalidInput("choose where to replay: open=True (live viewer) and/or html=FILE")
-    page = _build_page(run, arm, speed=speed, fps=fps, meshes=meshes, dt=dt)
+    page = _build_page(
+        run, arm, speed=speed, fps=fps, meshes=meshes, dt=dt, package_dirs=package_dirs
+    )
     path = write_atomic(html, _page_html(page)) if html is not None else None
     server = _serve_page(page, port) if open else None
     return Replay(path, server.url if server else None, server)
@@ -112,6 +117,7 @@ def replay_main(
     *,
     fps: float = 50.0,
     port: int | None = None,
+    package_dirs: Sequence[str | Path] = (),
     wait: Callable[[], Any] | None = None,
     stdout: IO[str] | None = None,
     stderr: IO[str] | None = None,
@@ -145,7 +151,15 @@ def replay_main(
         print("replay: choose --open (live viewer) or --html FILE (self-contained page)", file=err)
         return 2
     try:
-        result = replay(run_dir, speed=speed, fps=fps, open=open, html=html, port=port)
+        result = replay(
+            run_dir,
+            speed=speed,
+            fps=fps,
+            open=open,
+            html=html,
+            port=port,
+            package_dirs=package_dirs,
+        )
     except FaultToleranceError as e:
         print(f"replay: {e}", file=err)
         return 2

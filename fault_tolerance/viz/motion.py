@@ -9,15 +9,17 @@ replay second (:func:`_frame_times`), interpolating between the run's samples.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 from ..arm import Arm
+from ..budget import check_frames
+from ..carried import arm_of_run
 from ..errors import InvalidInput
-from ..loading import arm_from_meta
-from ..simulation import Run
+from ..run import Run
 
 
 @dataclass
@@ -31,13 +33,20 @@ class _Motion:
     meta: dict = field(default_factory=dict)
 
 
-def _load_motion(run, arm: Arm | None, dt: float | None) -> tuple[_Motion, Arm]:
-    """A :class:`_Motion` and its arm from a Run, a run folder, an array of q or a pair (t, q)."""
+def _load_motion(
+    run, arm: Arm | None, dt: float | None, package_dirs: Sequence[str | Path] = ()
+) -> tuple[_Motion, Arm]:
+    """A :class:`_Motion` and its arm from a Run, a run folder, an array of q or a pair (t, q).
+
+    A run's arm is rebuilt from the record it carries (:func:`~..carried.arm_of_run`), never from
+    a file named in it.
+    """
+    where = str(run) if isinstance(run, (str, Path)) else "the run"
     if isinstance(run, (str, Path)):
         run = Run.load(run)
     if isinstance(run, Run):
         if arm is None:
-            arm = arm_from_meta(run.meta)
+            arm = arm_of_run(run, package_dirs, where=where)
         motion = _Motion(
             np.asarray(run.t, dtype=float),
             np.asarray(run.q, dtype=float),
@@ -92,6 +101,7 @@ def _check_rate(speed: float, fps: float) -> tuple[float, float]:
 def _frame_times(t: np.ndarray, speed: float, fps: float) -> tuple[np.ndarray, np.ndarray]:
     """Replay times ``tau`` [s] every ``1/fps`` and the run times ``t0 + tau·speed`` they show."""
     span = float(t[-1] - t[0])
+    check_frames(span, speed, fps)  # before allocating: --speed 1e-9 would be 10¹¹ frames
     length = span / speed
     count = max(1, int(math.ceil(length * fps - 1e-9)))
     tau = np.minimum(np.arange(count + 1) / fps, length)

@@ -91,12 +91,15 @@ def _build_page(
     fps: float,
     meshes: str = "compact",
     dt: float | None = None,
+    package_dirs=(),
 ) -> _Page:
     """Scenes and plots of ``run`` (one run, or the runs of a folder / list / dict)."""
     items = collect_runs(run)
     scenes, charts, warnings, taken = [], [], [], set()
     for i, (label, item) in enumerate(items):
-        scene = _build_scene(item, arm, speed=speed, fps=fps, meshes=meshes, dt=dt)
+        scene = _build_scene(
+            item, arm, speed=speed, fps=fps, meshes=meshes, dt=dt, package_dirs=package_dirs
+        )
         scenes.append(scene)
         color = run_color(scene.info.get("algorithm"), i, taken)
         taken.add(color)

@@ -154,8 +154,12 @@ def _build_scene(
     fps: float,
     meshes: str = "compact",
     dt: float | None = None,
+    package_dirs=(),
 ) -> _Scene:
-    """Record the replay of ``run`` (motion, paths, lock colours, camera) as meshcat commands."""
+    """Record the replay of ``run`` (motion, paths, lock colours, camera) as meshcat commands.
+
+    ``package_dirs``: where ``package://`` meshes of a run's carried arm may be read.
+    """
     meshcat = _require_meshcat()
     import meshcat.geometry as mg
     from pinocchio.visualize import MeshcatVisualizer
@@ -163,7 +167,7 @@ def _build_scene(
     if meshes not in ("compact", "original"):
         raise InvalidInput(f"meshes must be 'compact' or 'original', got {meshes!r}")
     speed, fps = _check_rate(speed, fps)
-    motion, arm = _load_motion(run, arm, dt)
+    motion, arm = _load_motion(run, arm, dt, package_dirs)
     tau, t_frames = _frame_times(motion.t, speed, fps)
     q_frames = _interp_rows(t_frames, motion.t, motion.q)
     lock = motion.lock
