@@ -34,6 +34,7 @@ SHAPES = {
     "sigma_min": ("K",),
     "flags": ("K",),
     "qd_cmd": ("K", "n"),
+    "orientation_error": ("K",),  # tasks with angular rows [rad]
 }
 #: Members that are JSON text (0-d string arrays).
 TEXT_MEMBERS = ("meta", "arm")
