@@ -68,3 +68,26 @@ def test_plainest_simulate_runs_from_the_default_start(name, tmp_path, capsys):
         _assert_run_is_clean(arm, run)
         q0 = json.loads((out / alg / "summary.json").read_text())["meta"]["q0"]
         np.testing.assert_allclose(run.q[0], q0)
+
+
+# -- real descriptions (tests/data/robots): the plainest --urdf FILE --tip T ------------------
+
+try:
+    from real_arms import ARMS, cli_args, load
+except ImportError:  # the data set is not in this checkout
+    ARMS = {}
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", sorted(ARMS))
+def test_plainest_urdf_simulate_runs_from_the_default_start(name, tmp_path, capsys):
+    """`simulate --urdf FILE --tip T` (plus the manifest's package dirs, xacro args, task and
+    joints; no start given) runs every algorithm cleanly from a printed default start."""
+    out = tmp_path / name
+    argv = ["simulate", *cli_args(name), "--out", str(out), "--no-progress"]
+    assert main(argv) == 0
+    printed = capsys.readouterr().out.splitlines()
+    assert len([line for line in printed if line.startswith("start q0 = ")]) == 1
+    arm = load(name)
+    for alg in ("lnva", "jvja", "mda"):
+        _assert_run_is_clean(arm, Run.load(out / alg))
