@@ -35,7 +35,7 @@ from .boxqp import BOX_TOL, BoxSolution, solve_box
 from .errors import InvalidInput
 from .failures import Scenarios, scenarios
 from .indices import RESPONSES, square_sum_jump
-from .linalg import projection, reduced_rates
+from .linalg import damped_pivots, projection, reduced_rates
 
 #: Horizon h of the rate box (L1) [s]: a joint covers at most its distance to a limit in h.
 RATE_HORIZON = 0.05
@@ -71,14 +71,22 @@ def check_bounds(bounds, n: int) -> tuple[np.ndarray, np.ndarray]:
         lo, hi = bounds
     except (TypeError, ValueError):
         raise InvalidInput("bounds must be a pair (qd_lo, qd_hi) of rate arrays") from None
-    lo = np.broadcast_to(np.asarray(lo, dtype=float), (n,)).copy()
-    hi = np.broadcast_to(np.asarray(hi, dtype=float), (n,)).copy()
-    if np.any(np.isnan(lo)) or np.any(np.isnan(hi)):
-        raise InvalidInput("bounds must not contain NaN (use ±inf for no bound)")
-    if np.any(lo > hi):
+    if not (_is_rates(lo, n) and _is_rates(hi, n)):
+        try:
+            lo = np.broadcast_to(np.asarray(lo, dtype=float), (n,)).copy()
+            hi = np.broadcast_to(np.asarray(hi, dtype=float), (n,)).copy()
+        except (TypeError, ValueError):
+            raise InvalidInput(f"bounds must be two arrays of {n} rates (or scalars)") from None
+    if not (lo <= hi).all():  # also False where either is NaN
+        if np.isnan(lo).any() or np.isnan(hi).any():
+            raise InvalidInput("bounds must not contain NaN (use ±inf for no bound)")
         bad = np.flatnonzero(lo > hi).tolist()
         raise InvalidInput(f"bounds: qd_lo > qd_hi at joint index {bad}; each lower <= upper")
     return lo, hi
+
+
+def _is_rates(x, n: int) -> bool:
+    return isinstance(x, np.ndarray) and x.dtype == np.float64 and x.shape == (n,)
 
 
 # Eqn. (L1)
@@ -201,30 +209,46 @@ def resolve_bounded(name: str, J, xdot, lockable=None, *, bounds, **options) -> 
         >>> [round(float(v), 3) for v in out.qd], out.scale, out.active.tolist()
         ([0.125, 0.125, 0.05], 1.0, [False, False, True])
     """
-    from .planner import resolve
+    from .planner import OPTIONS, RESOLVERS, check_task, resolve
 
-    J = np.asarray(J, dtype=float)
-    xdot = np.asarray(xdot, dtype=float)
-    n = J.shape[1] if J.ndim == 2 else 0
+    if name not in RESOLVERS or set(options) - OPTIONS:
+        return BoundedRates(resolve(name, J, xdot, lockable, **options), 1.0, None, None)  # raises
+    J, xdot = check_task(J, xdot)
+    n = J.shape[1]
     lo, hi = check_bounds(bounds, n)
-    qd = resolve(name, J, xdot, lockable, **options)  # validates; the unbounded optimum
-    proj = options.get("proj") or projection(J)
+    options = dict(options)
+    proj = options.pop("proj", None) or projection(J)
     tolerate = bool(options.get("tolerate", False))
     empty = np.zeros(0)
     if name in ("lnva", "mda"):
-        if np.all(qd >= lo - BOX_TOL) and np.all(qd <= hi + BOX_TOL):
+        qd = resolve(name, J, xdot, lockable, proj=proj, **options)  # the unbounded optimum
+        if _inside(qd, lo, hi):
             return BoundedRates(np.clip(qd, lo, hi), 1.0, np.zeros(n, dtype=bool), empty)
         a = proj.Jpinv @ xdot
         sol = solve_box(qd - a, a, _null_basis(proj.N), lo, hi)
         return BoundedRates(sol.qd, sol.scale, sol.active, empty)
-    names = options.get("joint_names") or ()
-    sc = _scenarios(J, lockable, options.get("weights"), names)
+    names = options.get("joint_names") or (options["arm"].joint_names if options.get("arm") else ())
+    sc = _scenarios(J, lockable, options.pop("weights", None), names)
     response = options.get("response", "least_norm")
     if response not in RESPONSES:
         raise InvalidInput(f"response {response!r} is not one of {RESPONSES}")
+    if response == "least_norm" and sc.singletons:  # fast path: nothing meets a bound
+        N = proj.N
+        a = proj.Jpinv @ xdot
+        pivots = damped_pivots(sc.pivots(N)) if tolerate else sc.check_tolerable(N)
+        cols = sc.columns
+        post = a - (a[cols] / pivots)[:, None] * N[cols]  # (G1) for every scenario (N symmetric)
+        qd = sc.weights @ post / sc.weights.sum()  # (G2): the mean is already on the task's set
+        if _inside(qd, lo, hi) and _inside(post, lo, hi):
+            ones = np.ones(sc.f)
+            return BoundedRates(np.clip(qd, lo, hi), 1.0, np.zeros(n, dtype=bool), ones)
     if response == "least_norm":
         sol, scales = _jvja_least_norm(J, xdot, sc, lo, hi, proj, tolerate)
     else:
         _, scales = reduced_under_limits(J, xdot, sc, lo, hi, proj=proj, tolerate=tolerate)
         sol = _continuation(J, xdot, sc, lo, hi, proj, tolerate)
     return BoundedRates(sol.qd, sol.scale, sol.active, scales)
+
+
+def _inside(x, lo, hi) -> bool:
+    return bool((x >= lo - BOX_TOL).all() and (x <= hi + BOX_TOL).all())

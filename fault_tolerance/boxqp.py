@@ -12,8 +12,11 @@ orthonormal null-space basis and ``ZᵀHZ = LLᵀ``) the objective is ``½‖u�
 :func:`nearest_point` finds it exactly with the dual active-set method of Goldfarb & Idnani (the
 method inside quadprog), which starts from the unbounded optimum ``u = 0`` and adds one violated
 bound at a time: with no bound violated the unbounded rates come back untouched; every further
-bound costs one small solve. Infeasibility is certain when it stops; then (L3) is a linear
-programme in ``(u, s)`` (scipy's HiGHS), solved only on that rare path.
+bound costs one small solve. When it stops on an empty set it returns a Farkas certificate: a
+non-negative combination of bounds whose right-hand side, affine in ``s``, must be ≤ 0; its root
+is an upper bound of the task scaling (L3). Solving again at that ``s`` either succeeds (then that
+``s`` is the largest: every feasible ``s`` lies below every certificate's root) or gives a smaller
+root; a few rounds find the exact largest ``s`` without a linear-programming solver.
 """
 
 from __future__ import annotations
@@ -39,46 +42,47 @@ class BoxSolution(NamedTuple):
     iterations: int  # active-set changes (0: the unbounded optimum was inside the box)
 
 
+class Certificate(NamedTuple):
+    """Farkas certificate of an empty polytope: ``Σ coef_k e_k > 0`` for rows ``rows``."""
+
+    rows: np.ndarray  # indices into the constraint rows
+    coef: np.ndarray  # non-negative coefficients
+
+
 def _constraints(M: np.ndarray, blo: np.ndarray, bhi: np.ndarray):
-    """Rows ``nᵢᵀu ≥ eᵢ`` of ``blo ≤ M u ≤ bhi`` (finite bounds only) and the joint of each row."""
-    rows, rhs, joint = [], [], []
-    for i in range(M.shape[0]):
-        if np.isfinite(bhi[i]):
-            rows.append(-M[i])
-            rhs.append(-bhi[i])
-            joint.append(i)
-        if np.isfinite(blo[i]):
-            rows.append(M[i])
-            rhs.append(blo[i])
-            joint.append(i)
-    r = M.shape[1]
-    Nk = np.array(rows, dtype=float).reshape(len(rows), r)
-    return Nk, np.array(rhs, dtype=float), np.array(joint, dtype=int)
+    """Rows ``nₖᵀu ≥ eₖ`` of ``blo ≤ M u ≤ bhi`` (finite bounds only), their joint and side (±1)."""
+    up = np.flatnonzero(np.isfinite(bhi))
+    dn = np.flatnonzero(np.isfinite(blo))
+    Nk = np.vstack([-M[up], M[dn]])
+    e = np.concatenate([-bhi[up], blo[dn]])
+    joint = np.concatenate([up, dn])
+    side = np.concatenate([np.ones(len(up)), -np.ones(len(dn))])
+    return Nk, e, joint, side
 
 
 # Goldfarb & Idnani (1983), dual active set, with Hessian I: min ½‖u‖² s.t. nₖᵀu ≥ eₖ.
-def nearest_point(M: np.ndarray, blo: np.ndarray, bhi: np.ndarray):
-    """Point of ``{u : blo ≤ M u ≤ bhi}`` nearest the origin, or ``None`` when the set is empty.
+def nearest_point(Nk: np.ndarray, e: np.ndarray):
+    """Point of ``{u : Nk u ≥ e}`` nearest the origin: ``(u, active rows, iterations)``.
 
-    Returns ``(u, active_joints, iterations)``. Exact up to rounding: each iteration either adds
-    a violated bound with a full step or drops one whose multiplier reached zero.
+    Or a :class:`Certificate` when the set is empty. Exact up to rounding: each iteration either
+    adds a violated row with a full step or drops one whose multiplier reached zero.
     """
-    Nk, e, joint = _constraints(M, blo, bhi)
-    r = M.shape[1]
+    r = Nk.shape[1]
     u = np.zeros(r)
-    norms = np.linalg.norm(Nk, axis=1) if len(e) else np.zeros(0)
-    if np.any((norms < ROW_EPS) & (e > BOX_TOL)):
-        return None  # a bound that no null-space motion can meet
+    norms = np.sqrt(np.einsum("kr,kr->k", Nk, Nk))
+    flat = np.flatnonzero((norms < ROW_EPS) & (e > BOX_TOL))
+    if len(flat):  # a bound that no null-space motion can meet
+        return Certificate(flat[:1], np.ones(1))
     moving = norms >= ROW_EPS
+    safe = np.where(moving, norms, 1.0)
     A: list[int] = []
     mu = np.zeros(0)
     it = 0
     limit = 10 * (len(e) + 1)
     while True:
-        slack = Nk @ u - e
-        viol = np.where(moving, slack / np.where(moving, norms, 1.0), 0.0)
+        viol = np.where(moving, (Nk @ u - e) / safe, 0.0)
         if len(viol) == 0 or viol.min() >= -BOX_TOL:
-            return u, joint[A], it
+            return u, np.array(A, dtype=int), it
         p = int(np.argmin(viol))
         mu_p = 0.0
         while True:
@@ -103,78 +107,56 @@ def nearest_point(M: np.ndarray, blo: np.ndarray, bhi: np.ndarray):
             sp = float(npv @ u - e[p])
             t2 = -sp / zz if zz > 1e-14 * float(npv @ npv) else np.inf  # else n_p ∈ span(N_A)
             t = min(t1, t2)
-            if not np.isfinite(t):
-                return None  # the violated bound is incompatible with the active ones
+            if not np.isfinite(t):  # n_p = N_A rr with rr ≤ 0: e_p − Σ rr_j e_j ≤ 0 is needed
+                return Certificate(np.array([p, *A], dtype=int), np.concatenate([[1.0], -rr]))
             if np.isfinite(t2):
                 u = u + t * z
             mu = mu - t * rr
             mu_p += t
-            if t2 <= t1:  # full step: bound p joins the active set
+            if t2 <= t1:  # full step: row p joins the active set
                 A.append(p)
                 mu = np.append(mu, mu_p)
                 break
-            del A[k]  # partial step: the multiplier of bound k reached zero
+            del A[k]  # partial step: the multiplier of row k reached zero
             mu = np.delete(mu, k)
-            if sp + t * zz >= -BOX_TOL * norms[p]:
-                break
 
 
-def largest_scale(p0: np.ndarray, d: np.ndarray, M: np.ndarray, lo, hi) -> tuple[float, np.ndarray]:
-    """(L3) The largest ``s ∈ [0, 1]`` with ``lo ≤ p₀ + s d + M u ≤ hi`` for some ``u``; and that ``u``.
-
-    A linear programme in ``(u, s)`` (scipy's HiGHS). Raises :class:`InfeasibleBounds` when no
-    ``s ∈ [0, 1]`` is feasible (the box excludes even the rates that hold the task still).
-    """
-    from scipy.optimize import linprog
-
-    n, r = M.shape
-    hi_rows = np.isfinite(hi)
-    lo_rows = np.isfinite(lo)
-    A = np.vstack(
-        [np.hstack([M, d[:, None]])[hi_rows], -np.hstack([M, d[:, None]])[lo_rows]]
-    ).reshape(-1, r + 1)
-    b = np.concatenate([(hi - p0)[hi_rows], (p0 - lo)[lo_rows]])
-    cost = np.zeros(r + 1)
-    cost[-1] = -1.0
-    res = linprog(
-        cost, A_ub=A, b_ub=b, bounds=[(None, None)] * r + [(0.0, 1.0)], method="highs",
-        options={"primal_feasibility_tolerance": 1e-10, "dual_feasibility_tolerance": 1e-10},
-    )
-    if res.status != 0:
-        raise InfeasibleBounds(
-            "no joint rates inside the rate box reach any fraction of the task velocity, not even "
-            "zero (is the configuration outside its joint limits?)"
-        )
-    return float(res.x[-1]), np.asarray(res.x[:-1])
+#: Rounds of (L3): a certificate's root, then a solve there (a handful suffice in practice).
+MAX_SCALE_ROUNDS = 50
 
 
 def solve_box(p0, d, M, lo, hi) -> BoxSolution:
     """(L2) with (L3): rates ``p₀ + s d + M u`` inside ``[lo, hi]``, ``s`` as large as possible.
 
     ``p₀ + d`` is the unbounded optimum at ``s = 1``, ``M`` (n, r) the metric-scaled null-space
-    basis. Returns the unbounded optimum itself when it is inside the box.
+    basis. Returns the unbounded optimum itself when it is inside the box. Raises
+    :class:`InfeasibleBounds` when no ``s ∈ [0, 1]`` is reachable.
     """
-    x = p0 + d
-    if np.all(x >= lo - BOX_TOL) and np.all(x <= hi + BOX_TOL):
-        return BoxSolution(np.clip(x, lo, hi), 1.0, np.zeros(len(x), dtype=bool), 0)
-    found = nearest_point(M, lo - x, hi - x)
+    n = len(p0)
+    Nk, e_lo_hi, joint, side = _constraints(M, lo, hi)  # rows for x = 0; shifted below
+    e0 = e_lo_hi + side * p0[joint]  # e_k(s) = e0_k + s e1_k (upper: x − hi, lower: lo − x)
+    e1 = side * d[joint]
     s = 1.0
-    if found is None:
-        s, u_lp = largest_scale(p0, d, M, lo, hi)
-        for shrink in (0.0, 1e-12, 1e-10, 1e-8):
-            x = p0 + s * (1.0 - shrink) * d
-            found = nearest_point(M, lo - x, hi - x)
-            if found is not None:
-                s *= 1.0 - shrink
-                break
-        else:  # rounding at a degenerate vertex: the LP's point is feasible
-            qd = np.clip(p0 + s * d + M @ u_lp, lo, hi)
-            active = (qd <= lo + BOX_TOL) | (qd >= hi - BOX_TOL)
-            return BoxSolution(qd, s, active, -1)
-    u, joints, it = found
-    qd = np.clip(x + M @ u, lo, hi)
-    active = np.zeros(len(x), dtype=bool)
-    active[joints] = True
-    if s < 1.0:  # at the scaled optimum further joints may sit on a bound with zero multiplier
-        active |= (qd <= lo + BOX_TOL) | (qd >= hi - BOX_TOL)
-    return BoxSolution(qd, s, active, it)
+    for _ in range(MAX_SCALE_ROUNDS):
+        x = p0 + s * d
+        if s == 1.0 and np.all(x >= lo - BOX_TOL) and np.all(x <= hi + BOX_TOL):
+            return BoxSolution(np.clip(x, lo, hi), 1.0, np.zeros(n, dtype=bool), 0)
+        found = nearest_point(Nk, e0 + s * e1)
+        if not isinstance(found, Certificate):
+            u, rows, it = found
+            qd = np.clip(x + M @ u, lo, hi)
+            active = np.zeros(n, dtype=bool)
+            active[joint[rows]] = True
+            if s < 1.0:  # at the scaled optimum more joints may sit on a bound, multiplier 0
+                active |= (qd <= lo + BOX_TOL) | (qd >= hi - BOX_TOL)
+            return BoxSolution(qd, s, active, it)
+        g0 = float(found.coef @ e0[found.rows])
+        g1 = float(found.coef @ e1[found.rows])
+        if not g1 > 0 or -g0 / g1 < -1e-12:  # lowering s does not help, or not even s = 0
+            raise InfeasibleBounds(
+                "no joint rates inside the rate box reach any fraction of the task velocity, "
+                "not even zero (is the configuration outside its joint limits?)"
+            )
+        s_new = max(-g0 / g1, 0.0)
+        s = s_new if s_new < s else s * (1.0 - 1e-12) - 1e-15  # rounding at a touching point
+    raise InfeasibleBounds("the task scaling did not converge")  # pragma: no cover

@@ -380,6 +380,8 @@ def lapack_jvja(ctrl: Workspace) -> Callable[..., np.ndarray]:
     check_tolerable = ctrl.scenarios.check_tolerable
     mode = ("all" if ctrl._all_uniform else "singletons") if ctrl._singletons else "general"
     weighted = not ctrl._uniform
+    ws = ctrl._jvja_ws
+    ws[2] = c
 
     def jvja(q: np.ndarray, xdot: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
         """JVJA, minimum square-sum jump rates, eq. (5) in closed form (G1, G2)."""
@@ -399,6 +401,7 @@ def lapack_jvja(ctrl: Workspace) -> Callable[..., np.ndarray]:
             dot(xdot, B, out=out)  # a
             einsum("ij,ij->j", J, B, out=d)  # N is never formed: N_ii = 1 - J_iᵀ B_i
             subtract(1.0, d, out=d)
+            ws[0], ws[1] = J, B  # N = I - JᵀB, for the bounded step's box check (boxstep)
             if mode == "all":  # c_i = a_i / N_ii, alpha = -1/f
                 if min(d.tolist()) < tol:
                     if not tolerate:
@@ -510,6 +513,8 @@ def compiled_step(ctrl: Workspace, jvja: int) -> Callable[..., np.ndarray]:
     fallback, bad_call = ctrl._fallback, ctrl._bad_call
     check_tolerable = ctrl.scenarios.check_tolerable
     name = "jvja" if jvja else "lnva"
+    if jvja:  # N = I - YᵀY with Y = L⁻¹J in B, for the bounded step's box check (boxstep)
+        ctrl._jvja_ws[0], ctrl._jvja_ws[1], ctrl._jvja_ws[2] = B, B, c
     kernel(np.zeros((m, n)), np.zeros(m), np.zeros(n), G, B, c, fw, params, jvja)  # compile
 
     def slow(q, xdot, out, err: Exception) -> np.ndarray:

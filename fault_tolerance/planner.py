@@ -152,6 +152,17 @@ def mda(
     return proj.Jpinv @ xdot - step
 
 
+def check_task(J, xdot) -> tuple[np.ndarray, np.ndarray]:
+    """``J`` (m, n) and ``ẋ`` (m,) as finite float arrays, or :class:`InvalidInput`."""
+    J = np.asarray(J, dtype=float)
+    xdot = np.asarray(xdot, dtype=float)
+    if J.ndim != 2 or xdot.shape != (J.shape[0],):
+        raise InvalidInput(f"J must be (m, n) and xdot (m,); got {J.shape} and {xdot.shape}")
+    if not (np.all(np.isfinite(J)) and np.all(np.isfinite(xdot))):
+        raise InvalidInput("J and xdot must be finite")
+    return J, xdot
+
+
 RESOLVERS: dict[str, Callable[..., np.ndarray]] = {"lnva": lnva, "jvja": jvja, "mda": mda}
 
 #: Keyword options each resolver takes (its signature after ``J, xdot, lockable``).
@@ -194,12 +205,7 @@ def resolve(name: str, J: np.ndarray, xdot: np.ndarray, lockable=None, **options
         raise InvalidInput(
             f"resolve: unknown option(s) {unknown}; allowed options are {sorted(OPTIONS)}"
         )
-    J = np.asarray(J, dtype=float)
-    xdot = np.asarray(xdot, dtype=float)
-    if J.ndim != 2 or xdot.shape != (J.shape[0],):
-        raise InvalidInput(f"J must be (m, n) and xdot (m,); got {J.shape} and {xdot.shape}")
-    if not (np.all(np.isfinite(J)) and np.all(np.isfinite(xdot))):
-        raise InvalidInput("J and xdot must be finite")
+    J, xdot = check_task(J, xdot)
     if options.get("arm") is not None and not options.get("joint_names"):
         options["joint_names"] = options["arm"].joint_names  # lockable joints by name
     bounds = options.pop("bounds", None)

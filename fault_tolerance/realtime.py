@@ -157,6 +157,12 @@ class Controller:
             :class:`~fault_tolerance.errors.IntolerableFailure`; for loops that may cross a
             singularity of a reduced Jacobian.
         backend: ``"auto"``, ``"numba"``, ``"lapack"`` or ``"numpy"`` (see the module doc).
+        limits: Honour the joint limits (default): every step stays inside the rate box (L1) of
+            the arm's position and velocity limits at ``q`` (docs/MATH.md "Joint limits"); the
+            fast step is checked against it and only a step that meets a bound is solved as the
+            bounded problem (:mod:`fault_tolerance.boxstep`). ``False``: the paper's rates.
+        horizon: Horizon of the rate box [s] (default ``bounded.RATE_HORIZON``, 0.05 s; at
+            least your control period).
 
     Attributes:
         step: The step chosen by ``method``: ``step(q, xdot, out=None) -> qd``.
@@ -167,6 +173,9 @@ class Controller:
         backend: The backend in use.
         fallbacks: Number of steps handed to :mod:`~fault_tolerance.planner` (near a singularity
             of ``J``, where the rates are damped).
+        last_scale: Task scaling of the last step (1 unless the task was out of reach in the box).
+        last_active: Joints held at a bound in the last step, bool (n,).
+        bounded_steps: Number of steps that met a bound and were solved as the bounded problem.
     """
 
     step: Callable[..., np.ndarray]
@@ -185,6 +194,8 @@ class Controller:
         max_step: float = planner.MDA_MAX_STEP,
         tolerate: bool = False,
         backend: str = "auto",
+        limits: bool = True,
+        horizon: float | None = None,
     ) -> None:
         if method not in METHODS:
             raise InvalidInput(f"method '{method}' is not one of {list(METHODS)}")
@@ -237,6 +248,10 @@ class Controller:
             kernels.numpy_linalg() if backend == "numpy" else kernels.lapack_linalg_or_numpy()
         )
         self._init_scenario_tables()
+        self._jvja_ws: list = [None, None, None]  # P, Q, c of the last JVJA step: N = I - PᵀQ (kernels)
+        self.limits = bool(limits)
+        self.last_scale, self.last_active = 1.0, np.zeros(self.n, dtype=bool)
+        self.bounded_steps = 0
         if backend == "numba":
             self.lnva = kernels.compiled_step(self, 0)
             if self._singletons:
@@ -249,6 +264,13 @@ class Controller:
             self.lnva = kernels.lapack_lnva(self)
             self.jvja = kernels.lapack_jvja(self)
         self.mda = kernels.lapack_mda(self)
+        if self.limits:  # the fast steps checked against the rate box (L1), bounded when needed
+            from .boxstep import RATE_HORIZON, bounded_step
+
+            self.horizon = float(RATE_HORIZON if horizon is None else horizon)
+            self.lnva = bounded_step(self, "lnva", self.lnva, self.horizon)
+            self.jvja = bounded_step(self, "jvja", self.jvja, self.horizon)
+            self.mda = bounded_step(self, "mda", self.mda, self.horizon)
         self.step = {"lnva": self.lnva, "jvja": self.jvja, "mda": self.mda}[method]
 
     # -- helpers ----------------------------------------------------------------------------

@@ -41,7 +41,7 @@ def backend(request) -> str:
 
 
 def _controllers(case, backend, **kw) -> Controller:
-    return Controller(case.arm, list(case.lockable), backend=backend, **kw)
+    return Controller(case.arm, list(case.lockable), backend=backend, **kw, limits=False)
 
 
 def _samples(case, draw_q, draw_xdot, rng, k=8, lockable=None):
@@ -78,9 +78,9 @@ def test_step_is_the_chosen_method(planar_3r, draw_q, draw_xdot, rng):
     """Controller.step is the method named at construction; JVJA by default."""
     q, xd = draw_q(planar_3r, rng), draw_xdot(rng, 2)
     for method in realtime.METHODS:
-        ctrl = Controller(planar_3r.arm, "all", method=method)
+        ctrl = Controller(planar_3r.arm, "all", method=method, limits=False)
         np.testing.assert_array_equal(ctrl.step(q, xd), getattr(ctrl, method)(q, xd))
-    default = Controller(planar_3r.arm)
+    default = Controller(planar_3r.arm, limits=False)
     np.testing.assert_array_equal(default.step(q, xd), default.jvja(q, xd))
 
 
@@ -88,7 +88,7 @@ def test_weighted_and_subset_singletons(robot, backend, draw_q, draw_xdot, rng):
     """Weighted scenarios on part of the joints give ft.resolve's rates (G2 with weights)."""
     lock = list(robot.lockable)[::2] or list(robot.lockable)
     weights = rng.uniform(0.2, 3.0, size=len(lock))
-    ctrl = Controller(robot.arm, lock, weights=weights, backend=backend)
+    ctrl = Controller(robot.arm, lock, weights=weights, backend=backend, limits=False)
     for q, xd in _samples(robot, draw_q, draw_xdot, rng, k=5, lockable=lock):
         ref = ft.resolve("jvja", robot.arm.jacobian(q), xd, lockable=lock, weights=weights)
         assert_close(ctrl.jvja(q, xd), ref)
@@ -102,11 +102,11 @@ def test_multi_joint_scenarios(panda_position, backend, draw_q, draw_xdot, rng):
     """Multi-joint scenarios (G1, one batched solve per size) give ft.resolve's rates."""
     case, sets = panda_position, PANDA_MULTI
     weights = rng.uniform(0.5, 2.0, size=len(sets))
-    ctrl = Controller(case.arm, sets, weights=weights, backend=backend)
+    ctrl = Controller(case.arm, sets, weights=weights, backend=backend, limits=False)
     for q, xd in _samples(case, draw_q, draw_xdot, rng, k=5, lockable=sets):
         ref = ft.resolve("jvja", case.arm.jacobian(q), xd, lockable=sets, weights=weights)
         assert_close(ctrl.jvja(q, xd), ref)
-    uniform = Controller(case.arm, sets, backend=backend)
+    uniform = Controller(case.arm, sets, backend=backend, limits=False)
     q, xd = draw_q(case, rng, sets), draw_xdot(rng, case.m)
     assert_close(uniform.jvja(q, xd), ft.resolve("jvja", case.arm.jacobian(q), xd, lockable=sets))
 
@@ -183,7 +183,7 @@ def test_kernel_as_plain_python(robot, draw_q, draw_xdot, rng):
 
 def test_out_is_returned_and_filled(robot, backend, draw_q, draw_xdot, rng):
     """With out= every step writes into that array and returns the same object."""
-    ctrl = Controller(robot.arm, list(robot.lockable), backend=backend)
+    ctrl = Controller(robot.arm, list(robot.lockable), backend=backend, limits=False)
     q, xd = draw_q(robot, rng), draw_xdot(rng, robot.m)
     for method in ("lnva", "jvja", "mda"):
         step = getattr(ctrl, method)
@@ -199,7 +199,7 @@ def test_out_is_returned_and_filled(robot, backend, draw_q, draw_xdot, rng):
 
 def test_out_of_wrong_kind_is_refused(planar_3r, backend, draw_q, draw_xdot, rng):
     """An out of the wrong shape or type raises InvalidInput instead of writing elsewhere."""
-    ctrl = Controller(planar_3r.arm, "all", backend=backend)
+    ctrl = Controller(planar_3r.arm, "all", backend=backend, limits=False)
     q, xd = draw_q(planar_3r, rng), draw_xdot(rng, 2)
     for bad in (np.empty(4), np.empty(3, dtype=np.float32), [0.0, 0.0, 0.0]):
         with pytest.raises(ft.InvalidInput, match="out must be"):
@@ -231,7 +231,7 @@ def test_singular_configurations_give_finite_damped_rates(robot, backend, draw_x
     q = np.array(SINGULAR[robot.id])
     J = robot.arm.jacobian(q)
     assert np.linalg.svd(J, compute_uv=False)[-1] < 1e-8 < SIGMA_EPS
-    ctrl = Controller(robot.arm, list(robot.lockable), backend=backend)
+    ctrl = Controller(robot.arm, list(robot.lockable), backend=backend, limits=False)
     for _ in range(3):
         xd = draw_xdot(rng, robot.m)
         assert_close(ctrl.lnva(q, xd), ft.resolve("lnva", J, xd))
@@ -255,7 +255,7 @@ def test_near_singular_steps_are_finite(robot, backend, draw_xdot, rng):
     """Approaching a singularity along a line of configurations, every rate stays finite."""
     q1 = np.array(SINGULAR[robot.id])
     q0 = q1 + rng.uniform(-0.3, 0.3, size=robot.n)
-    ctrl = Controller(robot.arm, list(robot.lockable), backend=backend)
+    ctrl = Controller(robot.arm, list(robot.lockable), backend=backend, limits=False)
     xd = draw_xdot(rng, robot.m)
     for t in np.linspace(0.9, 1.0, 21):
         q = (1 - t) * q0 + t * q1
@@ -268,7 +268,7 @@ def test_near_singular_steps_are_finite(robot, backend, draw_xdot, rng):
 
 def test_intolerable_scenario_raises_like_the_planner(spatial_4r, backend, draw_xdot, rng):
     """Joint 4 of the spatial 4R is intolerable: the step raises IntolerableFailure naming it."""
-    ctrl = Controller(spatial_4r.arm, "all", backend=backend)
+    ctrl = Controller(spatial_4r.arm, "all", backend=backend, limits=False)
     q = np.array([0.3, -0.4, 0.5, 1.1])
     xd = draw_xdot(rng, 3)
     with pytest.raises(ft.IntolerableFailure) as ref:
@@ -286,7 +286,7 @@ def test_intolerable_scenario_raises_like_the_planner(spatial_4r, backend, draw_
 
 def test_tolerate_damps_pivots_like_the_planner(spatial_4r, backend, draw_q, draw_xdot, rng):
     """With tolerate=True an intolerable scenario gets planner.jvja(tolerate=True)'s rates."""
-    ctrl = Controller(spatial_4r.arm, "all", tolerate=True, backend=backend)
+    ctrl = Controller(spatial_4r.arm, "all", tolerate=True, backend=backend, limits=False)
     for _ in range(3):
         q, xd = draw_q(spatial_4r, rng), draw_xdot(rng, 3)
         J = spatial_4r.arm.jacobian(q)
@@ -294,7 +294,7 @@ def test_tolerate_damps_pivots_like_the_planner(spatial_4r, backend, draw_q, dra
         assert np.all(np.isfinite(qd))
         assert_close(qd, planner.jvja(J, xd, "all", tolerate=True))
     # away from small pivots the fast path is taken and equals the plain JVJA
-    ctrl = Controller(spatial_4r.arm, list(spatial_4r.lockable), tolerate=True, backend=backend)
+    ctrl = Controller(spatial_4r.arm, list(spatial_4r.lockable), tolerate=True, backend=backend, limits=False)
     q, xd = draw_q(spatial_4r, rng), draw_xdot(rng, 3)
     lock = list(spatial_4r.lockable)
     ref = ft.resolve("jvja", spatial_4r.arm.jacobian(q), xd, lockable=lock)
@@ -316,7 +316,7 @@ def test_mda_step_is_capped_like_the_planner(robot, draw_q, draw_xdot, rng):
 
 def test_bad_input_is_named(planar_3r, backend, draw_q, rng):
     """Wrong shapes and non-finite values raise InvalidInput saying which argument is wrong."""
-    ctrl = Controller(planar_3r.arm, "all", backend=backend)
+    ctrl = Controller(planar_3r.arm, "all", backend=backend, limits=False)
     q = draw_q(planar_3r, rng)
     with pytest.raises(ft.InvalidInput, match="xdot"):
         ctrl.jvja(q, np.zeros(3))
@@ -332,20 +332,20 @@ def test_constructor_validation(planar_3r):
     """Unknown methods and backends, bad gains and non-redundant tasks are refused."""
     arm = planar_3r.arm
     with pytest.raises(ft.InvalidInput, match="method"):
-        Controller(arm, method="fastest")
+        Controller(arm, method="fastest", limits=False)
     with pytest.raises(ft.InvalidInput, match="backend"):
-        Controller(arm, backend="cuda")
+        Controller(arm, backend="cuda", limits=False)
     with pytest.raises(ft.InvalidInput, match="gain"):
-        Controller(arm, gain=-1.0)
+        Controller(arm, gain=-1.0, limits=False)
     with pytest.raises(ft.InvalidScenario):
-        Controller(arm, [(0, 1)])  # two joints locked together, but r = 1
+        Controller(arm, [(0, 1)], limits=False)  # two joints locked together, but r = 1
     pose = ft.load_arm("planar_3r", task="x,y,rz")  # n = m = 3
     with pytest.raises(ft.InvalidInput, match="redundant"):
-        Controller(pose)
+        Controller(pose, limits=False)
 
 
 def test_default_lockable_is_every_joint(planar_3r):
     """lockable=None means every joint, as in ft.resolve."""
-    ctrl = Controller(planar_3r.arm)
+    ctrl = Controller(planar_3r.arm, limits=False)
     assert ctrl.scenarios.sets == ((0,), (1,), (2,))
     assert "planar_3r" in repr(ctrl)

@@ -1,0 +1,168 @@
+"""The bounded step of :class:`~fault_tolerance.realtime.Controller`: fast step, box check, then QP.
+
+A bounded step takes the controller's unbounded fast step, builds the rate box (L1) at ``q`` in
+preallocated buffers and checks the rates (for JVJA also every reduced robot's rates (G1), the
+target of its bounded objective (L2)) against it: one pass over ``n²`` numbers, compiled by numba
+with the numba backend. Only when a bound is met does it solve the bounded problem
+(:func:`fault_tolerance.bounded.resolve_bounded`). See docs/MATH.md "Joint limits".
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from .boxqp import BOX_TOL
+from .bounded import NO_LIMIT, RATE_HORIZON, resolve_bounded
+from .errors import InvalidInput
+from .limits import velocity_limits
+
+if TYPE_CHECKING:  # pragma: no cover
+    from .realtime import Controller
+
+
+def box_status(q, lower, upper, vmax, ih, lo, hi, out, P, Q, c, a, y, alpha, cols, jv):  # pragma: no cover - numba
+    """Box (L1) at ``q`` into ``lo, hi``; 0 when ``out`` (and, ``jv``, each (G1) rate) is inside.
+
+    ``out = a + alpha N c`` is the JVJA step (``c`` its pivot ratios) with ``N = I - PᵀQ`` (the
+    kernels never form N: ``P = Q = Y = L⁻¹J`` compiled, ``P = J, Q = G⁻¹J`` with LAPACK), so
+    ``N[:, i] = e_i - Pᵀ Q[:, i]``; ``a`` (n) and ``y`` (m) are scratch. Plain
+    Python with scalar loops (compiled by numba with the numba backend). Returns 1 when ``out``
+    leaves the box, 2 when a reduced robot's rates do.
+    """
+    n = q.shape[0]
+    bad = 0
+    for j in range(n):
+        lj = (lower[j] - q[j]) * ih
+        hj = (upper[j] - q[j]) * ih
+        v = vmax[j]
+        lj = -v if lj < -v else (v if lj > v else lj)
+        hj = -v if hj < -v else (v if hj > v else hj)
+        lo[j] = lj
+        hi[j] = hj
+        if out[j] < lj - BOX_TOL or out[j] > hj + BOX_TOL:
+            bad = 1
+    if bad or not jv:
+        return bad
+    m = P.shape[0]
+    for r in range(m):  # N = I - PᵀQ is never formed: N c = c - Pᵀ (Q c)
+        s = 0.0
+        for k in range(n):
+            s += Q[r, k] * c[k]
+        y[r] = s
+    for j in range(n):
+        s = c[j]
+        for r in range(m):
+            s -= P[r, j] * y[r]
+        a[j] = out[j] - alpha * s
+    for t in range(cols.shape[0]):
+        i = cols[t]
+        nii = 1.0
+        for r in range(m):
+            nii -= P[r, i] * Q[r, i]
+        ratio = a[i] / nii
+        for j in range(n):
+            if j == i:
+                continue
+            nji = 0.0  # N[j, i] = -P_jᵀ Q_i off the diagonal
+            for r in range(m):
+                nji -= P[r, j] * Q[r, i]
+            p = a[j] - ratio * nji
+            if p < lo[j] - BOX_TOL or p > hi[j] + BOX_TOL:
+                return 2
+    return 0
+
+
+def box_status_numpy(q, lower, upper, vmax, ih, lo, hi, out, P, Q, c, a, y, alpha, cols, jv):
+    """:func:`box_status` with NumPy array operations (the lapack and numpy backends)."""
+    np.subtract(lower, q, out=lo)
+    np.multiply(lo, ih, out=lo)
+    np.clip(lo, -vmax, vmax, out=lo)
+    np.subtract(upper, q, out=hi)
+    np.multiply(hi, ih, out=hi)
+    np.clip(hi, -vmax, vmax, out=hi)
+    if (out < lo - BOX_TOL).any() or (out > hi + BOX_TOL).any():
+        return 1
+    if not jv:
+        return 0
+    np.dot(Q, c, out=y)
+    np.subtract(c, P.T @ y, out=a)  # N c = c - Pᵀ (Q c)
+    np.multiply(a, -alpha, out=a)
+    np.add(a, out, out=a)
+    Ncols = -(P.T @ Q[:, cols]).T  # rows t: N[:, cols[t]] (N symmetric), off-diagonal part
+    k = np.arange(len(cols))
+    Ncols[k, cols] += 1.0
+    post = a - (a[cols] / Ncols[k, cols])[:, None] * Ncols
+    post[k, cols] = 0.0
+    if (post < lo - BOX_TOL).any() or (post > hi + BOX_TOL).any():
+        return 2
+    return 0
+
+
+_COMPILED: dict[str, Callable] = {}
+
+
+def compiled_box_status() -> Callable:
+    """:func:`box_status` compiled by numba (once per process; cached on disk)."""
+    if "box" not in _COMPILED:
+        import numba
+
+        _COMPILED["box"] = numba.njit(cache=True, nogil=True, error_model="numpy")(box_status)
+    return _COMPILED["box"]
+
+
+def bounded_step(ctrl: Controller, name: str, inner: Callable, horizon: float) -> Callable:
+    """``step(q, xdot, out=None)``: ``inner`` (the unbounded fast step), checked against the box.
+
+    Sets ``ctrl.last_scale`` (task scaling of the last step, 1 when ``ẋ`` was reached) and
+    ``ctrl.last_active`` (joints held at a bound); counts ``ctrl.bounded_steps`` (steps that needed
+    the bounded solver).
+    """
+    if not (np.isfinite(horizon) and horizon > 0):
+        raise InvalidInput(f"horizon must be finite and > 0 [s], got {horizon}")
+    arm, n = ctrl.arm, ctrl.n
+    lower = np.where(np.abs(arm.lower) < NO_LIMIT, arm.lower, -np.inf)
+    upper = np.where(np.abs(arm.upper) < NO_LIMIT, arm.upper, np.inf)
+    vmax = velocity_limits(arm)
+    ih = 1.0 / horizon
+    lo, hi, a, y = np.empty(n), np.empty(n), np.empty(n), np.empty(ctrl.m)
+    ws = ctrl._jvja_ws  # [P, Q, c] of the last JVJA fast step, N = I - PᵀQ (set by the kernels)
+    jv = name == "jvja" and ctrl._singletons
+    cols = ctrl.scenarios.columns if ctrl._singletons else np.zeros(0, dtype=np.int64)
+    alpha = ctrl._alpha
+    check = compiled_box_status() if ctrl.backend == "numba" else box_status_numpy
+    dummy = np.zeros((ctrl.m, n)), np.zeros((ctrl.m, n)), np.zeros(n)
+    sc = ctrl.scenarios
+    general = name == "jvja" and not ctrl._singletons
+    inactive = np.zeros(n, dtype=bool)
+
+    def slow(q, xdot, out):
+        J = ctrl.jacobian(q)
+        opts = {"tolerate": ctrl.tolerate}
+        if name == "mda":
+            opts.update(dJ=ctrl.jacobian_derivatives(q), gain=ctrl.gain, max_step=ctrl.max_step)
+        res = resolve_bounded(name, J, np.asarray(xdot, dtype=float), sc, bounds=(lo, hi), **opts)
+        out[...] = res.qd
+        ctrl.last_scale, ctrl.last_active = res.scale, res.active
+        ctrl.bounded_steps += 1
+        return out
+
+    def step(q: np.ndarray, xdot: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+        before = ctrl.fallbacks
+        out = inner(q, xdot, out)
+        fresh = jv and ctrl.fallbacks == before
+        P, Q, c = (ws[0], ws[1], ws[2]) if fresh else dummy
+        status = check(q, lower, upper, vmax, ih, lo, hi, out, P, Q, c, a, y, alpha, cols, fresh)
+        if status or general or (jv and not fresh):
+            return slow(q, xdot, out)
+        ctrl.last_scale, ctrl.last_active = 1.0, inactive
+        return out
+
+    step.__name__ = name
+    step.__doc__ = f"{name} inside the rate box of the joint limits (horizon {horizon} s)."
+    return step
+
+
+__all__ = ["RATE_HORIZON", "bounded_step", "box_status", "box_status_numpy"]
