@@ -115,7 +115,7 @@ def make_case(key: str, backend: str = "auto") -> Case:
         arm = synthetic_chain(spec["chain"], spec["task"])
     else:
         arm = ft.load_arm(spec["robot"], **({"task": spec["task"]} if spec["task"] else {}))
-    ctrl = Controller(arm, spec["lockable"], backend=backend)
+    ctrl = Controller(arm, spec["lockable"], backend=backend, limits=False)  # the paper's step
     qs, xds = _pool(arm, ctrl.scenarios, np.random.default_rng(SEED), POOL)
     return Case(key, spec, arm, ctrl, qs, xds, np.empty(arm.n))
 
@@ -137,12 +137,12 @@ def fast_rows(case: Case) -> dict[str, Row]:
     }
     for other in available_backends():
         if other != ctrl.backend:
-            c2 = Controller(case.arm, case.spec["lockable"], backend=other)
+            c2 = Controller(case.arm, case.spec["lockable"], backend=other, limits=False)
             rows[f"lnva_{other}"] = (c2.lnva, qxo)
             rows[f"jvja_{other}"] = (c2.jvja, qxo)
     if case.arm.redundancy >= 2:  # two-joint scenarios: the general (G1) kernel
         pairs = [(j, j + 1) for j in range(case.arm.n - 1)]
-        rows["jvja_multi"] = (Controller(case.arm, pairs, backend=ctrl.backend).jvja, qxo)
+        rows["jvja_multi"] = (Controller(case.arm, pairs, backend=ctrl.backend, limits=False).jvja, qxo)
     return rows
 
 
