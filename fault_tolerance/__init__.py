@@ -8,6 +8,7 @@ nor matplotlib.
 __version__ = "0.1.0"
 
 from .arm import Arm, parse_task  # noqa: E402
+from .api import jvj, resolve  # noqa: E402
 from .bounded import BoundedRates, rate_box, resolve_bounded  # noqa: E402
 from .errors import (  # noqa: E402
     FaultToleranceError,
@@ -26,7 +27,6 @@ from .errors import (  # noqa: E402
 from .failures import Scenarios, scenarios  # noqa: E402
 from .indices import (  # noqa: E402
     fault_tolerance_measure,
-    jvj,
     rcn,
     rcn_gradient,
     reduced_manipulability,
@@ -41,7 +41,6 @@ from .planner import (  # noqa: E402
     jvja_explicit,
     lnva,
     mda,
-    resolve,
 )
 from .start import StartChoice, default_start  # noqa: E402
 

@@ -238,7 +238,7 @@ class Arm:
             >>> bool(np.allclose(arm.jacobian([0.3, 1.2, 1.0]) @ qd, [0.1, 0.0]))
             True
         """
-        from .planner import resolve
+        from .api import resolve
 
         q = self.check_q(q)
         lockable = self.default_lockable if lockable is None else lockable

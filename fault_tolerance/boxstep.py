@@ -10,7 +10,6 @@ with the numba backend. Only when a bound is met does it solve the bounded probl
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -18,9 +17,6 @@ from .boxqp import BOX_TOL
 from .bounded import NO_LIMIT, RATE_HORIZON, resolve_bounded
 from .errors import InvalidInput
 from .limits import velocity_limits
-
-if TYPE_CHECKING:  # pragma: no cover
-    from .realtime import Controller
 
 
 def box_status(q, lower, upper, vmax, ih, lo, hi, out, P, Q, c, a, y, alpha, cols, jv):  # pragma: no cover - numba
@@ -113,8 +109,10 @@ def compiled_box_status() -> Callable:
     return _COMPILED["box"]
 
 
-def bounded_step(ctrl: Controller, name: str, inner: Callable, horizon: float) -> Callable:
+def bounded_step(ctrl, name: str, inner: Callable, horizon: float) -> Callable:
     """``step(q, xdot, out=None)``: ``inner`` (the unbounded fast step), checked against the box.
+
+    ``ctrl`` is the :class:`~fault_tolerance.realtime.Controller` being built.
 
     Sets ``ctrl.last_scale`` (task scaling of the last step, 1 when ``ẋ`` was reached) and
     ``ctrl.last_active`` (joints held at a bound); counts ``ctrl.bounded_steps`` (steps that needed

@@ -73,14 +73,11 @@ def jvj(
     response: str = "least_norm",
     per_joint: bool = False,
     joint_names: Sequence[str] = (),
-    bounds=None,
 ):
     """Square-sum joint velocity jump of rates ``qd``, eq. (9)/(10) [(rad/s)²].
 
-    With ``per_joint=True`` returns the (f, n) array of eq. (1) instead. With ``bounds=(qd_lo,
-    qd_hi)`` the jump is measured against the rates each reduced robot takes inside that box
-    (docs/MATH.md (L4)-(L5)), and a scenario whose reduced robot cannot keep the task there raises
-    :class:`~fault_tolerance.errors.IntolerableUnderLimits`.
+    With ``per_joint=True`` returns the (f, n) array of eq. (1) instead. Under joint limits
+    (``bounds=``) see :func:`fault_tolerance.jvj` (:mod:`fault_tolerance.api`).
 
     Example:
         >>> import numpy as np, fault_tolerance as ft
@@ -89,20 +86,6 @@ def jvj(
         >>> ft.jvj(J, xd, ft.resolve("jvja", J, xd)) <= ft.jvj(J, xd, ft.resolve("lnva", J, xd))
         True
     """
-    if bounds is not None:
-        from .limits import jvj_under_limits
-
-        return jvj_under_limits(
-            J,
-            xdot,
-            qd,
-            lockable,
-            bounds=bounds,
-            weights=weights,
-            response=response,
-            per_joint=per_joint,
-            joint_names=joint_names,
-        )
     J = np.asarray(J, dtype=float)
     sc = _scenarios(J, lockable, weights, joint_names)
     proj = projection(J)

@@ -169,8 +169,8 @@ RESOLVERS: dict[str, Callable[..., np.ndarray]] = {"lnva": lnva, "jvja": jvja, "
 RESOLVER_OPTIONS: dict[str, frozenset[str]] = {
     name: frozenset(list(inspect.signature(f).parameters)[3:]) for name, f in RESOLVERS.items()
 }
-#: Every option :func:`resolve` accepts: those of some resolver, and ``bounds``.
-OPTIONS = frozenset().union(*RESOLVER_OPTIONS.values()) | {"bounds"}
+#: Every option :func:`resolve` accepts: those of some resolver.
+OPTIONS = frozenset().union(*RESOLVER_OPTIONS.values())
 
 
 def resolve(name: str, J: np.ndarray, xdot: np.ndarray, lockable=None, **options) -> np.ndarray:
@@ -184,11 +184,9 @@ def resolve(name: str, J: np.ndarray, xdot: np.ndarray, lockable=None, **options
             multi-joint scenarios, ``None``/``"all"`` for every joint, or a :class:`Scenarios`.
         **options: ``weights``, ``response`` (jvja); ``arm``, ``q``, ``gain``, ``dJ``,
             ``max_step`` (mda); ``proj``, ``tolerate``; ``joint_names`` to name lockable joints
-            (taken from ``arm`` when it is given); ``bounds=(qd_lo, qd_hi)``: the rate box of the
-            joint limits (:mod:`.bounded`; the rates minimise the resolver's objective inside it,
-            the task scaled when it cannot be reached: :func:`.bounded.resolve_bounded` also
-            returns that scaling). Each resolver gets the options it takes; an option no resolver
-            takes raises :class:`InvalidInput`.
+            (taken from ``arm`` when it is given). Each resolver gets the options it takes; an
+            option no resolver takes raises :class:`InvalidInput`. The joint limits
+            (``bounds=``) are :func:`fault_tolerance.resolve`'s (:mod:`fault_tolerance.api`).
 
     Example:
         >>> import numpy as np, fault_tolerance as ft
@@ -204,15 +202,11 @@ def resolve(name: str, J: np.ndarray, xdot: np.ndarray, lockable=None, **options
     if unknown:
         raise InvalidInput(
             f"resolve: unknown option(s) {unknown}; allowed options are {sorted(OPTIONS)}"
+            + (" (bounds=: use fault_tolerance.resolve)" if "bounds" in unknown else "")
         )
     J, xdot = check_task(J, xdot)
     if options.get("arm") is not None and not options.get("joint_names"):
         options["joint_names"] = options["arm"].joint_names  # lockable joints by name
-    bounds = options.pop("bounds", None)
-    if bounds is not None:
-        from .bounded import resolve_bounded
-
-        return resolve_bounded(name, J, xdot, lockable, bounds=bounds, **options).qd
     own = RESOLVER_OPTIONS[name]
     return RESOLVERS[name](J, xdot, lockable, **{k: v for k, v in options.items() if k in own})
 

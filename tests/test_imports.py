@@ -9,13 +9,11 @@ import fault_tolerance
 
 PKG = Path(fault_tolerance.__file__).resolve().parent
 
-#: Circles known on main and owned by another piece of work (delete the entry once it is broken):
-#: the joint-limits work (#12) made planner <-> bounded and indices <-> limits import each other
-#: (lazily, inside functions).
+#: Circles known on main and owned by another piece of work (delete the entry once it is broken).
+#: (The joint-limits circle planner/bounded/indices/limits is gone: fault_tolerance.api.)
 #: The whole-path planner (#13): simulate dispatches "global" to wholepath.run (lazily), whose free
 #: start comes from posture.initial_posture, and posture's planning loop (Sec. III.D) runs simulate.
 KNOWN = {
-    frozenset(f"fault_tolerance.{m}" for m in ("planner", "bounded", "indices", "limits")),
     frozenset(
         f"fault_tolerance.{m}"
         for m in ("posture", "simulation", "wholepath.plan", "wholepath.run")
