@@ -196,7 +196,7 @@ def run_case(
     posture = initial_posture(arm, np.array(case.x0), lockable)
     path = case.path(duration)
     jvja_run, attempts = plan(
-        arm, path, "jvja", lockable=lockable, posture=posture, progress=progress
+        arm, path, "jvja", lockable=lockable, posture=posture, progress=progress, limits=False
     )
     if len(attempts) > 1 and hasattr(progress, "grow"):
         progress.grow((len(attempts) - 1) * len(jvja_run.t))
@@ -204,7 +204,7 @@ def run_case(
     runs = {
         alg: jvja_run
         if alg == "jvja"
-        else simulate(arm, path, alg, q0=q0, lockable=lockable, progress=progress)
+        else simulate(arm, path, alg, q0=q0, lockable=lockable, progress=progress, limits=False)
         for alg in ALGORITHMS
     }
     return {
@@ -269,7 +269,8 @@ def run_experiment(
     T = duration or exp.duration
     posture = initial_posture(arm, np.array(exp.x0), [exp.joint])
     planned = simulate(
-        arm, exp.path(T), "lnva", q0=posture.q, lockable=[exp.joint], progress=progress
+        arm, exp.path(T), "lnva", q0=posture.q, lockable=[exp.joint], progress=progress,
+        limits=False,
     )
     t_max = float(planned.t[int(np.argmax(planned.jvj))])
     t_min = float(planned.t[int(np.argmin(planned.jvj))])
@@ -288,6 +289,7 @@ def run_experiment(
             servo=exp.servo,
             feedback_gain=exp.feedback_gain,
             progress=progress,
+            limits=False,
             **lock,
         )
 
@@ -377,7 +379,10 @@ def start_sensitivity(
     rows, replaced = [], 0
     for i in order[: SENSITIVITY_TRIES * starts]:
         runs = {
-            alg: simulate(arm, path, alg, q0=good[i], lockable=list(case.lockable), progress=progress)
+            alg: simulate(
+                arm, path, alg, q0=good[i], lockable=list(case.lockable), progress=progress,
+                limits=False,
+            )
             for alg in ("lnva", "jvja")
         }
         if max(float(np.max(r.rcn)) for r in runs.values()) > RCN_THRESHOLD:
@@ -419,7 +424,9 @@ def eq8_check(duration: float | None = None) -> dict:
     case = CASES["fig2"]
     arm = load_arm(case.robot)
     posture = initial_posture(arm, np.array(case.x0), ["joint3"])
-    run = simulate(arm, case.path(duration), "jvja", q0=posture.q, lockable=["joint3"])
+    run = simulate(
+        arm, case.path(duration), "jvja", q0=posture.q, lockable=["joint3"], limits=False
+    )
     return {
         "max_abs_rate_joint3": float(np.max(np.abs(run.qd[:, 2]))),
         "jvj_max": float(np.max(run.jvj)),

@@ -53,6 +53,16 @@ def arm_rate_box(arm, q, horizon: float = RATE_HORIZON) -> tuple[np.ndarray, np.
     return rate_box(q, arm.lower, arm.upper, velocity_limits(arm), horizon)
 
 
+def wrap_into_limits(arm, q) -> np.ndarray:
+    """``q`` with the angles of full-turn joints (limits spanning ≥ 2π) wrapped into their limits."""
+    q = np.array(q, dtype=float)
+    lo, hi = arm.lower, arm.upper
+    full = np.isfinite(hi - lo) & (hi - lo >= 2 * np.pi - 1e-3) & (np.abs(lo) < NO_LIMIT)
+    out = full & ((q < lo) | (q > hi))
+    q[out] = lo[out] + np.mod(q[out] - lo[out], 2 * np.pi)
+    return q
+
+
 def outside_limits(arm, q, tol: float = 1e-9) -> np.ndarray:
     """Joints of ``q`` (…, n) beyond their position limits by more than ``tol``, bool (…, n)."""
     q = np.asarray(q, dtype=float)

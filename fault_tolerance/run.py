@@ -25,11 +25,15 @@ from .runfile import read_run_file
 
 __all__ = [
     "ARRAYS",
+    "FLAG_BOUND_ACTIVE",
+    "FLAG_INTOLERABLE_UNDER_LIMITS",
     "FLAG_LOCKED",
     "FLAG_NEAR_INTOLERABLE",
     "FLAG_NEAR_SINGULAR",
     "FLAG_OVER_SPEED",
+    "FLAG_SERVO_CLIPPED",
     "FLAG_STEP_LIMITED",
+    "FLAG_TASK_SCALED",
     "OPTIONAL_ARRAYS",
     "Run",
     "output_folder",
@@ -67,6 +71,10 @@ FLAG_NEAR_INTOLERABLE = 2  # a scenario's N[S, S] pivot < NEAR_INTOLERABLE: pivo
 FLAG_LOCKED = 4  # the arm runs with a locked joint
 FLAG_STEP_LIMITED = 8  # MDA's null-space step was capped at MDA_MAX_ANGLE / dt
 FLAG_OVER_SPEED = 16  # a commanded joint rate exceeds the joint's velocity limit (URDF <limit>)
+FLAG_BOUND_ACTIVE = 32  # joint limits on: a joint's commanded rate is held at its rate box (L1)
+FLAG_TASK_SCALED = 64  # joint limits on: the task velocity was scaled to stay inside the box (L3)
+FLAG_INTOLERABLE_UNDER_LIMITS = 128  # a lock now would leave a robot that cannot keep the task (L5)
+FLAG_SERVO_CLIPPED = 256  # joint limits on: the servo's rate was clipped at a position limit
 
 
 @dataclass
@@ -127,6 +135,7 @@ class Run:
             "near_intolerable_samples": int(np.count_nonzero(self.flags & FLAG_NEAR_INTOLERABLE)),
             "step_limited_samples": int(np.count_nonzero(self.flags & FLAG_STEP_LIMITED)),
             "over_speed_samples": int(np.count_nonzero(self.flags & FLAG_OVER_SPEED)),
+            **self._limit_counts(),
         }
         lock = self.meta.get("lock")
         if lock:
@@ -149,6 +158,31 @@ class Run:
             "orientation_error_max": float(np.max(self.orientation_error)),
             "orientation_error_final": float(self.orientation_error[-1]),
         }
+
+    def _limit_counts(self) -> dict:
+        """Samples with an active bound / a scaled task, and (measured) outside the limits."""
+        lim = self.meta.get("limits") or {}
+        out = {
+            "limits": bool(lim.get("enabled", False)),
+            "bound_active_samples": int(np.count_nonzero(self.flags & FLAG_BOUND_ACTIVE)),
+            "task_scaled_samples": int(np.count_nonzero(self.flags & FLAG_TASK_SCALED)),
+            "intolerable_under_limits_samples": int(
+                np.count_nonzero(self.flags & FLAG_INTOLERABLE_UNDER_LIMITS)
+            ),
+            "servo_clipped_samples": int(np.count_nonzero(self.flags & FLAG_SERVO_CLIPPED)),
+        }
+        if "lower" in lim:  # measured on the recorded q and q̇, whether limits were on or not
+            lo = np.array([-np.inf if x is None else x for x in lim["lower"]], dtype=float)
+            hi = np.array([np.inf if x is None else x for x in lim["upper"]], dtype=float)
+            v = np.array([np.inf if x is None else x for x in lim["velocity"]], dtype=float)
+            tol = 1e-9
+            out["outside_position_limits_samples"] = int(
+                np.count_nonzero(((self.q < lo - tol) | (self.q > hi + tol)).any(axis=1))
+            )
+            out["over_velocity_limit_samples"] = int(
+                np.count_nonzero((np.abs(self.qd) > v + tol).any(axis=1))
+            )
+        return out
 
     # -- files -------------------------------------------------------------------------------
     def save(

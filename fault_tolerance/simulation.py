@@ -21,14 +21,20 @@ from .errors import InvalidInput
 from .failures import Scenarios, scenarios
 from .indices import RESPONSES, condition_numbers, post_failure_rates, reduced_singular_values
 from .linalg import PIVOT_EPS, SIGMA_EPS, projection
+from .bounded import NO_LIMIT, SCALE_TOL, bounded_least_norm, resolve_bounded
+from .limits import arm_rate_box, post_failure_under_limits, velocity_limits, wrap_into_limits
 from .planner import MDA_GAIN, RESOLVERS, resolve
 from .run import (  # noqa: F401 - re-exported: Run, ARRAYS and the flags used to live here
     ARRAYS,
+    FLAG_BOUND_ACTIVE,
+    FLAG_INTOLERABLE_UNDER_LIMITS,
     FLAG_LOCKED,
     FLAG_NEAR_INTOLERABLE,
     FLAG_NEAR_SINGULAR,
     FLAG_OVER_SPEED,
+    FLAG_SERVO_CLIPPED,
     FLAG_STEP_LIMITED,
+    FLAG_TASK_SCALED,
     OPTIONAL_ARRAYS,
     Run,
     output_folder,
@@ -119,6 +125,9 @@ class _Setup:
     servo: ServoModel
     max_step: float  # [rad/s], MDA's null-space step
     vmax: np.ndarray  # joint velocity limits, inf where none is given
+    limits: bool = True  # honour the joint limits (rate box L1)
+    horizon: float = 0.05  # [s] of the rate box, at least dt
+    vlimit: np.ndarray | None = None  # velocity limits of the box, with the documented defaults
     reference: np.ndarray | None = None  # the global plan's configurations, tracked (W3)
 
 
@@ -152,6 +161,8 @@ def simulate(
     progress=None,
     engine: str = "auto",
     plan_options: dict | None = None,
+    limits: bool = True,
+    horizon: float | None = None,
 ) -> Run:
     """Integrate ``algorithm`` along ``path`` from ``q0``; optionally lock a joint on the way.
 
@@ -177,11 +188,18 @@ def simulate(
         progress: A callable ``progress(k, K)`` or a tqdm-like object with ``update``.
         engine: ``"auto"`` (default): the compiled sample (:mod:`.sampler`, the controller's
             workspace) where it applies, the reference code elsewhere; ``"fast"``: the compiled
-            sample or :class:`InvalidInput` saying why not; ``"reference"``: the plain reference
+            sample or :class:`InvalidInput` saying why not (it does not cover runs under joint
+            limits: pass ``limits=False`` for the paper's rates); ``"reference"``: the plain reference
             code (:mod:`.planner`, :mod:`.indices`) at every sample. The numbers agree to 1e-9.
         plan_options: Options of the global plan (``objective``, ``method``, ``limits``,
             ``rcn_max``, ``iterations``, ``dp_step``, ``dp_stage``; see
             :func:`fault_tolerance.wholepath.plan_path`); only with ``"global"``.
+        limits: Honour the joint position and velocity limits (default): the rates of every step,
+            before and after a lock, stay inside the rate box (L1) of ``Arm.rate_bounds``, the
+            resolvers minimise their objectives inside it and scale the task when it is out of
+            reach (docs/MATH.md "Joint limits"); ``q0`` must be inside the limits. ``False``:
+            the paper's unconstrained formulation.
+        horizon: Horizon of the rate box [s] (default ``bounded.RATE_HORIZON``; at least ``dt``).
 
     Example:
         >>> import numpy as np, fault_tolerance as ft
@@ -198,7 +216,7 @@ def simulate(
     sim = dict(
         lockable=lockable, weights=weights, response=response, dt=dt, duration=duration,
         feedback_gain=feedback_gain, gain=gain, lock_joint=lock_joint, lock_time=lock_time,
-        servo=servo,
+        servo=servo, limits=limits, horizon=horizon,
     )  # fmt: skip
     if algorithm == GLOBAL:
         from .wholepath.run import simulate_global
@@ -234,15 +252,20 @@ def _simulate(
     progress=None,
     reference: np.ndarray | None = None,
     engine: str = "auto",
+    limits: bool = True,
+    horizon: float | None = None,
 ) -> Run:
     """The loop of :func:`simulate`; with ``reference`` (the global plan) the rates track it."""
     setup = _setup(
         arm, path, "jvja" if reference is not None else algorithm, q0, lockable, weights,
-        response, dt, duration, feedback_gain, gain, lock_joint, lock_time, servo,
+        response, dt, duration, feedback_gain, gain, lock_joint, lock_time, servo, limits,
+        horizon,
     )  # fmt: skip
     if reference is not None:
         setup = replace(setup, algorithm=algorithm, reference=np.asarray(reference, dtype=float))
     q = arm.check_q(q0).copy()
+    if setup.limits:  # full-turn joints read modulo 2π: the same posture, inside the limits
+        q = wrap_into_limits(arm, q)
     # an intolerable scenario is refused before any work; later, a path through a reduced
     # singularity gets damped pivots and FLAG_NEAR_INTOLERABLE instead of an exception
     setup.sc.check_tolerable(projection(arm.jacobian(q)).N)
@@ -257,7 +280,7 @@ def _simulate(
         if fast is None or not fast.step(state, k, X[k], XD[k]):
             _step(setup, state, k, rec, X[k], XD[k])
         _tick(progress, k, K1)
-    return _finish(setup, state, rec, q0)
+    return _finish(setup, state, rec, rec["q"][0] if setup.limits else q0)
 
 
 def _sampler(s: _Setup, rec: dict, engine: str):
@@ -266,7 +289,10 @@ def _sampler(s: _Setup, rec: dict, engine: str):
         return None
     from . import sampler
 
-    why = sampler.covers(s.sc, s.algorithm, s.response)
+    # the compiled sample knows the unbounded resolvers only: a run under joint limits takes the
+    # bounded reference code at every sample (bounded resolvers, λ of the bounded reduced robots)
+    why = "runs under joint limits (limits=True)" if s.limits else None
+    why = why or sampler.covers(s.sc, s.algorithm, s.response)
     if why is None:
         return sampler.Sampler(s, rec)
     if engine == "fast":
@@ -276,7 +302,7 @@ def _sampler(s: _Setup, rec: dict, engine: str):
 
 def _setup(
     arm, path, algorithm, q0, lockable, weights, response, dt, duration, feedback_gain, gain,
-    lock_joint, lock_time, servo,
+    lock_joint, lock_time, servo, limits=True, horizon=None,
 ) -> _Setup:  # fmt: skip
     """Validate the options of :func:`simulate` (before any work)."""
     if algorithm not in RESOLVERS:
@@ -309,9 +335,10 @@ def _setup(
         raise InvalidInput(f"response {response!r} is not one of {list(RESPONSES)}")
     vmax = arm.velocity_limit
     vmax = np.where(np.isfinite(vmax) & (vmax > 0), vmax, np.inf)  # 0 or inf: no limit given
+    h = _check_limits(arm, q0, limits, horizon, dt)
     return _Setup(
         arm, path, algorithm, sc, response, dt, duration, steps, feedback_gain, gain, lock_col,
-        lock_time, servo, MDA_MAX_ANGLE / dt, vmax,
+        lock_time, servo, MDA_MAX_ANGLE / dt, vmax, bool(limits), h, velocity_limits(arm),
     )  # fmt: skip
 
 
@@ -326,6 +353,25 @@ _SCALARS = ("error", "jvj", "K", "sigma_min", "flags")  # one number per sample
 def _widths(n: int, m: int, f: int) -> dict[str, int]:
     sizes = {"q": n, "qd": n, "qd_cmd": n, "x": m, "x_des": m, "jvj_parts": f, "rcn": f}
     return {h: 1 if h in _SCALARS else sizes[h] for h in HISTORIES}
+
+
+def _check_limits(arm, q0, limits, horizon, dt) -> float:
+    """The rate box's horizon (at least ``dt``); with limits on, ``q0`` must be inside them."""
+    from .bounded import RATE_HORIZON
+    from .limits import outside_limits, wrap_into_limits
+
+    h = RATE_HORIZON if horizon is None else float(horizon)
+    if not (np.isfinite(h) and h > 0):
+        raise InvalidInput(f"horizon must be finite and > 0 [s], got {horizon}")
+    out = np.flatnonzero(outside_limits(arm, wrap_into_limits(arm, arm.check_q(q0))))
+    if limits and len(out):
+        names = [arm.joint_names[i] for i in out]
+        raise InvalidInput(
+            f"q0 is outside the joint limits at {names} (limits "
+            f"{[(float(arm.lower[i]), float(arm.upper[i])) for i in out]}); start inside them, "
+            "or run without limits (limits=False, --no-limits)"
+        )
+    return max(h, dt)
 
 
 def _allocate(K1: int, n: int, m: int, f: int, dt: float) -> dict[str, np.ndarray]:
@@ -382,15 +428,27 @@ def _step(s: _Setup, state: _State, k: int, rec: dict, x_des, xd_des) -> None:
     proj = projection(J)
     flag = FLAG_NEAR_SINGULAR if proj.sigma_min < SIGMA_EPS else 0
     planned = None
+    box = arm_rate_box(arm, q, s.horizon) if s.limits else None
     if s.reference is not None and (not state.locked or state.lock_jump is None):
         planned = _tracking_rates(s, k, q, J, xd_cmd, proj)
+        if box is not None:  # the plan's rates, nearest inside the box (L4 with that target)
+            sol = bounded_least_norm(J, xd_cmd, box[0], box[1], target=planned, proj=proj)
+            planned = sol.qd
+            if not state.locked:
+                flag |= _box_flags(sol.active, sol.scale)
     elif not state.locked or state.lock_jump is None:
-        planned = resolve(
-            s.algorithm, J, xd_cmd, s.sc, response=s.response, arm=arm, q=q, gain=s.gain,
-            tolerate=True, max_step=s.max_step, proj=proj,
-        )  # fmt: skip
+        opts = dict(response=s.response, arm=arm, q=q, gain=s.gain, tolerate=True,
+                    max_step=s.max_step, proj=proj)  # fmt: skip
+        if box is None:
+            planned = resolve(s.algorithm, J, xd_cmd, s.sc, **opts)
+        else:
+            res = resolve_bounded(s.algorithm, J, xd_cmd, s.sc, bounds=box, **opts)
+            planned = res.qd
+            if not state.locked:
+                flag |= _box_flags(res.active, res.scale)
     if state.locked:
-        qd_cmd, flag = _locked_rates(s, state, J, xd_cmd, planned)
+        qd_cmd, lflag = _locked_rates(s, state, J, xd_cmd, planned, box)
+        flag = lflag
     else:
         qd_cmd = planned
         if (
@@ -404,32 +462,87 @@ def _step(s: _Setup, state: _State, k: int, rec: dict, x_des, xd_des) -> None:
     if state.locked:
         parts = np.zeros(s.sc.f)  # the failure has happened; no jump is pending
     else:
-        parts, near = _jump_parts(s, proj, xd_cmd, qd_cmd)
+        parts, near = _jump_parts(s, proj, J, xd_cmd, qd_cmd, box)
         flag |= near
     state.qd = qd_cmd.copy() if k == 0 else s.servo.follow(state.qd, qd_cmd, s.dt)
     if state.locked:
         state.qd[s.lock_col] = 0.0
+    if box is not None:
+        flag |= _clip_to_limits(s, q, state.qd)
     _record(rec, k, q, state.qd, qd_cmd, x, x_des, err, parts, k_s, proj.sigma_min, flag)
     state.q = q + state.qd * s.dt
 
 
-def _locked_rates(s: _Setup, state: _State, J, xd_cmd, planned) -> tuple[np.ndarray, int]:
-    """Least-norm rates of the reduced robot, its flags; the jump the lock causes, once."""
+def _locked_rates(s: _Setup, state: _State, J, xd_cmd, planned, box=None) -> tuple[np.ndarray, int]:
+    """Least-norm rates of the reduced robot (inside the box (L4) with limits), its flags; the
+    jump the lock causes, once."""
     qd_cmd = np.zeros(s.arm.n)
-    reduced = projection(J[:, state.keep])
-    qd_cmd[state.keep] = reduced.Jpinv @ xd_cmd
+    keep = state.keep
+    reduced = projection(J[:, keep])
     flag = FLAG_LOCKED | (FLAG_NEAR_SINGULAR if reduced.sigma_min < SIGMA_EPS else 0)
+    if box is None:
+        qd_cmd[keep] = reduced.Jpinv @ xd_cmd
+    else:
+        sol = bounded_least_norm(J[:, keep], xd_cmd, box[0][keep], box[1][keep], proj=reduced)
+        qd_cmd[keep] = sol.qd
+        flag |= _box_flags(sol.active, sol.scale)
     if state.lock_jump is None:  # the jump the lock causes: reduced rates minus planned rates
         state.lock_jump = float(np.sum((qd_cmd - planned) ** 2))
     return qd_cmd, flag
 
 
-def _jump_parts(s: _Setup, proj, xd_cmd, qd_cmd) -> tuple[np.ndarray, int]:
-    """The jump the planned rates would suffer if a scenario happened now, eq. (9)/(10)."""
+def _jump_parts(s: _Setup, proj, J, xd_cmd, qd_cmd, box=None) -> tuple[np.ndarray, int]:
+    """The jump the planned rates would suffer if a scenario happened now, eq. (9)/(10).
+
+    With limits, against what each reduced robot does inside the box (L4)-(L5)."""
     sc = s.sc
     flag = FLAG_NEAR_INTOLERABLE if sc.pivots(proj.N).min() < NEAR_INTOLERABLE else 0
-    post = post_failure_rates(proj.Jpinv @ xd_cmd, proj.N, sc, qd_cmd, s.response, damp=True)
+    if box is None:
+        post = post_failure_rates(proj.Jpinv @ xd_cmd, proj.N, sc, qd_cmd, s.response, damp=True)
+    else:
+        post, scales = post_failure_under_limits(
+            J, xd_cmd, qd_cmd, sc, box[0], box[1], s.response, tolerate=True
+        )
+        if np.any(scales < 1.0 - SCALE_TOL):
+            flag |= FLAG_INTOLERABLE_UNDER_LIMITS
     return sc.weights * np.einsum("fn,fn->f", post - qd_cmd, post - qd_cmd), flag
+
+
+def _limits_meta(s: _Setup) -> dict:
+    """What the run knew of the joint limits (JSON: ``None`` where a limit is absent)."""
+    arm = s.arm
+
+    def listed(x):
+        return [float(v) if np.isfinite(v) and abs(v) < NO_LIMIT else None for v in x]
+
+    return {
+        "enabled": s.limits,
+        "horizon": s.horizon,
+        "lower": listed(arm.lower),
+        "upper": listed(arm.upper),
+        "velocity": listed(s.vlimit),
+    }
+
+
+def _box_flags(active: np.ndarray, scale: float) -> int:
+    """FLAG_BOUND_ACTIVE / FLAG_TASK_SCALED of a bounded solution."""
+    return (FLAG_BOUND_ACTIVE if active.any() else 0) | (
+        FLAG_TASK_SCALED if scale < 1.0 - SCALE_TOL else 0
+    )
+
+
+def _clip_to_limits(s: _Setup, q: np.ndarray, qd: np.ndarray) -> int:
+    """Keep the executed step inside the limits: a servo that lags its (in-box) command may not
+    carry a joint past a position limit or over its velocity limit; FLAG_SERVO_CLIPPED if so."""
+    arm = s.arm
+    lo = np.where(np.abs(arm.lower) < NO_LIMIT, (arm.lower - q) / s.dt, -np.inf)
+    hi = np.where(np.abs(arm.upper) < NO_LIMIT, (arm.upper - q) / s.dt, np.inf)
+    v = s.vlimit
+    lo, hi = np.maximum(lo, -v), np.minimum(hi, v)
+    clipped = np.clip(qd, lo, hi)
+    changed = bool(np.any(np.abs(clipped - qd) > 1e-12))
+    qd[...] = clipped
+    return FLAG_SERVO_CLIPPED if changed else 0
 
 
 def _record(rec, k, q, qd, qd_cmd, x, x_des, err, parts, k_s, sigma_min, flag) -> None:
@@ -471,6 +584,7 @@ def _finish(s: _Setup, state: _State, rec: dict, q0) -> Run:
         "q0": np.asarray(q0, dtype=float).tolist(),
         "path": s.path.spec(),
         "servo": s.servo.describe() if servo_used else "perfect rate tracking",
+        "limits": _limits_meta(s),
     }
     if s.lock_col is not None:
         meta["lock"] = {

@@ -41,8 +41,9 @@ def _same(a, b):
 
 
 def _pair(arm, path, alg, **kw):
-    fast = simulate(arm, path, alg, engine="fast", **kw)
-    ref = simulate(arm, path, alg, engine="reference", **kw)
+    """The compiled sample is the paper's step (no joint limits): run both without them."""
+    fast = simulate(arm, path, alg, engine="fast", limits=False, **kw)
+    ref = simulate(arm, path, alg, engine="reference", limits=False, **kw)
     _same(fast, ref)
     return fast, ref
 
@@ -98,7 +99,21 @@ def test_engine_is_checked():
     q0 = np.array([0.1, -0.4, 0.2, -2.0, 0.1, 1.8, 0.6])
     path = CirclePath(panda.fk(q0), 0.01, 2 * np.pi, 0.01)
     with pytest.raises(ft.InvalidInput, match="multi-joint"):
-        simulate(panda, path, q0=q0, lockable=[(0, 1), 3], engine="fast")
+        simulate(panda, path, q0=q0, lockable=[(0, 1), 3], engine="fast", limits=False)
+
+
+def test_runs_under_joint_limits_take_the_bounded_reference_code():
+    """With limits on (the default) the compiled sample does not apply: 'fast' says so, 'auto'
+    runs the bounded reference code (the same run as engine='reference')."""
+    arm = ft.load_arm("planar_3r")
+    q0 = np.array([0.3, 1.2, 1.0])
+    path = CirclePath(arm.fk(q0), 0.1, 2 * np.pi, 0.05)
+    with pytest.raises(ft.InvalidInput, match="joint limits"):
+        simulate(arm, path, "jvja", q0=q0, engine="fast")
+    auto = simulate(arm, path, "jvja", q0=q0)
+    ref = simulate(arm, path, "jvja", q0=q0, engine="reference")
+    np.testing.assert_array_equal(auto.q, ref.q)
+    assert auto.meta["limits"]["enabled"]
 
 
 def test_plain_python_kernel_matches_the_compiled_one():

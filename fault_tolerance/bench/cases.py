@@ -142,7 +142,8 @@ def fast_rows(case: Case) -> dict[str, Row]:
             rows[f"jvja_{other}"] = (c2.jvja, qxo)
     if case.arm.redundancy >= 2:  # two-joint scenarios: the general (G1) kernel
         pairs = [(j, j + 1) for j in range(case.arm.n - 1)]
-        rows["jvja_multi"] = (Controller(case.arm, pairs, backend=ctrl.backend, limits=False).jvja, qxo)
+        multi = Controller(case.arm, pairs, backend=ctrl.backend, limits=False)
+        rows["jvja_multi"] = (multi.jvja, qxo)
     return rows
 
 
@@ -178,7 +179,7 @@ def simulated_rows(case: Case) -> dict[str, Row]:
     rows: dict[str, Row] = {}
     for alg in ("lnva", "jvja"):
         s = sim._setup(arm, path, alg, q0, sc, None, "least_norm", 1e-3, None, 0.0, 1e-2,
-                       None, None, None)  # fmt: skip
+                       None, None, None, limits=False)  # fmt: skip (the paper's sample)
         rec = sim._allocate(s.steps + 1, arm.n, arm.m, sc.f, s.dt)
         X, XD = sim.sample_path(path, rec["t"], arm.m)
         state = sim._State(q=q0.copy(), qd=np.zeros(arm.n), keep=np.arange(arm.n))

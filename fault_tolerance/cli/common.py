@@ -180,6 +180,31 @@ def add_path_options(p: argparse.ArgumentParser) -> None:
     from ..planner import MDA_GAIN
 
     g.add_argument("--gain", type=float, default=None, help=f"MDA gain α (default: {MDA_GAIN:g})")
+    g.add_argument(
+        "--no-limits",
+        action="store_true",
+        help="ignore the joint position and velocity limits (the paper's formulation); by "
+        "default every step stays inside them (docs/MATH.md, Joint limits)",
+    )
+
+
+def limits_line(run_) -> str:
+    """One line on what the joint limits did in a run."""
+    s = run_.summary()
+    if not s.get("limits"):
+        return (
+            "joint limits: off (--no-limits); samples outside the position limits "
+            f"{s.get('outside_position_limits_samples', '?')}, over a velocity limit "
+            f"{s.get('over_velocity_limit_samples', '?')}"
+        )
+    return (
+        f"joint limits: on (rate box, horizon {run_.meta['limits']['horizon']:g} s): "
+        f"{s['bound_active_samples']} samples with an active bound, {s['task_scaled_samples']} "
+        f"with a scaled task, {s['intolerable_under_limits_samples']} where a lock would be "
+        "intolerable under limits; outside the position limits "
+        f"{s['outside_position_limits_samples']}, over a velocity limit "
+        f"{s['over_velocity_limit_samples']}"
+    )
 
 
 def bar(total: int, enabled: bool, desc: str):

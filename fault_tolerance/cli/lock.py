@@ -15,6 +15,7 @@ from .common import (
     bar,
     epilog,
     floats,
+    limits_line,
     load_robot,
     report_warnings,
 )
@@ -81,6 +82,7 @@ def _lock_time(args, arm, path, q0, joint: str, duration: float, gain: dict):
         dt=args.dt,
         duration=duration,
         response=args.response,
+        limits=not args.no_limits,
         **gain,
     )
     k = int(np.argmax(planned.jvj) if args.at == "max" else np.argmin(planned.jvj))
@@ -121,6 +123,7 @@ def _run(args) -> int:
         extra_lockable=[joint],
         duration=args.duration,
         response=args.response,
+        limits=not args.no_limits,  # the start's checks run the same formulation as the lock run
         **gain,
     )
     duration = args.duration or path.duration
@@ -146,6 +149,7 @@ def _run(args) -> int:
         feedback_gain=feedback,
         response=args.response,
         progress=progress,
+        limits=not args.no_limits,
         **gain,
     )
     if progress:
@@ -163,6 +167,7 @@ def _run(args) -> int:
             f"mrad (whole run: {1e3 * s['orientation_error_max']:.3f} mrad)"
         )
     found = report_warnings(NAME, args.algorithm, run_, arm)
+    print(limits_line(run_))
     if args.out:
         _write(run_, arm, joint, t_lock, Path(args.out), args.html, found, planned)
     return 0

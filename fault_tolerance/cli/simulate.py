@@ -14,6 +14,7 @@ from .common import (
     add_robot_options,
     bar,
     epilog,
+    limits_line,
     load_robot,
     names,
     report_warnings,
@@ -28,6 +29,7 @@ EXAMPLE = (
     "  fault-tolerance simulate --robot spatial_4r --x0=-0.21,0.20,0.35 --algorithms lnva,jvja,global\n"
     "  fault-tolerance simulate --robot panda --task position --lockable panda_joint2,panda_joint4 "
     "--radius 0.05 --rows y,z --out out/panda\n"
+    "  fault-tolerance simulate --robot panda --algorithms jvja --no-limits --out out/panda_paper\n"
     "  fault-tolerance simulate --urdf my_arm.urdf --tip tool0 --task position --csv path.csv --out out/mine"
 )
 
@@ -123,6 +125,7 @@ def _run(args, out: Path | None) -> int:
         "feedback_gain": args.feedback or 0.0,
         "response": args.response,
         "gain": MDA_GAIN if args.gain is None else args.gain,
+        "limits": not args.no_limits,  # the default start's checks run the same formulation
     }
     out = output_folder(out) if out else None
     stepwise = [a for a in algs if a != "global"] or ["jvja"]  # the start is checked with these
@@ -175,6 +178,7 @@ def _run(args, out: Path | None) -> int:
     print_table(runs)
     for alg, run_ in runs.items():
         report_warnings(NAME, alg, run_, arm)
+        print(f"{alg}: {limits_line(run_)}")
     if out:
         from .. import plots
 
