@@ -19,16 +19,21 @@ from .errors import InvalidInput
 from .limits import velocity_limits
 
 
-def box_status(q, lower, upper, vmax, ih, lo, hi, out, P, Q, c, a, y, alpha, cols, jv):  # pragma: no cover - numba
-    """Box (L1) at ``q`` into ``lo, hi``; 0 when ``out`` (and, ``jv``, each (G1) rate) is inside.
+def box_status(q, lim, prm, buf, out, P, Q, c, cols, jv):  # pragma: no cover - numba
+    """Box (L1) at ``q`` into ``buf[0], buf[1]``; 0 when ``out`` (and, ``jv``, each (G1) rate) is inside.
 
-    ``out = a + alpha N c`` is the JVJA step (``c`` its pivot ratios) with ``N = I - PᵀQ`` (the
-    kernels never form N: ``P = Q = Y = L⁻¹J`` compiled, ``P = J, Q = G⁻¹J`` with LAPACK), so
-    ``N[:, i] = e_i - Pᵀ Q[:, i]``; ``a`` (n) and ``y`` (m) are scratch. Plain
-    Python with scalar loops (compiled by numba with the numba backend). Returns 1 when ``out``
-    leaves the box, 2 when a reduced robot's rates do.
+    ``lim`` rows: lower, upper position limits, velocity limits; ``prm = [1/h, alpha]``; ``out =
+    a + alpha N c`` is the JVJA step (``c`` its pivot ratios) with ``N = I - PᵀQ`` (the kernels
+    never form N: ``P = Q = Y = L⁻¹J`` compiled, ``P = J, Q = G⁻¹J`` with LAPACK), so ``N[:, i] =
+    e_i - Pᵀ Q[:, i]``; ``buf[2]`` (n) and ``buf[3, :m]`` are scratch. Plain Python with scalar
+    loops (compiled by numba with the numba backend). Returns 1 when ``out`` leaves the box, 2 when
+    a reduced robot's rates do.
     """
     n = q.shape[0]
+    m = P.shape[0]
+    lower, upper, vmax = lim[0], lim[1], lim[2]
+    lo, hi, a, y = buf[0], buf[1], buf[2], buf[3]
+    ih, alpha = prm[0], prm[1]
     bad = 0
     for j in range(n):
         lj = (lower[j] - q[j]) * ih
@@ -42,8 +47,7 @@ def box_status(q, lower, upper, vmax, ih, lo, hi, out, P, Q, c, a, y, alpha, col
             bad = 1
     if bad or not jv:
         return bad
-    m = P.shape[0]
-    for r in range(m):  # N = I - PᵀQ is never formed: N c = c - Pᵀ (Q c)
+    for r in range(m):  # N c = c - Pᵀ (Q c), N never formed
         s = 0.0
         for k in range(n):
             s += Q[r, k] * c[k]
@@ -71,8 +75,11 @@ def box_status(q, lower, upper, vmax, ih, lo, hi, out, P, Q, c, a, y, alpha, col
     return 0
 
 
-def box_status_numpy(q, lower, upper, vmax, ih, lo, hi, out, P, Q, c, a, y, alpha, cols, jv):
+def box_status_numpy(q, lim, prm, buf, out, P, Q, c, cols, jv):
     """:func:`box_status` with NumPy array operations (the lapack and numpy backends)."""
+    lower, upper, vmax = lim[0], lim[1], lim[2]
+    lo, hi, a = buf[0], buf[1], buf[2]
+    ih, alpha = prm[0], prm[1]
     np.subtract(lower, q, out=lo)
     np.multiply(lo, ih, out=lo)
     np.clip(lo, -vmax, vmax, out=lo)
@@ -83,12 +90,11 @@ def box_status_numpy(q, lower, upper, vmax, ih, lo, hi, out, P, Q, c, a, y, alph
         return 1
     if not jv:
         return 0
-    np.dot(Q, c, out=y)
-    np.subtract(c, P.T @ y, out=a)  # N c = c - Pᵀ (Q c)
+    np.subtract(c, P.T @ (Q @ c), out=a)  # N c = c - Pᵀ (Q c)
     np.multiply(a, -alpha, out=a)
     np.add(a, out, out=a)
-    Ncols = -(P.T @ Q[:, cols]).T  # rows t: N[:, cols[t]] (N symmetric), off-diagonal part
     k = np.arange(len(cols))
+    Ncols = -(P.T @ Q[:, cols]).T  # row t: N[cols[t], :] (N symmetric)
     Ncols[k, cols] += 1.0
     post = a - (a[cols] / Ncols[k, cols])[:, None] * Ncols
     post[k, cols] = 0.0
@@ -121,15 +127,16 @@ def bounded_step(ctrl, name: str, inner: Callable, horizon: float) -> Callable:
     if not (np.isfinite(horizon) and horizon > 0):
         raise InvalidInput(f"horizon must be finite and > 0 [s], got {horizon}")
     arm, n = ctrl.arm, ctrl.n
-    lower = np.where(np.abs(arm.lower) < NO_LIMIT, arm.lower, -np.inf)
-    upper = np.where(np.abs(arm.upper) < NO_LIMIT, arm.upper, np.inf)
-    vmax = velocity_limits(arm)
-    ih = 1.0 / horizon
-    lo, hi, a, y = np.empty(n), np.empty(n), np.empty(n), np.empty(ctrl.m)
+    lim = np.empty((3, n))
+    lim[0] = np.where(np.abs(arm.lower) < NO_LIMIT, arm.lower, -np.inf)
+    lim[1] = np.where(np.abs(arm.upper) < NO_LIMIT, arm.upper, np.inf)
+    lim[2] = velocity_limits(arm)
+    prm = np.array([1.0 / horizon, ctrl._alpha])
+    buf = np.empty((4, n))  # lo, hi, scratch (n), scratch (m <= n)
+    lo, hi = buf[0], buf[1]
     ws = ctrl._jvja_ws  # [P, Q, c] of the last JVJA fast step, N = I - PᵀQ (set by the kernels)
     jv = name == "jvja" and ctrl._singletons
     cols = ctrl.scenarios.columns if ctrl._singletons else np.zeros(0, dtype=np.int64)
-    alpha = ctrl._alpha
     check = compiled_box_status() if ctrl.backend == "numba" else box_status_numpy
     dummy = np.zeros((ctrl.m, n)), np.zeros((ctrl.m, n)), np.zeros(n)
     sc = ctrl.scenarios
@@ -141,7 +148,8 @@ def bounded_step(ctrl, name: str, inner: Callable, horizon: float) -> Callable:
         opts = {"tolerate": ctrl.tolerate}
         if name == "mda":
             opts.update(dJ=ctrl.jacobian_derivatives(q), gain=ctrl.gain, max_step=ctrl.max_step)
-        res = resolve_bounded(name, J, np.asarray(xdot, dtype=float), sc, bounds=(lo, hi), **opts)
+        box = (lo.copy(), hi.copy())
+        res = resolve_bounded(name, J, np.asarray(xdot, dtype=float), sc, bounds=box, **opts)
         out[...] = res.qd
         ctrl.last_scale, ctrl.last_active = res.scale, res.active
         ctrl.bounded_steps += 1
@@ -152,7 +160,7 @@ def bounded_step(ctrl, name: str, inner: Callable, horizon: float) -> Callable:
         out = inner(q, xdot, out)
         fresh = jv and ctrl.fallbacks == before
         P, Q, c = (ws[0], ws[1], ws[2]) if fresh else dummy
-        status = check(q, lower, upper, vmax, ih, lo, hi, out, P, Q, c, a, y, alpha, cols, fresh)
+        status = check(q, lim, prm, buf, out, P, Q, c, cols, fresh)
         if status or general or (jv and not fresh):
             return slow(q, xdot, out)
         ctrl.last_scale, ctrl.last_active = 1.0, inactive

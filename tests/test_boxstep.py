@@ -71,10 +71,10 @@ def test_status_kernels_agree():
             post[np.arange(len(cols)), cols] = 0.0
             want = 2 if ((post < lo - 1e-9).any() or (post > hi + 1e-9).any()) else 0
         res = []
+        lim, prm = np.array([lower, upper, v]), np.array([20.0, -0.25])
         for f in (boxstep.box_status, boxstep.box_status_numpy):
-            lb, hb, a, y = np.empty(n), np.empty(n), np.empty(n), np.empty(3)
-            args = (q, lower, upper, v, 20.0, lb, hb, out, P, Q, c, a, y, -0.25, cols, True)
-            res.append((f(*args), lb, hb))
+            buf = np.empty((4, n))  # lo, hi, scratch a (n), scratch y (m <= n)
+            res.append((f(q, lim, prm, buf, out, P, Q, c, cols, True), buf[0].copy(), buf[1].copy()))
         assert res[0][0] == res[1][0] == want
         assert np.allclose(res[0][1], lo) and np.allclose(res[1][1], lo)
         assert np.allclose(res[0][2], hi) and np.allclose(res[1][2], hi)

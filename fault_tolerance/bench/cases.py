@@ -53,6 +53,9 @@ DESCRIPTIONS = {
     "jvja_qp": "Jacobian + eq. (2) per scenario + (3)-(4) by quadprog (dense active-set QP)",
     "qp_solve_only": "the quadprog call alone, its inputs (J, ẋ, Σ w ˢq̇') given",
     "jvja_slsqp": "Jacobian + eq. (2) per scenario + (3)-(4) by scipy.optimize SLSQP",
+    "jvja_bounded_free": "JVJA step with joint limits on, no bound active (fast step + box check)",
+    "jvja_bounded_2": "JVJA step with joint limits on, two joints at a binding bound (bounded QPs)",
+    "jvja_bounded_2_qp": "the same bounded JVJA problem by quadprog (f reduced QPs + 1)",
 }
 
 
@@ -237,6 +240,12 @@ def slow_rows(case: Case) -> dict[str, Row]:
 
 #: ``(label, builder, divisor)``, timed in this order; a group's rows get ``--steps // divisor``
 #: calls (at least 5) after ``--warmup // divisor`` (at least 2) warm-up calls.
+def _limits_rows(case: Case) -> dict[str, Row]:
+    from .limits_rows import limits_rows
+
+    return limits_rows(case)
+
+
 def _fast_group(case: Case) -> dict[str, Row]:
     """The fast path, the floor and the simulated sample: timed side by side (ratios)."""
     return {**fast_rows(case), **floor_rows(case), **simulated_rows(case)}
@@ -244,6 +253,7 @@ def _fast_group(case: Case) -> dict[str, Row]:
 
 GROUPS: list[tuple[str, Callable[[Case], dict[str, Row]], int]] = [
     ("fast path, floor, simulated sample", _fast_group, 1),
+    ("joint limits", _limits_rows, 1),
     ("reference routes", reference_rows, 1),
     ("slow routes", slow_rows, 10),
 ]
@@ -257,7 +267,9 @@ def deviations(case: Case, rows: dict[str, Row]) -> dict[str, float]:
     ctrl, qx = case.ctrl, case.qx
     ref = [ctrl.jvja(q, xd).copy() for q, xd in qx]
     names = ("jvja_resolve", "jvja_explicit", "jvja_qp", "jvja_slsqp")
-    names += tuple(k for k in rows if k.startswith("jvja_") and k not in names)
+    names += tuple(
+        k for k in rows if k.startswith("jvja_") and k not in names and "bounded" not in k
+    )
     out = {}
     for name in names:
         if name not in rows or name in ("jvja", "jvja_multi"):

@@ -12,6 +12,9 @@ MAX_MULTI_OVER_SINGLE = 2.0
 MIN_EXPLICIT_OVER_JVJA = 10.0
 EXPLICIT_TARGET_ARMS = ("panda_pose", "panda_position")
 MAX_JVJA_P99_US = 100.0
+#: Joint limits (#12): bounded JVJA step / unbounded, with no bound and with two bounds active.
+MAX_BOUNDED_FREE_OVER_JVJA = 1.3
+MAX_BOUNDED_TWO_OVER_JVJA = 4.0
 
 #: Generic routes that must be slower than the fast JVJA step: (row, label).
 SLOWER_ROUTES = (
@@ -65,6 +68,7 @@ def arm_targets(key: str, ops: dict) -> list[dict]:
         g = med(name)
         if jv and g:
             out.append(_item(key, f"{name}_over_jvja", label, g / jv, 1.0, ">", g / jv > 1.0))
+    out += _limit_targets(key, jv, med)
     rs = med("jvja_resolve")
     if jv and rs:
         out.append(_item(key, "resolve_over_jvja", "ft.resolve / JVJA", rs / jv, None, None, None))
@@ -93,6 +97,24 @@ def _issue11(key: str, med, jv) -> list[dict]:
         r = multi / jv
         out.append(_item(key, "multi_over_single", "two-joint JVJA / single-joint JVJA", r,
                          MAX_MULTI_OVER_SINGLE, "<=", r <= MAX_MULTI_OVER_SINGLE))  # fmt: skip
+    return out
+
+
+def _limit_targets(key, jv, med) -> list[dict]:
+    """Bounded JVJA step against the unbounded step and against quadprog on the same problem."""
+    out = []
+    free, two, qp = med("jvja_bounded_free"), med("jvja_bounded_2"), med("jvja_bounded_2_qp")
+    if jv and free:
+        r = free / jv
+        out.append(_item(key, "bounded_free_over_jvja", "bounded JVJA, no bound active / JVJA",
+                         r, MAX_BOUNDED_FREE_OVER_JVJA, "<=", r <= MAX_BOUNDED_FREE_OVER_JVJA))  # fmt: skip
+    if jv and two:
+        r = two / jv
+        out.append(_item(key, "bounded_two_over_jvja", "bounded JVJA, two bounds active / JVJA",
+                         r, MAX_BOUNDED_TWO_OVER_JVJA, "<=", r <= MAX_BOUNDED_TWO_OVER_JVJA))  # fmt: skip
+    if two and qp:
+        out.append(_item(key, "bounded_qp_over_bounded", "quadprog on the bounded problem / "
+                         "bounded JVJA (two active)", qp / two, 1.0, ">", qp / two > 1.0))  # fmt: skip
     return out
 
 

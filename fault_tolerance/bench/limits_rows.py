@@ -1,0 +1,120 @@
+"""Benchmark rows of the joint limits (issue 12): the bounded JVJA step and a generic QP route.
+
+* ``jvja_bounded_free``: ``Controller(limits=True)`` JVJA step where no bound is active (the fast
+  step and the box check);
+* ``jvja_bounded_2``: the same step where two joints are next to the limit they move towards, the
+  box allowing 30 % of their unbounded rate (the task still reached, ``s = 1``): the bounded
+  problem (L2) with the reduced robots' (L4), whose bounds meet the box too;
+* ``jvja_bounded_2_qp``: that problem handed to quadprog: each reduced robot's bounded least-norm
+  QP, then the bounded JVJA QP.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..errors import FaultToleranceError
+from .routes import installed
+
+DESCRIPTIONS = {
+    "jvja_bounded_free": "JVJA step with joint limits on, no bound active (fast step + box check)",
+    "jvja_bounded_2": "JVJA step with joint limits on, two joints at a binding bound (bounded QPs)",
+    "jvja_bounded_2_qp": "the same bounded JVJA problem by quadprog (f reduced QPs + 1)",
+}
+
+
+def _box_qp(H, c, J, xdot, lo, hi, keep):
+    import quadprog
+
+    Jk = J[:, keep]
+    k = len(keep)
+    C = np.hstack([Jk.T, np.eye(k), -np.eye(k)])
+    b = np.concatenate([xdot, lo[keep], -hi[keep]])
+    return quadprog.solve_qp(H[:k, :k], H[:k, :k] @ c[keep], C, b, J.shape[0])[0]
+
+
+def jvja_bounded_qp(J, xdot, sc, lo, hi) -> np.ndarray:
+    """Bounded JVJA (L2), least-norm response, with every QP solved by quadprog."""
+    n = J.shape[1]
+    eye, zero = np.eye(n), np.zeros(n)
+    post = np.zeros((sc.f, n))
+    for k, S in enumerate(sc.sets):
+        keep = [j for j in range(n) if j not in S]
+        post[k, keep] = _box_qp(eye, zero, J, xdot, lo, hi, keep)
+    c = sc.weights @ post / sc.weights.sum()
+    return _box_qp(eye, c, J, xdot, lo, hi, list(range(n)))
+
+
+def _pools(case, ctrl):
+    """``(q, ẋ)`` with no bound active, and with two joints at a binding bound (``s = 1``)."""
+    import fault_tolerance as ft
+
+    arm, sc, h = case.arm, case.sc, ctrl.horizon
+    free, two = [], []
+    for q, xd in case.qx:
+        for scale in (1.0, 0.3, 0.1, 0.03, 0.01):
+            before = ctrl.bounded_steps
+            ctrl.jvja(q, xd * scale)
+            if ctrl.bounded_steps == before:
+                free.append((q, xd * scale))
+                break
+        try:
+            pair = _two_bound_case(arm, sc, ctrl, q, xd * 0.05, h)
+        except FaultToleranceError:  # a reduced robot intolerable there: not a bench case
+            continue
+        if pair is not None:
+            two.append(pair)
+    return free, two
+
+
+def _two_bound_case(arm, sc, ctrl, q, xs, h):
+    """``(q2, ẋ)`` with two joints next to the limit they move towards, or ``None``."""
+    import fault_tolerance as ft
+
+    qd = ft.resolve("jvja", arm.jacobian(q), xs, sc)
+    top = np.argsort(-np.abs(qd))[:2]
+    q2 = q.copy()
+    for j in top:  # two joints next to the limit they move towards ...
+        q2[j] = (arm.upper[j] - 0.002) if qd[j] > 0 else (arm.lower[j] + 0.002)
+    qd2 = ft.resolve("jvja", arm.jacobian(q2), xs, sc)
+    for j in top:  # ... where the box allows 30 % of their unbounded rate
+        limit = arm.upper[j] if qd2[j] > 0 else arm.lower[j]
+        q2[j] = limit - 0.3 * qd2[j] * h
+    if np.any((q2 < arm.lower) | (q2 > arm.upper)):
+        return None
+    q2 = np.ascontiguousarray(q2)
+    res = ft.resolve_bounded("jvja", arm.jacobian(q2), xs, sc, bounds=arm.rate_bounds(q2, h))
+    before = ctrl.bounded_steps
+    ctrl.jvja(q2, xs)
+    if ctrl.bounded_steps == before or res.scale < 1.0 or np.any(res.reduced_scale < 1.0):
+        return None
+    if installed("quadprog"):
+        try:  # the generic route must solve the same problem (degenerate ones are left out)
+            jvja_bounded_qp(ctrl.jacobian(q2), xs, sc, *arm.rate_bounds(q2, h))
+        except ValueError:
+            return None
+    return q2, xs
+
+
+def limits_rows(case) -> dict:
+    """The rows above (``jvja_bounded_2*`` only where two-bound configurations were found)."""
+    from ..realtime import Controller
+
+    ctrl = Controller(case.arm, case.spec["lockable"], backend=case.ctrl.backend)
+    free, two = _pools(case, ctrl)
+    out = case.out
+    rows = {}
+    if free:
+        rows["jvja_bounded_free"] = (ctrl.jvja, [(q, xd, out) for q, xd in free])
+    if two:
+        rows["jvja_bounded_2"] = (ctrl.jvja, [(q, xd, out) for q, xd in two])
+        if installed("quadprog"):
+            arm, sc = case.arm, case.sc
+            args = [(q, xd) for q, xd in two]
+
+            def qp(q, xd):
+                lo, hi = arm.rate_bounds(q, ctrl.horizon)
+                return jvja_bounded_qp(ctrl.jacobian(q), xd, sc, lo, hi)
+
+            rows["jvja_bounded_2_qp"] = (qp, args)
+    return rows
