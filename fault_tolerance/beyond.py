@@ -4,7 +4,9 @@ For each of the paper's five cases the global plan (:mod:`.wholepath`) runs from
 LNVA, JVJA and MDA (the case's minimum-RCN start); the Power-Cube lock experiment of Sec. V is
 repeated with the global plan as the planned motion (the joint locks at the moments of the plan's
 largest and smallest jump). The paper's own sections are left as they are: this section writes new
-keys of ``summary.json`` (``beyond_the_paper``) and a section of ``REPORT.md``.
+keys of ``summary.json`` (``beyond_the_paper``) and a section of ``REPORT.md``. Every run here is
+the paper's formulation (``limits=False``), like the paper's sections it is compared with; the
+plan keeps its own position-limit handling (``plan_options['limits']``).
 """
 
 from __future__ import annotations
@@ -34,7 +36,9 @@ def _stats(run: Run, arm) -> dict:
 def case_global(case, result: dict, *, progress=None) -> tuple[Run, dict]:
     """The global plan of a case from the start LNVA / JVJA / MDA used; its summary entry."""
     arm, path, q0 = result["arm"], result["path"], result["q0"]
-    run = simulate(arm, path, "global", q0=q0, lockable=list(case.lockable), progress=progress)
+    run = simulate(
+        arm, path, "global", q0=q0, lockable=list(case.lockable), progress=progress, limits=False
+    )
     algs = {"global": _stats(run, arm)} | {a: _stats(r, arm) for a, r in result["runs"].items()}
     plan = run.meta["global"]
     best_local = min(algs[a]["jvj_mean"] for a in ("lnva", "jvja"))
@@ -60,6 +64,7 @@ def experiment_global(exp, *, duration: float | None = None, progress=None) -> t
     T = duration or exp.duration
     q0 = initial_posture(arm, np.array(exp.x0), [exp.joint]).q
     common = {"q0": q0, "lockable": [exp.joint], "feedback_gain": exp.feedback_gain}
+    common["limits"] = False  # the paper's formulation, like Sec. V's runs
     planned = simulate(arm, exp.path(T), "global", progress=progress, **common)
     flat = float(np.ptp(planned.jvj)) <= 1e-12 * max(1.0, float(np.max(planned.jvj)))
     if flat:  # λ ≡ const (eq. 8: a lone lockable joint is held still): lock at the paper's moments

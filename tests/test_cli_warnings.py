@@ -14,9 +14,10 @@ PREFIX = "fault-tolerance simulate: warning: "
 
 
 def test_bad_simulate_warns_once_per_problem(tmp_path, capsys):
-    """A circle out of reach: one stderr line per problem, the same ones in summary.json."""
+    """A circle out of reach: one stderr line per problem, the same ones in summary.json. The
+    paper's formulation (--no-limits): under the joint limits no rate is over the speed limit."""
     out = tmp_path / "bad"
-    argv = ["simulate", "--robot", "planar_3r", "--x0", "1.3,0", "--radius", "0.3"]
+    argv = ["simulate", "--robot", "planar_3r", "--x0", "1.3,0", "--radius", "0.3", "--no-limits"]
     argv += ["--algorithms", "jvja", "--duration", "0.5", "--out", str(out), "--no-progress"]
     assert main(argv) == 0
     err = capsys.readouterr().err.splitlines()
