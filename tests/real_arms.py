@@ -50,6 +50,11 @@ def load(name: str, **overrides):
         return ft.load_arm(source(name), **kwargs)
 
 
+def path_args(name: str) -> list[str]:
+    """Task-path options the arm needs (``path_args`` in the manifest, with ``path_args_why``)."""
+    return list(ARMS[name].get("path_args", []))
+
+
 def cli_args(name: str) -> list[str]:
     """``--urdf FILE --package-dir ... --xacro-arg ... --tip --task [--joints] [--lockable]``."""
     e = ARMS[name]

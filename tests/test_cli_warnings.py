@@ -63,7 +63,9 @@ def test_error_under_a_progress_bar_has_its_own_line(monkeypatch, capsys):
         raise InvalidInput("the path left the workspace")
 
     monkeypatch.setattr(simulation, "simulate", failing)
-    assert main(["simulate", "--robot", "planar_3r", "--algorithms", "jvja"]) == 2
+    # an explicit start: the default-start search would call the fake simulate without a bar
+    argv = ["simulate", "--robot", "planar_3r", "--algorithms", "jvja", "--q0", "0.3,1.2,1.0"]
+    assert main(argv) == 2
     err = capsys.readouterr().err
     message = "fault-tolerance simulate: error: the path left the workspace"
     assert err.count(message) == 1

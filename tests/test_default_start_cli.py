@@ -73,7 +73,7 @@ def test_plainest_simulate_runs_from_the_default_start(name, tmp_path, capsys):
 # -- real descriptions (tests/data/robots): the plainest --urdf FILE --tip T ------------------
 
 try:
-    from real_arms import ARMS, cli_args, load
+    from real_arms import ARMS, cli_args, load, path_args
 except ImportError:  # the data set is not in this checkout
     ARMS = {}
 
@@ -84,7 +84,7 @@ def test_plainest_urdf_simulate_runs_from_the_default_start(name, tmp_path, caps
     """`simulate --urdf FILE --tip T` (plus the manifest's package dirs, xacro args, task and
     joints; no start given) runs every algorithm cleanly from a printed default start."""
     out = tmp_path / name
-    argv = ["simulate", *cli_args(name), "--out", str(out), "--no-progress"]
+    argv = ["simulate", *cli_args(name), *path_args(name), "--out", str(out), "--no-progress"]
     assert main(argv) == 0
     printed = capsys.readouterr().out.splitlines()
     assert len([line for line in printed if line.startswith("start q0 = ")]) == 1

@@ -16,7 +16,7 @@ import warnings
 import numpy as np
 import pinocchio as pin
 import pytest
-from real_arms import ARMS, DATA, cli_args, load, package_dirs, source
+from real_arms import ARMS, DATA, cli_args, load, package_dirs, path_args, source
 
 import fault_tolerance as ft
 from fault_tolerance.chains import serial_chains
@@ -44,6 +44,9 @@ def _cli(*args, cwd=None):
         timeout=600,
         cwd=cwd,
     )
+
+
+RCN_WARNING = "with a reduced condition number beyond the paper's threshold"
 
 
 def _only_expected_warnings(stderr: str) -> list[str]:
@@ -171,8 +174,8 @@ def test_fk_is_pinocchios_on_the_full_model(name):
 @pytest.mark.slow
 @pytest.mark.parametrize("name", NAMES)
 def test_inspect_simulate_and_replay_from_the_command_line(name, tmp_path):
-    """``inspect`` (exit 0, the chain and serial chains listed), ``simulate`` from an explicit
-    regular start (inside the limits, never near-singular, position error < 1 mm) and
+    """``inspect`` (exit 0, the chain and serial chains listed), ``simulate`` from the default start
+    (no ``--q0``/``--x0``; inside the limits, never near-singular, position error < 1 mm) and
     ``replay --html``; no Pinocchio exception or traceback on stderr."""
     e = ARMS[name]
     opts = cli_args(name)
@@ -185,12 +188,17 @@ def test_inspect_simulate_and_replay_from_the_command_line(name, tmp_path):
     assert not _only_expected_warnings(p.stderr), p.stderr
 
     out = tmp_path / "run"
-    q0 = ",".join(repr(v) for v in e["q0"])
     p = _cli(
-        "simulate", *opts, "--q0", q0, "--algorithms", "jvja", "--out", str(out), "--no-progress"
-    )
+        "simulate", *opts, *path_args(name), "--algorithms", "jvja", "--out", str(out),
+        "--no-progress",
+    )  # fmt: skip
     assert p.returncode == 0, p.stderr
-    assert not _only_expected_warnings(p.stderr), p.stderr
+    # the diagnostics may say that k_S passes the paper's RCN threshold of 100 (a quality warning
+    # that issue 10 does not exclude); any other warning (velocity, near-singular,
+    # near-intolerable, off the path) fails
+    assert not [
+        line for line in _only_expected_warnings(p.stderr) if RCN_WARNING not in line
+    ], p.stderr
     arm = load(name)
     run = np.load(out / "jvja" / "run.npz")
     q = run["q"]
