@@ -21,7 +21,8 @@ def panda():
 
 def test_compiled_multi_joint_step_matches_the_planner(panda):
     rng = np.random.default_rng(11)
-    ctrl = Controller(panda, PAIRS, weights=[1.0, 2.0, 0.5, 1.5], backend="numba")
+    # the unbounded step (limits=False) is what ft.resolve computes without bounds=
+    ctrl = Controller(panda, PAIRS, weights=[1.0, 2.0, 0.5, 1.5], backend="numba", limits=False)
     for _ in range(20):
         q, xd = panda.random_q(rng), rng.standard_normal(3)
         J = panda.jacobian(q)
