@@ -66,6 +66,11 @@ def robot_path(filename: str) -> Path:
     return robots_dir() / filename
 
 
+def preset_names() -> list[str]:
+    """The arms with a preset: the shipped robots, then the example-robot-data arms we configure."""
+    return list(catalog()) + list(EXAMPLE_ROBOTS)
+
+
 def example_robot_names() -> list[str]:
     """Names example-robot-data can load (empty if its loaders are missing)."""
     try:

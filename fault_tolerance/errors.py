@@ -10,12 +10,32 @@ class FaultToleranceError(Exception):
 
 
 class RobotNotFound(FaultToleranceError):
-    """A robot name is neither a catalog entry, an example-robot-data name nor a file."""
+    """A robot name is neither a catalog entry, an example-robot-data name nor a file.
 
-    def __init__(self, name: str, known: Sequence[str]) -> None:
+    The message lists the arms that suit the command (``suits``, default: the shipped arms and the
+    example-robot-data arms with a preset), the closest names among all ``known`` ones, and says
+    that ``fault-tolerance robots --all`` lists every example-robot-data model.
+    """
+
+    def __init__(
+        self,
+        name: str,
+        known: Sequence[str],
+        suits: Sequence[str] | None = None,
+        command: str | None = None,
+    ) -> None:
+        import difflib
+
+        self.name, self.known = name, sorted(known)
+        self.suits = list(known if suits is None else suits)
+        close = difflib.get_close_matches(name, self.known, n=3, cutoff=0.6)
+        hint = f"did you mean {' or '.join(repr(c) for c in close)}? " if close else ""
+        what = f"arms that suit `{command}`" if command else "arms with a preset"
         super().__init__(
             f"robot '{name}' is not a shipped robot, an example-robot-data arm or an existing "
-            f"URDF file; known robots are {sorted(known)}"
+            f"URDF file; {hint}{what}: {self.suits} (`fault-tolerance robots`; "
+            "`fault-tolerance robots --all` lists every example-robot-data model, loadable with "
+            "--robot NAME --tip FRAME)"
         )
 
 

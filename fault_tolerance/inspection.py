@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .catalog import catalog, example_robot_names, robot_path
+from .catalog import catalog, example_robot_names, preset_names, robot_path
 from .chains import serial_chains
 from .errors import RobotNotFound, URDFError
 from .failures import scenarios
@@ -29,7 +29,7 @@ def urdf_path_of(target: str) -> Path:
         return Path(getModelPath(str(sub))) / sub
     path = Path(target).expanduser()
     if not path.exists() and not is_description_path(path):
-        raise RobotNotFound(target, list(catalog()) + example_robot_names())
+        raise RobotNotFound(target, list(catalog()) + example_robot_names(), suits=preset_names())
     return path
 
 

@@ -10,7 +10,7 @@ import numpy as np
 
 from .arm import Arm
 from .carried import remember, remember_example
-from .catalog import EXAMPLE_ROBOTS, catalog, example_robot_names, robot_path
+from .catalog import EXAMPLE_ROBOTS, catalog, example_robot_names, preset_names, robot_path
 from .chains import active_q, reduce_model
 from .errors import InvalidInput, RobotNotFound, URDFError
 from .models import build_model, build_visuals, load_urdf_models, read_description
@@ -138,7 +138,7 @@ def _load_example_robot(name: str, tip: str | None, task, joints, shipped: dict)
     """An arm of example-robot-data, with our preset tip, task and joints where we have one."""
     known = list(shipped) + example_robot_names()
     if name not in example_robot_names():
-        raise RobotNotFound(name, known)
+        raise RobotNotFound(name, known, suits=preset_names())
     import example_robot_data
 
     with warnings.catch_warnings():

@@ -83,6 +83,20 @@ CASES = {
         ["lock", "--no-progress", "--robot", "planar_3r", "--joint", "joint2", "--at", "7"],
         "lock time must be within",
     ),
+    "unknown_robot_workspace": (
+        ["workspace", "--robot", "plannar_3r", "--out", "{dir}/ws"],
+        "arms that suit `workspace`: ['planar_3r', 'spatial_4r', 'powercube_3r', 'ur5']",
+    ),
+    "unknown_robot_design": (
+        ["design", "--robot", "plannar_3r", "--out", "{dir}/d"],
+        "did you mean 'planar_3r'? arms that suit `design`: ['planar_3r', 'powercube_3r']",
+    ),
+    "lockable_none_simulate": (SIM + ["--lockable", "none"], "`simulate` plans or measures"),
+    "lockable_none_lock_jvja": (
+        ["lock", "--no-progress", "--robot", "planar_3r", "--joint", "joint2", "--lockable", "none",
+         "--algorithm", "jvja"],
+        "suits `lock --algorithm lnva`",
+    ),
     "unknown_case": (["reproduce", "--cases", "fig5", "--out", "{dir}/rep"], "unknown case(s)"),
     "unknown_command": (["simulat"], "invalid choice: 'simulat'"),
 }

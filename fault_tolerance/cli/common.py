@@ -16,7 +16,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from ..errors import FaultToleranceError, InvalidInput
+from ..errors import FaultToleranceError, InvalidInput, RobotNotFound
 
 EXIT_OK = 0
 EXIT_FAILURE = 1
@@ -75,7 +75,9 @@ def add_robot_options(p: argparse.ArgumentParser) -> None:
     g.add_argument(
         "--lockable",
         default=None,
-        help="joints that may lock: all | joint2,joint3 | joint1+joint2,joint3 (+ joins a multi-joint scenario)",
+        help="joints that may lock: all | none | joint2,joint3 | joint1+joint2,joint3 (+ joins a "
+        "multi-joint scenario; none: only where a command can run without them) (default: the "
+        "shipped arm's set (robots/catalog.json), else every active joint)",
     )
 
 
@@ -106,27 +108,50 @@ def load_robot(args) -> object:
         raise InvalidInput(
             "name a robot with --robot NAME or --urdf PATH (see `fault-tolerance robots`)"
         )
-    return load_arm(
-        args.urdf or args.robot,
-        tip=args.tip,
-        task=args.task,
-        joints=names(args.joints),
-        package_dirs=args.package_dir or None,
-        xacro_args=parse_xacro_args(args.xacro_arg) or None,
-    )
+    from .suits import robot_not_found
+
+    try:
+        return load_arm(
+            args.urdf or args.robot,
+            tip=args.tip,
+            task=args.task,
+            joints=names(args.joints),
+            package_dirs=args.package_dir or None,
+            xacro_args=parse_xacro_args(args.xacro_arg) or None,
+        )
+    except RobotNotFound as err:
+        raise robot_not_found(err, getattr(args, "command", None)) from None
 
 
-def lockable_of(args, arm):
-    """Lockable joints from ``--lockable`` (``a+b`` is a two-joint scenario); arm default if absent."""
+NONE_SUITS = (
+    "--lockable none suits `lock --algorithm lnva` (rates that anticipate no failure; only the "
+    "locking joint is measured)"
+)
+
+
+def lockable_of(args, arm, none_ok: bool = False):
+    """Lockable joints from ``--lockable`` (``a+b`` is a two-joint scenario); arm default if absent.
+
+    ``none`` (no joint expected to lock) gives ``[]`` where the command can run without lockable
+    joints (``none_ok``); elsewhere it is refused with the reason.
+    """
     if args.lockable is None:
         return list(arm.default_lockable)
     if args.lockable.strip() == "all":
         return list(arm.joint_names)
+    if args.lockable.strip().lower() == "none":
+        if none_ok:
+            return []
+        command = getattr(args, "command", None) or "this command"
+        raise InvalidInput(
+            f"--lockable none: `{command}` plans or measures for the joints that may lock and "
+            f"needs at least one; name them (joint2,joint3) or use 'all'. {NONE_SUITS}"
+        )
     items = []
     for tok in names(args.lockable) or []:
         items.append(tuple(tok.split("+")) if "+" in tok else tok)
     if not items:
-        raise InvalidInput("--lockable is empty; use 'all' or joint names like joint2,joint3")
+        raise InvalidInput("--lockable is empty; use 'all', 'none' or joint names like joint2,joint3")
     return items
 
 
@@ -317,6 +342,9 @@ def run_command(func: Callable, args: argparse.Namespace) -> int:
         close_bars()
         print("interrupted", file=sys.stderr)
         return EXIT_INTERRUPTED
+    except BrokenPipeError:  # `fault-tolerance robots | head`: the reader left, not an error
+        _quiet_stdout()
+        return 0
     except Exception as err:  # noqa: BLE001 - the last line of defence
         close_bars()
         if args.debug:
@@ -333,6 +361,19 @@ def run_command(func: Callable, args: argparse.Namespace) -> int:
         return EXIT_FAILURE
     finally:
         warnings.showwarning = shown
+
+
+def _quiet_stdout() -> None:
+    """Point stdout at /dev/null so the interpreter's final flush does not fail again."""
+    import os
+
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    try:
+        os.dup2(devnull, sys.stdout.fileno())
+    except (OSError, ValueError):  # pragma: no cover - stdout without a file descriptor
+        pass
+    finally:
+        os.close(devnull)
 
 
 #: errno values of an OSError that mean the system refused the output, not that the code is wrong.

@@ -17,7 +17,16 @@ EXAMPLE = (
 def add_parser(sub) -> argparse.ArgumentParser:
     """The ``inspect`` sub-command."""
     s = sub.add_parser(NAME, help=HELP, epilog=epilog(EXAMPLE), formatter_class=FORMATTER)
-    s.add_argument("target", help="shipped / example-robot-data name, URDF or xacro path")
+    s.add_argument(
+        "target",
+        nargs="?",
+        default=None,
+        help="shipped / example-robot-data name, URDF or xacro path (or --robot / --urdf, as in "
+        "the other commands)",
+    )
+    src = s.add_mutually_exclusive_group()
+    src.add_argument("--robot", default=None, help="the same as TARGET, a robot name (default: none)")
+    src.add_argument("--urdf", default=None, help="the same as TARGET, a file (default: none)")
     s.add_argument(
         "--tip",
         default=None,
@@ -43,17 +52,27 @@ def add_parser(sub) -> argparse.ArgumentParser:
 
 def run(args) -> int:
     """Print the kinematic tree, the chosen chain and task, and intolerable joints."""
+    from ..errors import InvalidInput, RobotNotFound
     from ..inspection import inspect_text
     from ..sources import parse_xacro_args
+    from .suits import robot_not_found
 
-    print(
-        inspect_text(
-            args.target,
+    given = [t for t in (args.target, args.robot, args.urdf) if t is not None]
+    if len(given) != 1:
+        raise InvalidInput(
+            "name one robot: fault-tolerance inspect NAME|PATH (or --robot NAME, --urdf PATH); "
+            f"got {len(given)}"
+        )
+    try:
+        text = inspect_text(
+            given[0],
             tip=args.tip,
             task=args.task,
             joints=names(args.joints),
             package_dirs=args.package_dir or None,
             xacro_args=parse_xacro_args(args.xacro_arg) or None,
         )
-    )
+    except RobotNotFound as err:
+        raise robot_not_found(err, "inspect") from None
+    print(text)
     return 0

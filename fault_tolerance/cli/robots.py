@@ -3,18 +3,25 @@
 from __future__ import annotations
 
 import argparse
+import textwrap
 
 from ..errors import FaultToleranceError
 from .common import FORMATTER, epilog
 
 NAME = "robots"
 HELP = "list shipped and example-robot-data arms"
-EXAMPLE = "fault-tolerance robots"
+EXAMPLE = "fault-tolerance robots\n  fault-tolerance robots --all"
 
 
 def add_parser(sub) -> argparse.ArgumentParser:
     """The ``robots`` sub-command."""
     s = sub.add_parser(NAME, help=HELP, epilog=epilog(EXAMPLE), formatter_class=FORMATTER)
+    s.add_argument(
+        "--all",
+        action="store_true",
+        help="also list every model example-robot-data can load, by name (most are not arms: "
+        "legged robots, hands; load one with --robot NAME --tip FRAME) (default: off)",
+    )
     s.set_defaults(func=run)
     return s
 
@@ -45,4 +52,10 @@ def run(args) -> int:
     print(
         "\nAny other example-robot-data name or a URDF path works too (--robot NAME | --urdf PATH)."
     )
+    if args.all:
+        from ..catalog import example_robot_names
+
+        others = [n for n in example_robot_names() if n not in EXAMPLE_ROBOTS]
+        print(f"\nexample-robot-data models without a preset ({len(others)}):")
+        print("\n".join(textwrap.wrap(", ".join(others), 100)))
     return 0

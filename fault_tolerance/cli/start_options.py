@@ -15,6 +15,11 @@ from ..errors import InvalidInput
 from .common import floats, lockable_of, names
 
 
+def _none_ok(algorithms) -> bool:
+    """``--lockable none`` suits runs whose rates do not depend on the lockable set."""
+    return all(a == "lnva" for a in algorithms)
+
+
 def choose_start(args, arm, algorithms=("jvja",), extra_lockable=(), **sim_options):
     """``(q0, path, lockable, choice)`` from the options.
 
@@ -35,7 +40,8 @@ def choose_start(args, arm, algorithms=("jvja",), extra_lockable=(), **sim_optio
         raise InvalidInput(f"--dt must be a finite number > 0 [s], got {args.dt}")
     if args.duration is not None and not (np.isfinite(args.duration) and args.duration > 0):
         raise InvalidInput(f"--duration must be a finite number > 0 [s], got {args.duration}")
-    lockable = lockable_of(args, arm)
+    lockable = lockable_of(args, arm, none_ok=bool(extra_lockable) and _none_ok(algorithms))
+    lockable = lockable or list(extra_lockable)  # none: only the extra joints are measured
     start_lockable = _with_joints(arm, lockable, extra_lockable)
     q0 = None if args.q0 is None else arm.check_q(floats(args.q0, "--q0"))
     circle = _circle_maker(args, arm, entry)
