@@ -69,7 +69,10 @@ def add_robot_options(p: argparse.ArgumentParser) -> None:
         "--tip", default=None, help="tip frame (default: the catalog's, or the last frame)"
     )
     g.add_argument(
-        "--task", default=None, help="planar | position | pose | rows among x,y,z,rx,ry,rz"
+        "--task",
+        default=None,
+        help="planar | position | pose | rows among x,y,z,rx,ry,rz (default: the catalog's for "
+        "a shipped or preset arm, else position)",
     )
     g.add_argument("--joints", default=None, help="active joints, comma-separated (others fixed)")
     g.add_argument(
@@ -183,7 +186,8 @@ def add_path_options(p: argparse.ArgumentParser) -> None:
         "--omega", type=float, default=None, help="circle angular rate [rad/s] (default 2π)"
     )
     g.add_argument(
-        "--rows", default=None, help="the two task rows the circle lies in, e.g. x,y or y,z"
+        "--rows", default=None, help="the two task rows the circle lies in, e.g. x,y or y,z (default: the "
+        "catalog's for a shipped arm, else the first two task rows)"
     )
     g.add_argument("--dt", type=float, default=1e-3, help="time step [s] (default 0.001)")
     g.add_argument(
@@ -268,7 +272,10 @@ def state_defaults(parser: argparse.ArgumentParser) -> None:
         if isinstance(action, (argparse._HelpAction, argparse._VersionAction)):
             continue
         text = action.help or ""
-        if "default" not in text.lower():
+        if action.required:  # a required option has no default: say it is required
+            if "required" not in text.lower():
+                text = f"{text} (required)".strip()
+        elif "default" not in text.lower():
             text = f"{text} (default: {_default_text(action)})".strip()
         action.help = text
 
