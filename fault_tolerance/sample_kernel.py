@@ -3,7 +3,8 @@
 :func:`sample_kernel` is what :func:`fault_tolerance.simulation.simulate` runs at every sample
 (through :class:`fault_tolerance.sampler.Sampler`): from the task Jacobian ``J`` and the commanded
 task velocity it computes, with one Cholesky factorisation of ``G = J Jᵀ`` and never the n x n
-projector ``N`` itself (only its diagonal and its products with vectors, ``N v = v - Jᵀ(G⁻¹ J v)``):
+projector ``N`` itself (only its diagonal and its products with vectors, ``N v = v - Jᵀ(G⁻¹ J v)``,
+:mod:`fault_tolerance.sample_linalg`):
 
 * the rates: LNVA ``a = J⁺ẋ``; JVJA in closed form (G2) ``a - N c / W``; MDA ``a - α N ∇K``
   (``∇K`` given, the step capped as in :func:`fault_tolerance.planner.mda`); rates given by the
@@ -12,12 +13,22 @@ projector ``N`` itself (only its diagonal and its products with vectors, ``N v =
   continuation response, G3);
 * the reduced condition numbers ``k_S`` (eq. 15) from ``eigvalsh`` of ``J_S J_Sᵀ = G − J_i J_iᵀ``,
   their square sum ``K`` and ``σ_min(J)``;
-* the flags of :mod:`fault_tolerance.run` it can decide (locked, step-limited, over-speed).
+* the flags of :mod:`fault_tolerance.run` it can decide (locked, step-limited, over-speed,
+  servo-clipped).
 
-It returns -1 when the sample needs the reference code instead: no certificate that
-``σ_min ≥ SIGMA_EPS`` (the reference damps there), a pivot ``N_ii`` below ``PIVOT_EPS`` (the
-reference damps and flags it), or numbers that are not finite. Plain Python, valid without
-numba (and tested so); compiled by :func:`compiled_sample_kernel`.
+Under joint limits (``params[P_BOUNDED]``) the sample is the bounded one while no bound is met:
+the rate box (L1) at ``q`` is built and the rates checked against it by
+:func:`fault_tolerance.boxstep.box_status`, every reduced robot's rates ``ˢq̇'`` (G1/G3) too
+(the targets of the bounded resolvers and of the jump under limits, (L4)-(L5)); inside the box
+the bounded resolvers return these very rates (clipped into the box within ``BOX_TOL``, as
+:mod:`fault_tolerance.bounded` does), and the servo's rates are clipped at the position limits
+as ``simulation._clip_to_limits``.
+
+It returns :data:`REFERENCE` (-1) when the sample needs the reference code instead: no
+certificate that ``σ_min ≥ SIGMA_EPS`` (the reference damps there), a pivot ``N_ii`` below
+``PIVOT_EPS`` (the reference damps and flags it), or numbers that are not finite; and
+:data:`BOUNDED` (-2) when a bound is met (the caller solves the bounded problem). Plain Python,
+valid without numba (and tested so); compiled by :func:`compiled_sample_kernel`.
 """
 
 from __future__ import annotations
@@ -27,156 +38,52 @@ from collections.abc import Callable
 
 import numpy as np
 
-try:  # compiled when numba is there (lazily, on first call; cached on disk)
-    import numba
+from .boxqp import BOX_TOL
+from .sample_linalg import (  # noqa: F401 - P_* and N_PARAMS are this kernel's interface
+    N_PARAMS,
+    P_ACCEL,
+    P_BOUNDED,
+    P_CONT,
+    P_DECAY,
+    P_DT,
+    P_GAIN,
+    P_LOCK,
+    P_MAXSTEP,
+    P_PIVOT,
+    P_RANK,
+    P_RCN_MAX,
+    P_TRACE,
+    P_WSUM,
+    _cholesky,
+    _condition,
+    _factor,
+    _null_times,
+    _solve,
+    _trace_inverse,
+    njit,
+)
 
-    _njit = numba.njit(cache=True, nogil=True, error_model="numpy")
+try:  # the rate box check of the Controller's bounded step, compiled
+    from .boxstep import compiled_box_status
+
+    _box_status = compiled_box_status()
 except ImportError:  # pragma: no cover - numba is a core dependency
-
-    def _njit(fn):
-        return fn
-
+    from .boxstep import box_status as _box_status
 
 #: ``method`` codes of :func:`sample_kernel`.
 LNVA, JVJA, MDA, GIVEN, LOCKED = 0, 1, 2, 3, 4
-#: Indices into ``params``.
-P_TRACE, P_PIVOT, P_RANK, P_WSUM, P_GAIN, P_MAXSTEP, P_RCN_MAX, P_CONT, P_LOCK = range(9)
-P_DT, P_DECAY, P_ACCEL = 9, 10, 11
-N_PARAMS = 12
+#: What :func:`sample_kernel` returns instead of the flags: do the sample the reference way, or
+#: solve it as the bounded problem (a bound of the rate box is met).
+REFERENCE, BOUNDED = -1, -2
 #: Indices into ``off``, the first column of each history in the run table (``simulation``).
 COLUMNS = ("q", "qd", "qd_cmd", "x", "x_des", "error", "jvj", "jvj_parts", "rcn", "K",
            "sigma_min", "flags")  # fmt: skip
 O_Q, O_QD, O_QCMD, O_X, O_XDES, O_ERROR, O_JVJ, O_PARTS, O_RCN, O_K, O_SIGMA, O_FLAGS = range(12)
 
-_FLAG_LOCKED, _FLAG_STEP_LIMITED, _FLAG_OVER_SPEED = 4, 8, 16
+_FLAG_LOCKED, _FLAG_STEP_LIMITED, _FLAG_OVER_SPEED, _FLAG_SERVO_CLIPPED = 4, 8, 16, 256
 
 
-@_njit
-def _cholesky(G, L, m) -> bool:  # pragma: no cover - numba
-    """Lower Cholesky factor of the leading m x m block of G into L; False unless G is PD."""
-    for j in range(m):
-        s = G[j, j]
-        for k in range(j):
-            s -= L[j, k] * L[j, k]
-        if not s > 0.0:
-            return False
-        s = math.sqrt(s)
-        L[j, j] = s
-        for i in range(j + 1, m):
-            t = G[i, j]
-            for k in range(j):
-                t -= L[i, k] * L[j, k]
-            L[i, j] = t / s
-    return True
-
-
-@_njit
-def _trace_inverse(L, z, m) -> float:  # pragma: no cover - numba
-    """``trace(G⁻¹) = ‖L⁻¹‖_F²``, column by column of ``L⁻¹`` (``z`` as scratch)."""
-    tr = 0.0
-    for j in range(m):
-        for i in range(j, m):
-            t = 1.0 if i == j else 0.0
-            for k in range(j, i):
-                t -= L[i, k] * z[k]
-            z[i] = t / L[i, i]
-            tr += z[i] * z[i]
-    return tr
-
-
-@_njit
-def _solve(L, b, y, m) -> None:  # pragma: no cover - numba
-    """``y = G⁻¹ b`` with ``G = L Lᵀ`` (``y`` may be ``b``)."""
-    for i in range(m):
-        t = b[i]
-        for k in range(i):
-            t -= L[i, k] * y[k]
-        y[i] = t / L[i, i]
-    for i in range(m - 1, -1, -1):
-        t = y[i]
-        for k in range(i + 1, m):
-            t -= L[k, i] * y[k]
-        y[i] = t / L[i, i]
-
-
-@_njit
-def _null_times(J, B, v, out, y) -> None:  # pragma: no cover - numba
-    """``out = N v = v - Jᵀ (B v)``, ``B = G⁻¹J``: O(mn), N never formed."""
-    m, n = J.shape
-    for i in range(m):
-        s = 0.0
-        for j in range(n):
-            s += B[i, j] * v[j]
-        y[i] = s
-    for j in range(n):
-        s = v[j]
-        for i in range(m):
-            s -= J[i, j] * y[i]
-        out[j] = s
-
-
-@_njit
-def _condition(G, J, cols, ks, W, rcn_max) -> float:  # pragma: no cover - numba
-    """``k_S`` of every single-joint scenario into ``ks``, as ``indices.condition_numbers``; K."""
-    m = G.shape[0]
-    K = 0.0
-    for s in range(cols.shape[0]):
-        i = cols[s]
-        for r in range(m):
-            for c in range(m):
-                W[r, c] = G[r, c] - J[r, i] * J[c, i]
-        lam = np.linalg.eigvalsh(W)
-        smax = math.sqrt(max(lam[m - 1], 0.0))
-        smin = max(math.sqrt(max(lam[0], 0.0)), smax / rcn_max)
-        k = smax / smin if smax > 0.0 else rcn_max  # smin >= smax / rcn_max > 0 then
-        k = min(k, rcn_max)
-        ks[s] = k
-        K += k * k
-    return K
-
-
-@_njit
-def _factor(J, xd, cols, params, G, L, B, a, piv, y, z) -> bool:  # pragma: no cover - numba
-    """Cholesky of ``G = J Jᵀ`` with its certificate, ``B = G⁻¹J``, ``a = J⁺ẋ``, pivots ``N_ii``.
-
-    False when the reference must do the sample (no certificate, or a pivot below PIVOT_EPS).
-    """
-    m, n = J.shape
-    if not _cholesky(G, L, m):
-        return False
-    tr = _trace_inverse(L, z, m)
-    if not tr <= params[P_TRACE]:
-        return False
-    if params[P_RANK] > 0.0:
-        s = 0.0
-        for i in range(m):
-            for c in range(n):
-                s += J[i, c] * J[i, c]
-        if not params[P_RANK] * s * tr < 1.0:
-            return False
-    for c in range(n):  # B = G⁻¹ J column by column
-        for i in range(m):
-            y[i] = J[i, c]
-        _solve(L, y, y, m)
-        for i in range(m):
-            B[i, c] = y[i]
-    for c in range(n):
-        s = 0.0
-        for i in range(m):
-            s += B[i, c] * xd[i]
-        a[c] = s
-    for k in range(cols.shape[0]):  # pivots N_ii = 1 - J_iᵀ B_i of the lockable columns
-        i = cols[k]
-        d = 1.0
-        for r in range(m):
-            d -= J[r, i] * B[r, i]
-        if not d >= params[P_PIVOT]:
-            return False
-        piv[k] = d
-    return True
-
-
-@_njit
+@njit
 def _planned(
     J, B, a, piv, cols, w, params, method, qd_in, grad, qd, v, Nv, y
 ) -> int:  # pragma: no cover - numba
@@ -217,9 +124,13 @@ def _planned(
     return 0
 
 
-@_njit
-def _jumps(J, B, a, qd, piv, cols, w, cont, parts) -> float:  # pragma: no cover - numba
-    """``w_S ‖ˢq̇' − q̇‖²`` of every scenario into ``parts`` (eqs. 9/10, G1/G3); their sum."""
+@njit
+def _jumps(J, B, a, qd, piv, cols, w, cont, parts, lo, hi, bounded) -> float:  # pragma: no cover
+    """``w_S ‖ˢq̇' − q̇‖²`` of every scenario into ``parts`` (eqs. 9/10, G1/G3); their sum.
+
+    ``bounded``: each ``ˢq̇'`` is checked against the box ``[lo, hi]`` (L4) and clipped into it as
+    ``bounded.reduced_bounded``; -1.0 when one leaves it (the reduced robot meets a bound).
+    """
     m, n = J.shape
     total = 0.0
     for k in range(cols.shape[0]):
@@ -231,6 +142,10 @@ def _jumps(J, B, a, qd, piv, cols, w, cont, parts) -> float:  # pragma: no cover
             for r in range(m):
                 ncol -= J[r, c] * B[r, i]
             post = 0.0 if c == i else (qd[c] if cont else a[c]) - t * ncol
+            if bounded:
+                if post < lo[c] - BOX_TOL or post > hi[c] + BOX_TOL:
+                    return -1.0
+                post = min(max(post, lo[c]), hi[c])
             e = post - qd[c]
             acc += e * e
         parts[k] = w[k] * acc
@@ -238,7 +153,7 @@ def _jumps(J, B, a, qd, piv, cols, w, cont, parts) -> float:  # pragma: no cover
     return total
 
 
-@_njit
+@njit
 def _locked(J, xd, G, params, Wm, L, y, z, qd) -> bool:  # pragma: no cover - numba
     """Least-norm rates of the joints left after the lock, ``G_r = G − J_l J_lᵀ``; False: reference."""
     m, n = J.shape
@@ -258,7 +173,28 @@ def _locked(J, xd, G, params, Wm, L, y, z, qd) -> bool:  # pragma: no cover - nu
     return True
 
 
-@_njit
+@njit
+def _in_box(q, lim, prm, buf, qd, J, B, v, cols, locked) -> bool:  # pragma: no cover - numba
+    """Box (L1) at ``q`` into ``buf[0], buf[1]`` (``box_status``); whether ``qd`` is inside it.
+
+    Inside, ``qd`` is clipped into the box (``bounded.resolve_bounded`` does so). After a lock the
+    locked joint (rate 0) is not checked: the reduced robot's box has no such joint.
+    """
+    n = qd.shape[0]
+    lock = int(prm[2]) if locked else -1
+    if _box_status(q, lim, prm, buf, qd, J, B, v, cols, False) != 0:
+        if lock < 0:
+            return False
+        for c in range(n):  # the locked joint's own bound does not count
+            if c != lock and (qd[c] < buf[0, c] - BOX_TOL or qd[c] > buf[1, c] + BOX_TOL):
+                return False
+    for c in range(n):
+        if c != lock:
+            qd[c] = min(max(qd[c], buf[0, c]), buf[1, c])
+    return True
+
+
+@njit
 def _follow(qd_cmd, qd_prev, params, k, locked, out) -> None:  # pragma: no cover - numba
     """Actual rates one step later, as ``simulation.ServoModel.follow`` (a locked joint stops)."""
     decay, step = params[P_DECAY], params[P_ACCEL]
@@ -274,40 +210,25 @@ def _follow(qd_cmd, qd_prev, params, k, locked, out) -> None:  # pragma: no cove
         out[int(params[P_LOCK])] = 0.0
 
 
-@_njit
-def sample_kernel(
-    J, xd, qd_in, grad, q, qd_prev, x, x_des, err, cols, w, vmax, params, method, k, T, off, ws
-) -> int:  # pragma: no cover - numba
-    """Sample ``k`` after the Jacobian into row ``k`` of the run table ``T``; the flags, or -1.
+@njit
+def _servo_clip(q, lim, dt, qd) -> int:  # pragma: no cover - numba
+    """``simulation._clip_to_limits``: the executed rates kept inside the limits over ``dt``."""
+    flag = 0
+    for c in range(qd.shape[0]):
+        v = lim[2, c]
+        lo = max((lim[0, c] - q[c]) / dt, -v)
+        hi = min((lim[1, c] - q[c]) / dt, v)
+        t = min(max(qd[c], lo), hi)
+        if abs(t - qd[c]) > 1e-12:
+            flag = _FLAG_SERVO_CLIPPED
+        qd[c] = t
+    return flag
 
-    ``J`` (m, n); ``xd`` the commanded task velocity; ``qd_in`` the rates for ``GIVEN``; ``grad``
-    ``∇K`` for ``MDA``; ``q``, ``qd_prev`` the configuration and the actual rates so far (``q`` is
-    advanced in place by ``q̇ dt``); ``x``, ``x_des``, ``err`` the task position, its target and
-    error; ``cols`` the lockable column of each scenario, ``w`` their weights; ``vmax`` the joint
-    velocity limits (inf: none); ``params`` see ``P_*``; ``method`` one of ``LNVA, JVJA, MDA,
-    GIVEN, LOCKED``; ``T`` the run table and ``off`` its column offsets (``O_*``); ``ws`` a float
-    workspace of :func:`workspace_size` numbers. -1: nothing usable was written; the caller does
-    the sample the reference way.
-    """
+
+@njit
+def _gram(J, G) -> None:  # pragma: no cover - numba
+    """``G = J Jᵀ`` (both triangles)."""
     m, n = J.shape
-    f = cols.shape[0]
-    G, L, Wm = (
-        ws[0 : m * m].reshape((m, m)),
-        ws[m * m : 2 * m * m].reshape((m, m)),
-        ws[2 * m * m : 3 * m * m].reshape((m, m)),
-    )
-    o = 3 * m * m
-    B = ws[o : o + m * n].reshape((m, n))
-    o += m * n
-    a, v, Nv, piv, qd = (
-        ws[o : o + n],
-        ws[o + n : o + 2 * n],
-        ws[o + 2 * n : o + 3 * n],
-        ws[o + 3 * n : o + 4 * n],
-        ws[o + 4 * n : o + 5 * n],
-    )
-    o += 5 * n
-    y, z = ws[o : o + m], ws[o + m : o + 2 * m]
     for i in range(m):
         for j in range(i + 1):
             s = 0.0
@@ -315,32 +236,136 @@ def sample_kernel(
                 s += J[i, c] * J[j, c]
             G[i, j] = s
             G[j, i] = s
-    row = T[k]
-    parts = row[off[O_PARTS] : off[O_PARTS] + f]
-    flag = 0
+
+
+@njit
+def _rates(J, xd, qd_in, grad, q, cols, w, params, method, parts, box, ws) -> int:  # pragma: no cover
+    """Rates into ``ws``'s ``qd``, the jumps into ``parts``; the flags so far, or -1 / -2.
+
+    ``box = (lim, prm, buf)`` of :func:`_in_box` (used when ``params[P_BOUNDED]``).
+    """
+    m, n = J.shape
+    f = cols.shape[0]
+    G, L, Wm, B, a, v, Nv, piv, qd, y, z = _views(ws, m, n)
+    lim, prm, buf = box
+    bounded = params[P_BOUNDED] > 0.0
+    _gram(J, G)
     if method == LOCKED:
         if not _locked(J, xd, G, params, Wm, L, y, z, qd):
-            return -1
-        flag = _FLAG_LOCKED
+            return REFERENCE
+        ws[-3], ws[-2] = _FLAG_LOCKED, 0.0
+        if bounded and not _in_box(q, lim, prm, buf, qd, J, B, v, cols, True):
+            return BOUNDED
+        ws[-2] = 1.0
         for i in range(f):
             parts[i] = 0.0
-        jv = 0.0
-    else:
-        if not _factor(J, xd, cols, params, G, L, B, a, piv, y, z):
-            return -1
-        flag = _planned(J, B, a, piv, cols, w, params, method, qd_in, grad, qd, v, Nv, y)
-        jv = _jumps(J, B, a, qd, piv, cols, w, params[P_CONT] > 0.0, parts)
+        ws[-1] = 0.0
+        return _FLAG_LOCKED
+    if not _factor(J, xd, cols, params, G, L, B, a, piv, y, z):
+        return REFERENCE
+    flag = _planned(J, B, a, piv, cols, w, params, method, qd_in, grad, qd, v, Nv, y)
+    ws[-3], ws[-2] = flag, 0.0
+    if bounded and not _in_box(q, lim, prm, buf, qd, J, B, v, cols, False):
+        return BOUNDED
+    ws[-2] = 1.0
+    jv = _jumps(J, B, a, qd, piv, cols, w, params[P_CONT] > 0.0, parts, buf[0], buf[1], bounded)
+    if jv < 0.0:
+        return BOUNDED
+    ws[-1] = jv
+    return flag
+
+
+@njit
+def _views(ws, m, n):  # pragma: no cover - numba
+    """``G, L, Wm`` (m, m), ``B`` (m, n), ``a, v, Nv, piv, qd`` (n), ``y, z`` (m) in ``ws``."""
+    G = ws[0 : m * m].reshape((m, m))
+    L = ws[m * m : 2 * m * m].reshape((m, m))
+    Wm = ws[2 * m * m : 3 * m * m].reshape((m, m))
+    o = 3 * m * m
+    B = ws[o : o + m * n].reshape((m, n))
+    o += m * n
+    a, v, Nv = ws[o : o + n], ws[o + n : o + 2 * n], ws[o + 2 * n : o + 3 * n]
+    piv, qd = ws[o + 3 * n : o + 4 * n], ws[o + 4 * n : o + 5 * n]
+    o += 5 * n
+    return G, L, Wm, B, a, v, Nv, piv, qd, ws[o : o + m], ws[o + m : o + 2 * m]
+
+
+@njit
+def sample_kernel(
+    J, xd, qd_in, grad, q, qd_prev, x, x_des, err, cols, w, vmax, params, method, k, T, off, ws,
+    lim, prm, buf,
+) -> int:  # pragma: no cover - numba
+    """Sample ``k`` after the Jacobian into row ``k`` of the run table ``T``; the flags, or -1 / -2.
+
+    ``J`` (m, n); ``xd`` the commanded task velocity; ``qd_in`` the rates for ``GIVEN``; ``grad``
+    ``∇K`` for ``MDA``; ``q``, ``qd_prev`` the configuration and the actual rates so far (``q`` is
+    advanced in place by ``q̇ dt``); ``x``, ``x_des``, ``err`` the task position, its target and
+    error; ``cols`` the lockable column of each scenario, ``w`` their weights; ``vmax`` the joint
+    velocity limits (inf: none); ``params`` see ``P_*``; ``method`` one of ``LNVA, JVJA, MDA,
+    GIVEN, LOCKED``; ``T`` the run table and ``off`` its column offsets (``O_*``); ``ws`` a float
+    workspace of :func:`workspace_size` numbers; under joint limits (``params[P_BOUNDED]``) ``lim``
+    (3, n) the lower and upper position limits (±inf: none) and the velocity limits, ``prm =
+    [1/h, 0, lock]``, ``buf`` (4, n) scratch (the box goes to ``buf[0], buf[1]``). -1
+    (:data:`REFERENCE`): nothing usable was written, ``q`` is unchanged. -2 (:data:`BOUNDED`): a
+    bound is met; ``ws`` holds the factors, ``a``, the planned rates and ``W_*``, the box is in
+    ``buf``; the caller solves the bounded problem and ends the sample with
+    :func:`finish_kernel`.
+    """  # fmt: skip
+    f = cols.shape[0]
+    row = T[k]
+    parts = row[off[O_PARTS] : off[O_PARTS] + f]
+    flag = _rates(J, xd, qd_in, grad, q, cols, w, params, method, parts, (lim, prm, buf), ws)
+    if flag < 0:
+        return flag
+    return _finish(J, q, qd_prev, x, x_des, err, cols, vmax, params, method, k, row, off, ws, lim, flag)
+
+
+@njit
+def finish_kernel(
+    J, q, qd_prev, x, x_des, err, cols, vmax, params, method, k, T, off, ws, lim, qd_cmd, jv, flag
+) -> int:  # pragma: no cover - numba
+    """The rest of sample ``k`` after :func:`sample_kernel` returned :data:`BOUNDED`.
+
+    The caller solved the bounded problem: ``qd_cmd`` the commanded rates, ``jv`` the jump (its
+    parts already in the row), ``flag`` the flags so far. ``ws`` is the kernel's, as it left it.
+    """
+    m, n = J.shape
+    qd = _views(ws, m, n)[8]
+    for c in range(n):
+        qd[c] = qd_cmd[c]
+    ws[-1] = jv
+    return _finish(J, q, qd_prev, x, x_des, err, cols, vmax, params, method, k, T[k], off, ws, lim, flag)
+
+
+@njit
+def _finish(
+    J, q, qd_prev, x, x_des, err, cols, vmax, params, method, k, row, off, ws, lim, flag
+) -> int:  # pragma: no cover - numba
+    """Over-speed, ``k_S``, ``K``, ``σ_min``, the servo (clipped under limits), the row, ``q``."""
+    m, n = J.shape
+    f = cols.shape[0]
+    G, L, Wm, B, a, v, Nv, piv, qd, y, z = _views(ws, m, n)
     total = 0.0
     for c in range(n):
         total += qd[c] * qd[c]
         if abs(qd[c]) > vmax[c]:
             flag |= _FLAG_OVER_SPEED
     if not total < math.inf:
-        return -1
+        return REFERENCE
     row[off[O_K]] = _condition(G, J, cols, row[off[O_RCN] : off[O_RCN] + f], Wm, params[P_RCN_MAX])
-    lam = np.linalg.eigvalsh(G)
-    row[off[O_SIGMA]] = math.sqrt(max(lam[0], 0.0))
-    _follow(qd, qd_prev, params, k, method == LOCKED, row[off[O_QD] : off[O_QD] + n])
+    row[off[O_SIGMA]] = math.sqrt(max(np.linalg.eigvalsh(G)[0], 0.0))
+    qd_row = row[off[O_QD] : off[O_QD] + n]
+    _follow(qd, qd_prev, params, k, method == LOCKED, qd_row)
+    if params[P_BOUNDED] > 0.0:
+        flag |= _servo_clip(q, lim, params[P_DT], qd_row)
+    _write(row, off, q, qd, x, x_des, err, params[P_DT], ws[-1], flag)
+    return flag
+
+
+@njit
+def _write(row, off, q, qd, x, x_des, err, dt, jv, flag) -> None:  # pragma: no cover - numba
+    """The rest of the sample's row; then ``q ← q + q̇ dt`` with the executed rates."""
+    m, n = x.shape[0], q.shape[0]
     e = 0.0
     for i in range(m):
         row[off[O_X] + i] = x[i]
@@ -349,16 +374,20 @@ def sample_kernel(
     for c in range(n):
         row[off[O_Q] + c] = q[c]
         row[off[O_QCMD] + c] = qd[c]
-        q[c] += row[off[O_QD] + c] * params[P_DT]
+        q[c] += row[off[O_QD] + c] * dt
     row[off[O_ERROR]] = math.sqrt(e)
     row[off[O_JVJ]] = jv
     row[off[O_FLAGS]] = flag
-    return flag
+
+
+#: The last entries of the workspace: the planned rates' flags, whether they are inside the box
+#: (1.0; then clipped into it in ``qd``), the jump.
+W_FLAG, W_INSIDE, W_JUMP = -3, -2, -1
 
 
 def workspace_size(m: int, n: int) -> int:
-    """Length of the float workspace ``ws`` of :func:`sample_kernel`."""
-    return 3 * m * m + m * n + 5 * n + 2 * m
+    """Length of the float workspace ``ws`` of :func:`sample_kernel` (see ``W_*``)."""
+    return 3 * m * m + m * n + 5 * n + 2 * m + 3
 
 
 def compiled_sample_kernel() -> Callable:

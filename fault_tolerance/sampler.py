@@ -7,8 +7,11 @@ coefficient, MDA gradient); the kernel is :func:`~fault_tolerance.sample_kernel.
 installed and the run is one it covers: single-joint scenarios) and calls :meth:`Sampler.step` at
 every sample. A step returns False when the sample needs the reference code of the simulation
 (near a singularity of ``J`` or of a reduced Jacobian, where the reference damps; at the moment of
-a lock); the simulation then does that sample the reference way. The numbers are those of the
-reference (``tests/test_fastpath.py`` compares whole runs to 1e-9).
+a lock; under joint limits, when a bound of the rate box is met and the sample is the bounded
+problem of :func:`fault_tolerance.bounded.resolve_bounded`); the simulation then does that sample
+the reference way. Under joint limits every other sample is the compiled one, checked against the
+rate box (L1) by the compiled box check of :mod:`fault_tolerance.boxstep`. The numbers are those
+of the reference (``tests/test_fastpath.py`` compares whole runs to 1e-9, with and without limits).
 """
 
 from __future__ import annotations
@@ -21,6 +24,7 @@ from .indices import RCN_MAX
 from .kernels import TRACE_MAX
 from .linalg import PIVOT_EPS
 
+_TASK_SCALED = 64  # run.FLAG_TASK_SCALED
 _LWA = pin.LOCAL_WORLD_ALIGNED
 _WORLD = pin.WORLD
 
@@ -37,7 +41,7 @@ def available() -> bool:
     return True
 
 
-def covers(sc, algorithm: str, response: str) -> str | None:
+def covers(sc, algorithm: str, response: str, limits: bool = False) -> str | None:
     """Why :class:`Sampler` cannot run this simulation (None: it can)."""
     if not available():
         return "numba is not installed"
@@ -49,6 +53,8 @@ def covers(sc, algorithm: str, response: str) -> str | None:
         overflow = not np.isfinite(sc.weights.sum())
     if overflow:
         return "weights whose sum overflows (the reference rescales them)"
+    if limits and algorithm == "jvja" and response == "continuation":
+        return "JVJA's continuation response under joint limits (a bounded solve at every sample)"
     return None
 
 
@@ -66,8 +72,8 @@ class Sampler:
         arm, sc = s.arm, s.sc
         self.ctrl = Controller(
             arm, sc, method=s.algorithm, gain=s.gain, max_step=s.max_step, tolerate=True,
-            backend="lapack" if "lapack" in _backends() else "numpy",
-        )  # fmt: skip
+            backend="lapack" if "lapack" in _backends() else "numpy", limits=False,
+        )  # fmt: skip (its workspace; the box check is the kernel's own)
         self.kernel = sk.compiled_sample_kernel()
         self.model, self.data, self.fid = arm.model, self.ctrl.data, arm.frame_id
         self.rows = self.ctrl._rows
@@ -90,10 +96,20 @@ class Sampler:
         p[sk.P_DT] = s.dt
         p[sk.P_DECAY] = -1.0 if s.servo.tau == 0 else float(np.exp(-s.dt / s.servo.tau))
         p[sk.P_ACCEL] = s.servo.accel_limit * s.dt if np.isfinite(s.servo.accel_limit) else np.inf
+        p[sk.P_BOUNDED] = 1.0 if s.limits else 0.0
+        self.lim, self.prm, self.buf = _box_tables(arm, s)
         self.ws = np.zeros(sk.workspace_size(arm.m, arm.n))
         self.zeros = np.zeros(arm.n)
         self.table, self.off = rec["_table"], rec["_offsets"]
         self.qd_rows = rec["qd"]
+        m, n = arm.m, arm.n
+        o = 3 * m * m + m * n
+        self.a_ws, self.qd_ws = self.ws[o : o + n], self.ws[o + 4 * n : o + 5 * n]
+        self.finish = sk.finish_kernel
+        self.boxed = None  # the Controller's bounded step, built at the first sample that needs it
+        #: Samples handed to the reference code (not certified, the lock, a bound met after it),
+        #: and samples that met a bound, solved by the bounded resolvers here.
+        self.reference_samples, self.bounded_samples = 0, 0
 
     def _jacobian(self, q: np.ndarray):
         """``(J, ∇K or zeros)``; the tip placement is then in ``data.oMf[fid]``."""
@@ -130,12 +146,124 @@ class Sampler:
             qd_in = jvja(J, xd_cmd, self.s.sc, response="continuation", tolerate=True)
         flag = self.kernel(
             J, xd_cmd, qd_in, grad, q, state.qd, x, x_des, err, self.cols, self.w, self.vmax,
-            self.params, method, k, self.table, self.off, self.ws,
+            self.params, method, k, self.table, self.off, self.ws, self.lim, self.prm, self.buf,
         )  # fmt: skip
+        if flag == sk.BOUNDED:
+            flag = self._bounded(state, k, J, xd_cmd, x, x_des, err, method)
         if flag < 0:
+            self.reference_samples += 1
             return False
         state.qd = self.qd_rows[k].copy()
         return True
+
+    def _bounded(self, state, k: int, J, xd_cmd, x, x_des, err, method: int) -> int:
+        """Sample ``k`` that meets a bound of the rate box: the bounded resolvers, then the kernel.
+
+        The planned rates: the kernel's (clipped into the box) when LNVA's or MDA's are inside it,
+        else the :class:`~fault_tolerance.realtime.Controller`'s bounded step
+        (:func:`fault_tolerance.bounded.resolve_bounded` where a bound is met); the jump against
+        the reduced robots' rates under the box (:func:`~fault_tolerance.limits.post_failure_under_limits`,
+        L4-L5); the rest (indices, servo, record) by :func:`~fault_tolerance.sample_kernel.finish_kernel`.
+        The numbers are those of ``simulation._step`` under limits.
+        """
+        from .bounded import SCALE_TOL
+        from .run import FLAG_BOUND_ACTIVE, FLAG_INTOLERABLE_UNDER_LIMITS, FLAG_STEP_LIMITED
+
+        s, ws, sc = self.s, self.ws, self.s.sc
+        self.bounded_samples += 1
+        lo, hi = self.buf[0].copy(), self.buf[1].copy()
+        if method == sk.LOCKED:
+            return self._locked(state, k, J, xd_cmd, x, x_des, err, lo, hi)
+        if ws[sk.W_INSIDE] > 0 and method != sk.JVJA:  # JVJA's objective has the reduced robots'
+            qd_cmd, flag = self.qd_ws.copy(), int(ws[sk.W_FLAG])
+        else:
+            ctrl = self._boxed()
+            qd_cmd = ctrl.step(state.q, xd_cmd)
+            flag = (FLAG_BOUND_ACTIVE if ctrl.last_active.any() else 0) | (
+                _TASK_SCALED if ctrl.last_scale < 1.0 - SCALE_TOL else 0
+            )
+            if method == sk.MDA and np.linalg.norm(qd_cmd - self.a_ws) >= 0.999 * s.max_step:
+                flag |= FLAG_STEP_LIMITED
+        post, scales = self._posts(J, xd_cmd, qd_cmd, lo, hi)
+        if np.any(scales < 1.0 - SCALE_TOL):
+            flag |= FLAG_INTOLERABLE_UNDER_LIMITS
+        parts = sc.weights * np.einsum("fn,fn->f", post - qd_cmd, post - qd_cmd)
+        lo_p = self.off[sk.O_PARTS]
+        self.table[k, lo_p : lo_p + sc.f] = parts
+        return self.finish(
+            J, state.q, state.qd, x, x_des, err, self.cols, self.vmax, self.params, method, k,
+            self.table, self.off, ws, self.lim, qd_cmd, parts.sum(), flag,
+        )  # fmt: skip
+
+    def _locked(self, state, k: int, J, xd_cmd, x, x_des, err, lo, hi) -> int:
+        """After the lock, a sample that meets a bound: the reduced robot's bounded least-norm
+        rates (L4, :func:`~fault_tolerance.bounded.bounded_least_norm`), as ``simulation._step``."""
+        from .bounded import SCALE_TOL, bounded_least_norm
+        from .run import FLAG_BOUND_ACTIVE, FLAG_LOCKED
+
+        keep = state.keep
+        sol = bounded_least_norm(J[:, keep], xd_cmd, lo[keep], hi[keep])
+        qd_cmd = np.zeros(len(lo))
+        qd_cmd[keep] = sol.qd
+        flag = FLAG_LOCKED | (FLAG_BOUND_ACTIVE if sol.active.any() else 0)
+        flag |= _TASK_SCALED if sol.scale < 1.0 - SCALE_TOL else 0
+        lo_p = self.off[sk.O_PARTS]
+        self.table[k, lo_p : lo_p + len(self.cols)] = 0.0
+        return self.finish(
+            J, state.q, state.qd, x, x_des, err, self.cols, self.vmax, self.params, sk.LOCKED, k,
+            self.table, self.off, self.ws, self.lim, qd_cmd, 0.0, flag,
+        )  # fmt: skip
+
+    def _posts(self, J, xd_cmd, qd_cmd, lo, hi) -> tuple[np.ndarray, np.ndarray]:
+        """Rates each reduced robot takes under the box and its task scaling (L4), as
+        :func:`~fault_tolerance.limits.post_failure_under_limits`: its unbounded rates (G1, G3)
+        from the kernel's factors where they are inside the box, the bounded solve
+        (:func:`~fault_tolerance.bounded.reduced_bounded`) for those that are not."""
+        from .boxqp import BOX_TOL
+        from .bounded import reduced_bounded
+
+        m, n = J.shape
+        cols, f = self.cols, len(self.cols)
+        o = 3 * m * m
+        B = self.ws[o : o + m * n].reshape(m, n)
+        piv = self.ws[o + m * n + 3 * n : o + m * n + 3 * n + f]
+        base = qd_cmd if self.continuation else self.a_ws
+        Ncols = -(B[:, cols].T @ J)  # row t: N[cols[t], :] = N[:, cols[t]] (N = I - JᵀB)
+        Ncols[np.arange(f), cols] += 1.0
+        post = base - (base[cols] / piv)[:, None] * Ncols  # (G1) / (G3)
+        post[np.arange(f), cols] = 0.0
+        scales = np.ones(f)
+        inside = ((post >= lo - BOX_TOL) & (post <= hi + BOX_TOL)).all(axis=1)
+        np.clip(post, lo, hi, out=post)
+        target = qd_cmd if self.continuation else None
+        for t in np.flatnonzero(~inside):
+            sol = reduced_bounded(J, xd_cmd, (int(cols[t]),), lo, hi, target=target)
+            post[t], scales[t] = sol.qd, sol.scale
+        return post, scales
+
+    def _boxed(self):
+        """The Controller whose bounded step solves the samples that meet a bound."""
+        if self.boxed is None:
+            from .realtime import Controller
+
+            s = self.s
+            self.boxed = Controller(
+                s.arm, s.sc, method=s.algorithm, gain=s.gain, max_step=s.max_step,
+                tolerate=True, backend=self.ctrl.backend, limits=True, horizon=s.horizon,
+            )  # fmt: skip
+        return self.boxed
+
+
+def _box_tables(arm, s) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``lim`` (lower, upper, velocity limits; ±inf: none), ``prm = [1/h, 0, lock]``, ``buf``."""
+    from .bounded import NO_LIMIT
+
+    lim = np.empty((3, arm.n))
+    lim[0] = np.where(np.abs(arm.lower) < NO_LIMIT, arm.lower, -np.inf)
+    lim[1] = np.where(np.abs(arm.upper) < NO_LIMIT, arm.upper, np.inf)
+    lim[2] = s.vlimit if s.vlimit is not None else np.inf
+    prm = np.array([1.0 / s.horizon, 0.0, -1.0 if s.lock_col is None else s.lock_col])
+    return lim, prm, np.zeros((4, arm.n))
 
 
 def _backends() -> list[str]:

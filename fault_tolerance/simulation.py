@@ -187,10 +187,11 @@ def simulate(
             :class:`ServoModel()` with one.
         progress: A callable ``progress(k, K)`` or a tqdm-like object with ``update``.
         engine: ``"auto"`` (default): the compiled sample (:mod:`.sampler`, the controller's
-            workspace) where it applies, the reference code elsewhere; ``"fast"``: the compiled
-            sample or :class:`InvalidInput` saying why not (it does not cover runs under joint
-            limits: pass ``limits=False`` for the paper's rates); ``"reference"``: the plain reference
-            code (:mod:`.planner`, :mod:`.indices`) at every sample. The numbers agree to 1e-9.
+            workspace) where it applies, the reference code elsewhere (near singularities, at the
+            lock, and under joint limits at the samples that meet a bound); ``"fast"``: the
+            compiled sample or :class:`InvalidInput` saying why not; ``"reference"``: the plain
+            reference code (:mod:`.planner`, :mod:`.indices`, :mod:`.bounded`) at every sample.
+            The numbers agree to 1e-9.
         plan_options: Options of the global plan (``objective``, ``method``, ``limits``,
             ``rcn_max``, ``iterations``, ``dp_step``, ``dp_stage``; see
             :func:`fault_tolerance.wholepath.plan_path`); only with ``"global"``.
@@ -289,10 +290,9 @@ def _sampler(s: _Setup, rec: dict, engine: str):
         return None
     from . import sampler
 
-    # the compiled sample knows the unbounded resolvers only: a run under joint limits takes the
-    # bounded reference code at every sample (bounded resolvers, λ of the bounded reduced robots)
-    why = "runs under joint limits (limits=True)" if s.limits else None
-    why = why or sampler.covers(s.sc, s.algorithm, s.response)
+    # under joint limits the compiled sample is the bounded one while no bound is met; a sample
+    # that meets a bound is solved the bounded reference way (bounded.resolve_bounded)
+    why = sampler.covers(s.sc, s.algorithm, s.response, s.limits)
     if why is None:
         return sampler.Sampler(s, rec)
     if engine == "fast":

@@ -102,18 +102,102 @@ def test_engine_is_checked():
         simulate(panda, path, q0=q0, lockable=[(0, 1), 3], engine="fast", limits=False)
 
 
-def test_runs_under_joint_limits_take_the_bounded_reference_code():
-    """With limits on (the default) the compiled sample does not apply: 'fast' says so, 'auto'
-    runs the bounded reference code (the same run as engine='reference')."""
+@pytest.fixture
+def samplers(monkeypatch):
+    """The :class:`~fault_tolerance.sampler.Sampler` objects simulate builds, in order."""
+    from fault_tolerance import sampler
+
+    built, real = [], sampler.Sampler
+
+    def spy(*args, **kwargs):
+        built.append(real(*args, **kwargs))
+        return built[-1]
+
+    monkeypatch.setattr(sampler, "Sampler", spy)
+    return built
+
+
+def _bounded_pair(arm, path, alg, **kw):
+    """Under joint limits (the default): the compiled sample against the bounded reference code."""
+    fast = simulate(arm, path, alg, engine="fast", **kw)
+    ref = simulate(arm, path, alg, engine="reference", **kw)
+    _same(fast, ref)
+    assert fast.meta["limits"]["enabled"]
+    return fast, ref
+
+
+def _count(run, flag):
+    return int(np.count_nonzero(run.flags & flag))
+
+
+@pytest.mark.parametrize("alg", ["lnva", "jvja", "mda"])
+def test_bounds_met_before_and_after_a_lock_agree(alg, samplers):
+    """Joints near their limits: bounds are met (planned rates, reduced robots' rates) before and
+    after the lock; the compiled sample solves those samples by the bounded resolvers."""
+    from fault_tolerance.run import (
+        FLAG_BOUND_ACTIVE,
+        FLAG_INTOLERABLE_UNDER_LIMITS,
+        FLAG_LOCKED,
+        FLAG_NEAR_INTOLERABLE,
+    )
+
+    arm = ft.load_arm("planar_3r")
+    q0 = np.array([2.9, -2.5, 1.2])  # joints 1 and 2 near their limits
+    path = CirclePath(x0=arm.fk(q0), radius=0.1, omega=2 * np.pi, duration=0.6, rows=(0, 1))
+    kw = dict(q0=q0, lockable="all", lock_joint="joint3", lock_time=0.3,
+              servo=ServoModel(tau=0.05), feedback_gain=10.0)  # fmt: skip
+    fast, ref = _bounded_pair(arm, path, alg, **kw)
+    assert _count(ref, FLAG_INTOLERABLE_UNDER_LIMITS) > 0  # reduced robots met bounds
+    (smp,) = samplers
+    assert smp.bounded_samples > 0  # solved here by the bounded resolvers, not by the reference
+    # the reference does only the samples whose pivots it damps (near-intolerable) and the lock
+    assert smp.reference_samples == _count(ref, FLAG_NEAR_INTOLERABLE)
+    if alg == "mda":
+        before, after = ref.flags & FLAG_LOCKED == 0, ref.flags & FLAG_LOCKED != 0
+        assert np.any(ref.flags[before] & FLAG_BOUND_ACTIVE)  # the planned rates met bounds
+        assert np.any(ref.flags[after] & FLAG_BOUND_ACTIVE)  # and the reduced robot's after it
+    s, r = fast.summary(), ref.summary()
+    for key in ("bound_active_samples", "task_scaled_samples"):
+        assert s[key] == r[key]
+
+
+@pytest.mark.parametrize("alg", ["lnva", "jvja"])
+def test_bounded_planned_rates_and_scaled_task_agree(alg, samplers):
+    """A fast circle near a limit: the planned rates meet bounds and the task is scaled."""
+    from fault_tolerance.run import FLAG_BOUND_ACTIVE, FLAG_TASK_SCALED
+
+    arm = ft.load_arm("planar_3r")
+    q0 = np.array([2.9, -2.5, 1.2])
+    path = CirclePath(x0=arm.fk(q0), radius=0.15, omega=8 * np.pi, duration=0.25, rows=(0, 1))
+    fast, ref = _bounded_pair(arm, path, alg, q0=q0, lockable="all", feedback_gain=10.0,
+                              lock_joint="joint2", lock_time=0.12)  # fmt: skip
+    assert _count(ref, FLAG_BOUND_ACTIVE) > 0 and _count(ref, FLAG_TASK_SCALED) > 0
+    assert samplers[0].boxed is not None and samplers[0].boxed.bounded_steps > 0  # the Controller's
+
+
+def test_auto_engine_takes_the_compiled_sample_under_limits(samplers):
+    """With limits on, engine='auto' runs the compiled sample (as engine='fast')."""
+    built = samplers
     arm = ft.load_arm("planar_3r")
     q0 = np.array([0.3, 1.2, 1.0])
     path = CirclePath(arm.fk(q0), 0.1, 2 * np.pi, 0.05)
-    with pytest.raises(ft.InvalidInput, match="joint limits"):
-        simulate(arm, path, "jvja", q0=q0, engine="fast")
     auto = simulate(arm, path, "jvja", q0=q0)
-    ref = simulate(arm, path, "jvja", q0=q0, engine="reference")
-    np.testing.assert_array_equal(auto.q, ref.q)
-    assert auto.meta["limits"]["enabled"]
+    assert len(built) == 1 and built[0].s.limits
+    assert built[0].reference_samples == 0
+    fast = simulate(arm, path, "jvja", q0=q0, engine="fast")
+    np.testing.assert_array_equal(auto.q, fast.q)
+    _same(auto, simulate(arm, path, "jvja", q0=q0, engine="reference"))
+
+
+def test_continuation_jvja_under_limits_takes_the_reference():
+    """JVJA's continuation response under limits is a bounded solve at every sample."""
+    arm = ft.load_arm("planar_3r")
+    q0 = np.array([0.3, 1.2, 1.0])
+    path = CirclePath(arm.fk(q0), 0.1, 2 * np.pi, 0.02)
+    with pytest.raises(ft.InvalidInput, match="continuation response under joint limits"):
+        simulate(arm, path, "jvja", q0=q0, response="continuation", engine="fast")
+    _same(simulate(arm, path, "lnva", q0=q0, response="continuation", engine="fast"),
+          simulate(arm, path, "lnva", q0=q0, response="continuation", engine="reference"))  # fmt: skip
 
 
 def test_plain_python_kernel_matches_the_compiled_one():
@@ -135,7 +219,8 @@ def test_plain_python_kernel_matches_the_compiled_one():
         rec = _allocate(1, n, m, 3, 1e-3)
         flag = fn(J, xd, np.zeros(n), np.zeros(n), q.copy(), np.zeros(n), np.zeros(m),
                   np.zeros(m), np.zeros(m), cols, w, np.full(n, np.inf), params, sk.JVJA, 0,
-                  rec["_table"], rec["_offsets"], np.zeros(sk.workspace_size(m, n)))  # fmt: skip
+                  rec["_table"], rec["_offsets"], np.zeros(sk.workspace_size(m, n)),
+                  np.zeros((3, n)), np.zeros(3), np.zeros((4, n)))  # fmt: skip
         assert flag == 0
         rows.append(rec)
     for h in HISTORIES:
@@ -143,3 +228,34 @@ def test_plain_python_kernel_matches_the_compiled_one():
     ref = ft.resolve("jvja", J, xd, lockable=[0, 1, 2])
     np.testing.assert_allclose(rows[0]["qd_cmd"][0], ref, rtol=1e-10, atol=1e-14)
     np.testing.assert_allclose(rows[0]["rcn"][0], ft.rcn(J, [0, 1, 2]), rtol=1e-10)
+
+
+def test_kernel_under_limits_checks_the_rate_box():
+    """With P_BOUNDED: a wide box gives the unbounded row; a tight one returns BOUNDED (compiled
+    and plain Python alike), with the box (L1) of bounded.rate_box in ``buf``."""
+    from fault_tolerance.bounded import rate_box
+    from fault_tolerance.simulation import _allocate
+
+    arm = ft.load_arm("spatial_4r")
+    q = arm.random_q(np.random.default_rng(3))
+    J = np.ascontiguousarray(arm.jacobian(q))
+    m, n = J.shape
+    xd = np.array([0.1, 0.0, 0.05])
+    cols, w = np.array([0, 1, 2], dtype=np.int64), np.ones(3)
+    params = np.zeros(sk.N_PARAMS)
+    params[[sk.P_TRACE, sk.P_PIVOT, sk.P_WSUM, sk.P_RCN_MAX, sk.P_LOCK]] = 1e6, 1e-4, 3.0, 1e8, -1
+    params[[sk.P_DT, sk.P_DECAY, sk.P_ACCEL, sk.P_BOUNDED]] = 1e-3, -1.0, np.inf, 1.0
+    rates = ft.resolve("jvja", J, xd, lockable=[0, 1, 2])
+    for fn in (sk.compiled_sample_kernel(), sk.compiled_sample_kernel().py_func):
+        for speed, expect in ((20.0, 0), (0.5 * np.abs(rates).max(), sk.BOUNDED)):
+            lim = np.array([q - 2.0, q + 2.0, np.full(n, speed)])
+            rec, buf = _allocate(1, n, m, 3, 1e-3), np.zeros((4, n))
+            flag = fn(J, xd, np.zeros(n), np.zeros(n), q.copy(), np.zeros(n), np.zeros(m),
+                      np.zeros(m), np.zeros(m), cols, w, np.full(n, np.inf), params, sk.JVJA, 0,
+                      rec["_table"], rec["_offsets"], np.zeros(sk.workspace_size(m, n)), lim,
+                      np.array([1 / 0.05, 0.0, -1.0]), buf)  # fmt: skip
+            assert flag == expect
+            lo, hi = rate_box(q, lim[0], lim[1], lim[2], 0.05)
+            np.testing.assert_allclose(buf[:2], [lo, hi], rtol=1e-14, atol=1e-14)
+            if expect == 0:
+                np.testing.assert_allclose(rec["qd_cmd"][0], rates, rtol=1e-10, atol=1e-14)

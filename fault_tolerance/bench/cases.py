@@ -41,6 +41,7 @@ DESCRIPTIONS = {
     "jvja_multi": "JVJA step, two-joint scenarios (j, j+1) (Jacobian included)",
     "sim_jvja": "one simulated JVJA sample: rates, λ parts, k_S, K, σ_min, flags, record",
     "sim_lnva": "one simulated LNVA sample: rates, λ parts, k_S, K, σ_min, flags, record",
+    "sim_jvja_lim": "one simulated JVJA sample under joint limits (rate box checked; default)",
     "lnva": "LNVA step, fast path (Jacobian included)",
     "jvja": "JVJA step, closed form G2, fast path (Jacobian included)",
     "rcn": "RCN of all scenarios, one batched eigvalsh (Jacobian included)",
@@ -169,7 +170,8 @@ def floor_rows(case: Case) -> dict[str, Row]:
 
 
 def simulated_rows(case: Case) -> dict[str, Row]:
-    """One sample of ``simulate`` (the loop body), LNVA and JVJA, along a 1 s circle of 1 cm."""
+    """One sample of ``simulate`` (the loop body), LNVA and JVJA, along a 1 s circle of 1 cm; the
+    paper's sample (no limits) and JVJA's under the joint limits (simulate's default)."""
     from .. import simulation as sim
     from ..sampler import Sampler, covers
     from ..trajectories import CirclePath
@@ -180,9 +182,9 @@ def simulated_rows(case: Case) -> dict[str, Row]:
     q0 = case.qs[0]
     path = CirclePath(arm.fk(q0)[: arm.m], 0.01, 2 * np.pi, 1.0, rows=(0, 1))
     rows: dict[str, Row] = {}
-    for alg in ("lnva", "jvja"):
+    for alg, limits in (("lnva", False), ("jvja", False), ("jvja", True)):
         s = sim._setup(arm, path, alg, q0, sc, None, "least_norm", 1e-3, None, 0.0, 1e-2,
-                       None, None, None, limits=False)  # fmt: skip (the paper's sample)
+                       None, None, None, limits=limits)  # fmt: skip
         rec = sim._allocate(s.steps + 1, arm.n, arm.m, sc.f, s.dt)
         X, XD = sim.sample_path(path, rec["t"], arm.m)
         state = sim._State(q=q0.copy(), qd=np.zeros(arm.n), keep=np.arange(arm.n))
@@ -193,7 +195,7 @@ def simulated_rows(case: Case) -> dict[str, Row]:
             if not smp.step(state, k, X[k], XD[k]):
                 sim._step(s, state, k, rec, X[k], XD[k])
 
-        rows[f"sim_{alg}"] = (sample, [(k,) for k in range(s.steps + 1)])
+        rows[f"sim_{alg}" + ("_lim" if limits else "")] = (sample, [(k,) for k in range(s.steps + 1)])
     return rows
 
 

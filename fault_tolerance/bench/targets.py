@@ -93,6 +93,11 @@ def _issue11(key: str, med, jv) -> list[dict]:
         r = sim / jv
         out.append(_item(key, "sim_over_jvja", "simulated JVJA sample / JVJA step", r,
                          MAX_SIM_OVER_STEP, "<=", r <= MAX_SIM_OVER_STEP))  # fmt: skip
+    lim, free = med("sim_jvja_lim"), med("jvja_bounded_free")
+    if free and lim:
+        r = lim / free
+        out.append(_item(key, "sim_lim_over_bounded", "simulated JVJA sample under limits / "
+                         "bounded JVJA step", r, MAX_SIM_OVER_STEP, "<=", r <= MAX_SIM_OVER_STEP))  # fmt: skip
     if jv and multi:
         r = multi / jv
         out.append(_item(key, "multi_over_single", "two-joint JVJA / single-joint JVJA", r,

@@ -1,0 +1,153 @@
+"""The small dense linear algebra of one simulated sample, compiled: Cholesky, solves, ``N v``.
+
+Used by :func:`fault_tolerance.sample_kernel.sample_kernel`. ``G = J Jᵀ`` is factored once
+(``G = L Lᵀ``), ``B = G⁻¹J`` is kept, and the projector ``N = I - JᵀB`` is never formed: only its
+pivots ``N_ii`` and its products with vectors. Plain Python loops, valid without numba; compiled
+by numba when it is installed (cached on disk).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+try:  # compiled when numba is there (lazily, on first call; cached on disk)
+    import numba
+
+    njit = numba.njit(cache=True, nogil=True, error_model="numpy")
+except ImportError:  # pragma: no cover - numba is a core dependency
+
+    def njit(fn):
+        return fn
+
+
+#: Indices into ``params`` (shared with :mod:`fault_tolerance.sample_kernel`).
+P_TRACE, P_PIVOT, P_RANK, P_WSUM, P_GAIN, P_MAXSTEP, P_RCN_MAX, P_CONT, P_LOCK = range(9)
+P_DT, P_DECAY, P_ACCEL, P_BOUNDED = 9, 10, 11, 12
+N_PARAMS = 13
+
+
+@njit
+def _cholesky(G, L, m) -> bool:  # pragma: no cover - numba
+    """Lower Cholesky factor of the leading m x m block of G into L; False unless G is PD."""
+    for j in range(m):
+        s = G[j, j]
+        for k in range(j):
+            s -= L[j, k] * L[j, k]
+        if not s > 0.0:
+            return False
+        s = math.sqrt(s)
+        L[j, j] = s
+        for i in range(j + 1, m):
+            t = G[i, j]
+            for k in range(j):
+                t -= L[i, k] * L[j, k]
+            L[i, j] = t / s
+    return True
+
+
+@njit
+def _trace_inverse(L, z, m) -> float:  # pragma: no cover - numba
+    """``trace(G⁻¹) = ‖L⁻¹‖_F²``, column by column of ``L⁻¹`` (``z`` as scratch)."""
+    tr = 0.0
+    for j in range(m):
+        for i in range(j, m):
+            t = 1.0 if i == j else 0.0
+            for k in range(j, i):
+                t -= L[i, k] * z[k]
+            z[i] = t / L[i, i]
+            tr += z[i] * z[i]
+    return tr
+
+
+@njit
+def _solve(L, b, y, m) -> None:  # pragma: no cover - numba
+    """``y = G⁻¹ b`` with ``G = L Lᵀ`` (``y`` may be ``b``)."""
+    for i in range(m):
+        t = b[i]
+        for k in range(i):
+            t -= L[i, k] * y[k]
+        y[i] = t / L[i, i]
+    for i in range(m - 1, -1, -1):
+        t = y[i]
+        for k in range(i + 1, m):
+            t -= L[k, i] * y[k]
+        y[i] = t / L[i, i]
+
+
+@njit
+def _null_times(J, B, v, out, y) -> None:  # pragma: no cover - numba
+    """``out = N v = v - Jᵀ (B v)``, ``B = G⁻¹J``: O(mn), N never formed."""
+    m, n = J.shape
+    for i in range(m):
+        s = 0.0
+        for j in range(n):
+            s += B[i, j] * v[j]
+        y[i] = s
+    for j in range(n):
+        s = v[j]
+        for i in range(m):
+            s -= J[i, j] * y[i]
+        out[j] = s
+
+
+@njit
+def _condition(G, J, cols, ks, W, rcn_max) -> float:  # pragma: no cover - numba
+    """``k_S`` of every single-joint scenario into ``ks``, as ``indices.condition_numbers``; K."""
+    m = G.shape[0]
+    K = 0.0
+    for s in range(cols.shape[0]):
+        i = cols[s]
+        for r in range(m):
+            for c in range(m):
+                W[r, c] = G[r, c] - J[r, i] * J[c, i]
+        lam = np.linalg.eigvalsh(W)
+        smax = math.sqrt(max(lam[m - 1], 0.0))
+        smin = max(math.sqrt(max(lam[0], 0.0)), smax / rcn_max)
+        k = smax / smin if smax > 0.0 else rcn_max  # smin >= smax / rcn_max > 0 then
+        k = min(k, rcn_max)
+        ks[s] = k
+        K += k * k
+    return K
+
+
+@njit
+def _factor(J, xd, cols, params, G, L, B, a, piv, y, z) -> bool:  # pragma: no cover - numba
+    """Cholesky of ``G = J Jᵀ`` with its certificate, ``B = G⁻¹J``, ``a = J⁺ẋ``, pivots ``N_ii``.
+
+    False when the reference must do the sample (no certificate, or a pivot below PIVOT_EPS).
+    """
+    m, n = J.shape
+    if not _cholesky(G, L, m):
+        return False
+    tr = _trace_inverse(L, z, m)
+    if not tr <= params[P_TRACE]:
+        return False
+    if params[P_RANK] > 0.0:
+        s = 0.0
+        for i in range(m):
+            for c in range(n):
+                s += J[i, c] * J[i, c]
+        if not params[P_RANK] * s * tr < 1.0:
+            return False
+    for c in range(n):  # B = G⁻¹ J column by column
+        for i in range(m):
+            y[i] = J[i, c]
+        _solve(L, y, y, m)
+        for i in range(m):
+            B[i, c] = y[i]
+    for c in range(n):
+        s = 0.0
+        for i in range(m):
+            s += B[i, c] * xd[i]
+        a[c] = s
+    for k in range(cols.shape[0]):  # pivots N_ii = 1 - J_iᵀ B_i of the lockable columns
+        i = cols[k]
+        d = 1.0
+        for r in range(m):
+            d -= J[r, i] * B[r, i]
+        if not d >= params[P_PIVOT]:
+            return False
+        piv[k] = d
+    return True
