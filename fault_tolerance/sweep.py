@@ -69,8 +69,26 @@ def _bar(total: int, enabled: bool, desc: str, initial: int):
     return tqdm(total=total, initial=initial, disable=not enabled, desc=desc, unit="chunk")
 
 
+#: Environment of the embedded cluster's worker processes (set before they start): one BLAS /
+#: OpenMP / numba thread each, as Dask's default, but without Dask's ``MALLOC_TRIM_THRESHOLD_``:
+#: any explicit malloc threshold turns off glibc's adaptive mmap threshold, so every temporary
+#: array over 128 KiB is mapped and zero-filled afresh by the kernel (26x the page faults of the
+#: serial run and ~25 % more CPU per chunk of a planar map; README, "Workspace on two workers").
+WORKER_ENVIRON = {
+    f"distributed.nanny.pre-spawn-environ.{k}": v
+    for k, v in {
+        "MALLOC_TRIM_THRESHOLD_": None,
+        "OMP_NUM_THREADS": 1,
+        "OPENBLAS_NUM_THREADS": 1,
+        "MKL_NUM_THREADS": 1,
+        "NUMBA_NUM_THREADS": 1,
+    }.items()
+}
+
+
 def client_for(workers: int, scheduler: str | None):
     """A dask.distributed Client: the given scheduler, or an embedded loopback LocalCluster."""
+    import dask
     from dask.distributed import Client, LocalCluster
 
     if scheduler:
@@ -82,14 +100,15 @@ def client_for(workers: int, scheduler: str | None):
                 "`dask scheduler` and workers with `dask worker tcp://HOST:PORT`"
             ) from None
     local = {"host": "127.0.0.1"} if workers > 1 else {}  # loopback only; 1 worker: in-process
-    cluster = LocalCluster(
-        n_workers=workers,
-        threads_per_worker=1,
-        processes=workers > 1,
-        dashboard_address="127.0.0.1:0",  # its HTTP server starts anyway: loopback, any free port
-        silence_logs=40,
-        **local,
-    )
+    with dask.config.set(WORKER_ENVIRON):
+        cluster = LocalCluster(
+            n_workers=workers,
+            threads_per_worker=1,
+            processes=workers > 1,
+            dashboard_address="127.0.0.1:0",  # its HTTP server starts anyway: loopback, any port
+            silence_logs=40,
+            **local,
+        )
     return Client(cluster)
 
 

@@ -93,6 +93,7 @@ def workspace_spec(arm, limits=None, lockable=None, *, grid=None, samples=None, 
     spec = {"kind": "workspace", "robot": robot_spec(arm), "limits": lim.tolist()}
     spec["lockable"] = [arm.joint_names[arm.joint_index(j)] for j in lock]
     if chain is not None and arm.n == 3:
+        spec["layout"] = "radius-strided"  # chunk of each point: radius_layout (in the hash)
         theta = int(options.pop("theta_samples", THETA_SAMPLES))
         chunks = int(options.pop("chunks", CHUNKS))
         if options:
@@ -120,24 +121,30 @@ def planar_grid(spec: dict) -> tuple[np.ndarray, np.ndarray, float]:
     return ax[0], ax[1], h
 
 
-def _radius_groups(spec: dict) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Points inside the reach ordered by exact integer radius key; chunk boundaries."""
-    N = spec["grid"]
+def radius_layout(N: int, chunks: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Points inside the reach, ordered by exact integer radius key, and the chunk of each.
+
+    Returns ``(order, keys, chunk)``: flat point indices (``ix * N + iy``) sorted by ``4 ρ² / h²``
+    (exact integers), their keys, and their chunk. Points of one radius form a group (they share
+    one index table, :func:`_index_table`); group ``g`` (in radius order) goes to chunk
+    ``g mod chunks``, so every chunk holds radii from the whole range and all chunks cost about
+    the same whatever the limits (contiguous radius bands cost up to 5x more in the middle than
+    at the ends, leaving one of two workers idle at the end of a sweep).
+    """
     i = 2 * np.arange(N) - (N - 1)  # 2 (x - c) / h, integers
     key = (i[:, None] ** 2 + i[None, :] ** 2).ravel()  # 4 ρ² / h², exact; flat index = ix * N + iy
     inside = np.flatnonzero(key <= N * N)  # ρ <= R
     order = inside[np.argsort(key[inside], kind="stable")]
     ks = key[order]
-    targets = ks[np.linspace(0, len(ks), spec["chunks"] + 1).astype(int)[1:-1]]
-    bounds = np.concatenate([[0], np.searchsorted(ks, targets, "left"), [len(ks)]])
-    return order, ks, bounds
+    group = np.cumsum(np.concatenate([[False], ks[1:] != ks[:-1]]))
+    return order, ks, group % chunks
 
 
-def _lock_exact(i: int, rho, phi, l, A) -> np.ndarray:
+def _lock_exact(i: int, rho, phi, lengths, A) -> np.ndarray:
     """Joint i locks anywhere in ``A[i]`` and the other two turn fully: annulus tests, exact."""
     from .planar import cos_range
 
-    l1, l2, l3 = l
+    l1, l2, l3 = lengths
     tol = 1e-12
     if i == 0:  # base of the 2R (l2, l3) on the circle l1 e(θ), θ ∈ A_1
         cmin, cmax = cos_range(A[0, 0] - phi, A[0, 1] - phi)
@@ -151,9 +158,9 @@ def _lock_exact(i: int, rho, phi, l, A) -> np.ndarray:
     return (rho <= Lmin + lo + tol) & (rho >= max(abs(lo - Lmin), abs(lo - Lmax)) - tol)
 
 
-def _lock_sampled(i: int, d, l, A, P, T: int) -> np.ndarray:
+def _lock_sampled(i: int, d, lengths, A, P, T: int) -> np.ndarray:
     """Joint i locks at T angles of ``A[i]`` (ends included); exact 2R reach with limits at each."""
-    l1, l2, l3 = l
+    l1, l2, l3 = lengths
     ok = np.ones(len(d), dtype=bool)
     for th in np.linspace(A[i, 0], A[i, 1], T):
         if i == 0:
@@ -169,18 +176,18 @@ def _lock_sampled(i: int, d, l, A, P, T: int) -> np.ndarray:
     return ok
 
 
-def _self_motion(spec, chain, d, A):
-    """W(A) membership and the (point, sample, branch) IK validity over joint-3 samples."""
-    l1, l2, l3 = chain.lengths
+def _joint3_samples(spec, A) -> np.ndarray:
+    """The ``samples`` values of joint 3 (shifted) in ``A[2]`` (a full turn without its end)."""
     S = spec["samples"]
-    v3 = np.linspace(A[2, 0], A[2, 1], S, endpoint=not full_turn(A[2, 0], A[2, 1]))
-    ok = np.zeros((S, 2, len(d)), dtype=bool)
-    vb = np.zeros((S, 2, len(d)))
-    for s, t in enumerate(v3):
-        M, g = rigid_pair(l2, l3, t)
-        r = reach_2r(d, l1, M, A[0, 0], A[0, 1], A[1, 0] + g, A[1, 1] + g)
-        ok[s], vb[s] = r.ok, r.vb - g  # vb - g = v2
-    return ok, vb, v3
+    return np.linspace(A[2, 0], A[2, 1], S, endpoint=not full_turn(A[2, 0], A[2, 1]))
+
+
+def _reach_at(chain, d, t, A):
+    """2R reach of ``d`` by links (l1, |l2 + l3 e(t)|) with joint 3 at ``t``, in A; v2 per branch."""
+    l1, l2, l3 = chain.lengths
+    M, g = rigid_pair(l2, l3, t)
+    r = reach_2r(d, l1, M, A[0, 0], A[0, 1], A[1, 0] + g, A[1, 1] + g)
+    return r.ok, r.vb - g  # vb - g = v2
 
 
 def _index_table(arm, chain, lock_cols, v2, v3, valid):
@@ -208,15 +215,15 @@ def planar_chunk(spec: dict, k: int) -> dict[str, np.ndarray]:
     """Masks and maps of the points in chunk ``k`` of a planar-3R spec (a sweep's compute)."""
     arm = arm_of(spec)
     chain = planar_chain(arm)
-    order, keys, bounds = _radius_groups(spec)
-    idx = order[bounds[k] : bounds[k + 1]]
+    order, keys, chunk = radius_layout(spec["grid"], spec["chunks"])
+    mine = chunk == k
+    idx, keys = order[mine], keys[mine]
     x, y, h = planar_grid(spec)
     N = spec["grid"]
     d = np.stack([x[idx // N], y[idx % N]], 1) - chain.p0
     rho, phi = np.hypot(d[:, 0], d[:, 1]), np.arctan2(d[:, 1], d[:, 0])
     A = np.stack(chain.v_limits(*np.asarray(spec["limits"]).T), 1)
     P = np.stack(chain.v_limits(arm.lower, arm.upper), 1)
-    ok, v2, v3 = _self_motion(spec, chain, d, A)
     lock_cols = [arm.joint_names.index(j) for j in spec["lockable"]]
     locks = []
     for i in lock_cols:
@@ -225,22 +232,41 @@ def planar_chunk(spec: dict, k: int) -> dict[str, np.ndarray]:
             locks.append(_lock_exact(i, rho, phi, chain.lengths, A))
         else:
             locks.append(_lock_sampled(i, d, chain.lengths, A, P, spec["theta_samples"]))
-    # one index table per radius: the representative is the group's first point
-    ukeys, first, inv = np.unique(keys[bounds[k] : bounds[k + 1]], True, True)
-    rep_ok = np.array([_ik_real(chain, rho[first], t, A) for t in v3]).reshape(len(v3), 2, -1)
-    jt, Kt = _index_table(arm, chain, lock_cols, v2[:, :, first], v3, rep_ok)
-    jump = np.where(ok, jt[:, :, inv], np.nan)
-    K = np.where(ok, Kt[:, :, inv], np.nan)
-    with np.errstate(all="ignore"):
-        jmin = np.fmin.reduce(jump.reshape(2 * len(v3), -1), axis=0, initial=np.nan)
-        kmin = np.fmin.reduce(K.reshape(2 * len(v3), -1), axis=0, initial=np.nan)
+    pre, jmin, kmin = _self_motion_minima(spec, arm, chain, d, rho, keys, A, lock_cols)
     return {
         "index": idx,
-        "pre": ok.any(axis=(0, 1)),
+        "pre": pre,
         "locks": np.array(locks).reshape(len(lock_cols), len(idx)),
         "jump": jmin,
         "rcn": kmin,
     }
+
+
+def _self_motion_minima(spec, arm, chain, d, rho, keys, A, lock_cols):
+    """W(A) membership and the smallest jump and K over the joint-3 samples, per point.
+
+    The indices of a planar chain depend on the radius only, so one table per radius (its
+    group's first point) serves all its points; the samples are then visited one by one with
+    arrays of one value per point, never (samples, 2, points) ones.
+    """
+    v3 = _joint3_samples(spec, A)
+    _, first, inv = np.unique(keys, True, True)
+    rep_v2 = np.zeros((len(v3), 2, len(first)))
+    for s, t in enumerate(v3):
+        rep_v2[s] = _reach_at(chain, d[first], t, A)[1]
+    rep_ok = np.array([_ik_real(chain, rho[first], t, A) for t in v3]).reshape(len(v3), 2, -1)
+    jt, Kt = _index_table(arm, chain, lock_cols, rep_v2, v3, rep_ok)
+    pre = np.zeros(len(d), dtype=bool)
+    jmin = np.full(len(d), np.nan)
+    kmin = np.full(len(d), np.nan)
+    with np.errstate(all="ignore"):
+        for s, t in enumerate(v3):
+            ok = _reach_at(chain, d, t, A)[0]
+            for b in (0, 1):
+                pre |= ok[b]
+                np.fmin(jmin, np.where(ok[b], jt[s, b, inv], np.nan), out=jmin)
+                np.fmin(kmin, np.where(ok[b], Kt[s, b, inv], np.nan), out=kmin)
+    return pre, jmin, kmin
 
 
 def _ik_real(chain, rho, v3, A) -> np.ndarray:
@@ -289,7 +315,14 @@ def assemble_planar(spec: dict, chunks: list[dict]) -> Workspace:
 
 
 def failure_tolerant_workspace(
-    arm, limits=None, lockable=None, *, workers=0, scheduler=None, folder=None, progress=False,
+    arm,
+    limits=None,
+    lockable=None,
+    *,
+    workers=0,
+    scheduler=None,
+    folder=None,
+    progress=False,
     **options,
 ) -> Workspace:
     """Compute the failure-tolerant workspace of ``arm`` (module doc), serially or on Dask.
@@ -300,17 +333,37 @@ def failure_tolerant_workspace(
         limits: Artificial limits, (n, 2) [rad] or ``"lo:hi,..."`` (``deg=True`` for degrees);
             default: the physical limits (no artificial limits).
         lockable: Joints that may lock (default: the arm's default lockable joints).
-        workers, scheduler, folder, progress: see :func:`.sweep.run`.
+        workers: 0 serial, 1 an in-process Dask worker, N > 1 a local cluster of N processes
+            (:func:`.sweep.run`).
+        scheduler: Address of a running Dask scheduler (instead of ``workers``).
+        folder: Output folder for the finished chunks (resumable), or ``None``.
+        progress: Show a progress bar.
         **options: ``grid``, ``samples``, ``theta_samples``, ``chunks``, ``deg`` (and, for the
             sampled method, ``seed``).
     """
     spec = workspace_spec(arm, limits, lockable, **options)
     if spec["method"] == "planar-3r":
-        chunks = run(planar_chunk, spec, spec["chunks"], folder=folder, workers=workers,
-                     scheduler=scheduler, progress=progress, desc="workspace")
+        chunks = run(
+            planar_chunk,
+            spec,
+            spec["chunks"],
+            folder=folder,
+            workers=workers,
+            scheduler=scheduler,
+            progress=progress,
+            desc="workspace",
+        )
         return assemble_planar(spec, chunks)
     from .workspace_sampled import assemble_sampled, n_chunks, sampled_chunk
 
-    chunks = run(sampled_chunk, spec, n_chunks(spec), folder=folder, workers=workers,
-                 scheduler=scheduler, progress=progress, desc="workspace")
+    chunks = run(
+        sampled_chunk,
+        spec,
+        n_chunks(spec),
+        folder=folder,
+        workers=workers,
+        scheduler=scheduler,
+        progress=progress,
+        desc="workspace",
+    )
     return assemble_sampled(spec, chunks)

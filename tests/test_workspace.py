@@ -1,17 +1,22 @@
 """Failure-tolerant workspace: brute force, zero area, scaling, workers, resume."""
 
+import os
 import re
 
 import numpy as np
 import pytest
+from conftest import ROOT
 from scipy.optimize import least_squares
 
 import fault_tolerance as ft
 from fault_tolerance import sweep
 from fault_tolerance.errors import InvalidInput
-from fault_tolerance.workspace import failure_tolerant_workspace, planar_chunk, workspace_spec
-
-from conftest import ROOT
+from fault_tolerance.workspace import (
+    failure_tolerant_workspace,
+    planar_chunk,
+    radius_layout,
+    workspace_spec,
+)
 
 
 def scaled_urdf(tmp_path, factor, limit=3.14159, name="planar_3r.urdf"):
@@ -51,8 +56,14 @@ class _Brute:
         lo, hi = self.lo[self.free], self.hi[self.free]
         near = np.argsort(np.linalg.norm(self.X - p, axis=1))[:starts]
         for u0 in self.U[near]:
-            r = least_squares(lambda u: self.arm.fk(self._q(u)) - p, np.clip(u0, lo + 1e-9, hi - 1e-9),
-                              bounds=(lo, hi), xtol=1e-13, ftol=1e-13, gtol=1e-13)
+            r = least_squares(
+                lambda u: self.arm.fk(self._q(u)) - p,
+                np.clip(u0, lo + 1e-9, hi - 1e-9),
+                bounds=(lo, hi),
+                xtol=1e-13,
+                ftol=1e-13,
+                gtol=1e-13,
+            )
             if np.linalg.norm(r.fun) < 1e-7:
                 return True
         return False
@@ -104,7 +115,9 @@ def test_areas_scale_with_the_square_of_the_link_length(tmp_path):
     b = failure_tolerant_workspace(big, lim, **opts)
     assert a.area_ftw > 0
     np.testing.assert_array_equal(a.ftw, b.ftw)
-    np.testing.assert_allclose([b.area_pre, b.area_ftw], [4 * a.area_pre, 4 * a.area_ftw], rtol=1e-12)
+    np.testing.assert_allclose(
+        [b.area_pre, b.area_ftw], [4 * a.area_pre, 4 * a.area_ftw], rtol=1e-12
+    )
 
 
 def test_maps_are_minima_over_the_self_motion():
@@ -151,10 +164,35 @@ def test_local_cluster_listens_on_loopback_only():
         assert client.dashboard_link.startswith("http://127.0.0.1:")
         workers = client.scheduler_info()["workers"]
         assert len(workers) == 2 and all(w.startswith("tcp://127.0.0.1:") for w in workers)
+        # one BLAS / OpenMP / numba thread per worker, and no MALLOC_TRIM_THRESHOLD_ (which turns
+        # off glibc's adaptive mmap threshold: a page fault per fresh page of every temporary)
+        names = ("MALLOC_TRIM_THRESHOLD_", "OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS",
+                 "MKL_NUM_THREADS", "NUMBA_NUM_THREADS")  # fmt: skip
+        env = client.run(lambda: [os.environ.get(n) for n in names])
+        assert list(env.values()) == [[None, "1", "1", "1", "1"]] * 2, env
     finally:
         cluster = client.cluster
         client.close()
         cluster.close()
+
+
+@pytest.mark.parametrize("grid, chunks", [(801, 32), (201, 16), (40, 6), (3, 16)])
+def test_chunks_hold_every_radius_once_and_share_them_evenly(grid, chunks):
+    """Each point inside the reach is in one chunk; a radius is never split; chunks get nearly
+    equal numbers of radii (their cost) and of points, from the whole range of radii."""
+    order, keys, chunk = radius_layout(grid, chunks)
+    i = 2 * np.arange(grid) - (grid - 1)
+    assert np.array_equal(
+        np.sort(order), np.flatnonzero((i[:, None] ** 2 + i[None, :] ** 2).ravel() <= grid**2)
+    )
+    radii = [np.unique(keys[chunk == k]) for k in range(chunks)]
+    assert sum(len(r) for r in radii) == len(np.unique(keys))  # no radius in two chunks
+    counts = np.array([len(r) for r in radii])
+    assert counts.max() - counts.min() <= 1
+    if grid >= 201:
+        points = np.bincount(chunk, minlength=chunks)
+        assert points.max() < 1.2 * points.min()
+        assert all(r[0] < keys[len(keys) // 10] and r[-1] > keys[-len(keys) // 10] for r in radii)
 
 
 def test_chunks_are_kept_and_resumed(tmp_path, monkeypatch):
@@ -174,13 +212,16 @@ def test_chunks_are_kept_and_resumed(tmp_path, monkeypatch):
     with pytest.raises(KeyboardInterrupt):
         sweep.run(flaky, spec, 4, folder=tmp_path)
     folder = sweep.chunk_folder(tmp_path, spec)
-    assert sorted(p.name for p in folder.glob("chunk-*.npz")) == ["chunk-00000.npz", "chunk-00001.npz"]
+    assert sorted(p.name for p in folder.glob("chunk-*.npz")) == [
+        "chunk-00000.npz",
+        "chunk-00001.npz",
+    ]
     calls.clear()
     interrupt[0] = False
     chunks = sweep.run(flaky, spec, 4, folder=tmp_path)
     assert calls == [2, 3]
     ref = sweep.run(planar_chunk, spec, 4)
-    for c, r in zip(chunks, ref):
+    for c, r in zip(chunks, ref, strict=True):
         for key in r:
             np.testing.assert_array_equal(c[key], r[key])
     assert not list(folder.glob(".tmp-*"))
