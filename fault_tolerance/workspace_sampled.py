@@ -50,7 +50,11 @@ def sampled_spec(arm, spec: dict, *, grid=None, samples=None, **options) -> dict
         )
     theta = int(options.pop("theta_samples", 7))
     seed = int(options.pop("seed", 0))
-    options.pop("chunks", None)
+    if options.pop("chunks", None) is not None:
+        raise InvalidInput(
+            f"chunks applies to the planar-3R method; the sampled method ({arm.name}) chunks by "
+            f"{CHUNK_SAMPLES} configurations"
+        )
     if options:
         raise InvalidInput(f"unknown workspace option(s) {sorted(options)}")
     m = len(rows)

@@ -17,6 +17,24 @@ def test_help_has_an_example(cmd, capsys):
     assert "example:" in out and EXAMPLES[cmd].split("\n")[0][:40] in out and "dask worker" in out
 
 
+@pytest.mark.parametrize("cmd", ["workspace", "design"])
+def test_help_states_every_default(cmd, capsys):
+    """Issue 16 item 4: every option's help states its default, as numbers where it has one."""
+    with pytest.raises(SystemExit):
+        main([cmd, "--help"])
+    out = " ".join(capsys.readouterr().out.split())
+    if cmd == "workspace":
+        from fault_tolerance.workspace import CHUNKS, SAMPLES, THETA_SAMPLES
+
+        for text in ("--grid GRID points per axis (default: 201 for a planar 3R;",
+                     "24 for position", f"(default {SAMPLES})", f"(default: {THETA_SAMPLES} for",
+                     f"(default {CHUNKS})"):  # fmt: skip
+            assert text in out, text
+    assert "--grid GRID" in out and "--no-progress no progress bar (default:" in out
+    options = out.split("robot:")[0].replace("output folder (required; default: none)", "")
+    assert "(default: none)" not in options
+
+
 def test_workspace_writes_json_npz_png_and_resumes(tmp_path, capsys):
     """workspace writes its three files with areas in m², limits in rad; a rerun reuses chunks."""
     out = tmp_path / "ws"
@@ -66,6 +84,7 @@ def test_design_writes_json_and_png(tmp_path):
         (["design", "--robot", "spatial_4r"], "planar 3R"),
         (["design", "--robot", "planar_3r", "--objective", "fast"], "objective"),
         (["design", "--robot", "planar_3r", "--task", "square"], "circle"),
+        (["workspace", "--robot", "spatial_4r", "--chunks", "4"], "planar-3R method"),
     ],
 )
 def test_bad_input_is_one_line_exit_2(tmp_path, capsys, argv, words):

@@ -77,6 +77,17 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "joints; default 20000; 0 skips it)",
     )
     parser.add_argument(
+        "--workspace",
+        type=int,
+        nargs="?",
+        const=801,
+        default=None,
+        metavar="GRID",
+        help="also time the planar-3R failure-tolerant workspace as separate runs: 201x201 on one "
+        "Dask worker (target < 30 s), GRID x GRID (default 801) on one and on two workers "
+        "(target: two >= 1.7x faster, identical maps); opt-in, about 1.5 min on 2 idle cores",
+    )
+    parser.add_argument(
         "--plan",
         action="store_true",
         help="time the whole-path planner (algorithm 'global') instead: planar 3R, spatial 4R, "
@@ -138,6 +149,8 @@ def _header(args: argparse.Namespace, data: dict) -> str:
 
 def _check(args: argparse.Namespace) -> list[str]:
     """The arm keys, after checking ``--steps``, ``--warmup`` and ``--backend``."""
+    if args.workspace is not None and args.workspace < 2:
+        raise InvalidInput(f"--workspace GRID must be >= 2, got {args.workspace}")
     if args.batch_configurations < 0:
         raise InvalidInput(f"--batch-configurations must be >= 0, got {args.batch_configurations}")
     if args.steps < 1 or args.warmup < 0:
@@ -177,6 +190,12 @@ def _run(args: argparse.Namespace) -> int:
         progress(f"batched API ({args.batch_configurations} configurations)")
         batch = bench_batch(args.batch_configurations)
         items.append(target_item(batch))
+    sweep = None
+    if args.workspace is not None:
+        from ..workspace_bench import bench_workspace, target_items
+
+        sweep = bench_workspace(args.workspace, progress)
+        items += target_items(sweep)
     machine["loadavg_after"] = list(os.getloadavg()) if hasattr(os, "getloadavg") else None
     data = {
         "schema": SCHEMA,
@@ -187,6 +206,7 @@ def _run(args: argparse.Namespace) -> int:
         "results": results,
         "targets": items,
         "batch": batch,
+        "workspace": sweep,
     }
     print(_header(args, data))
     print(format_table(results))
@@ -196,6 +216,10 @@ def _run(args: argparse.Namespace) -> int:
             f"JVJA rates, jump, RCN): loop {batch['loop_us']:.1f} us, batch {batch['batch_us']:.1f} "
             f"us per configuration"
         )
+    if sweep:
+        from ..workspace_bench import format_workspace
+
+        print("\n" + format_workspace(sweep))
     print("\ntargets (medians; p99 for the latency bound)")
     print(format_targets(items))
     if args.json:

@@ -26,14 +26,27 @@ def add_parser(sub) -> argparse.ArgumentParser:
     )
     add_robot_options(s)
     s.add_argument("--vary", default="limits", help="limits | links,limits (default limits)")
-    s.add_argument("--objective", default="ftw-area", help="ftw-area | jvj | rcn")
+    s.add_argument(
+        "--objective", default="ftw-area", help="ftw-area | jvj | rcn (default ftw-area)"
+    )
     s.add_argument("--x0", default=None, help="circle start x,y [m] (default: the catalog's)")
-    s.add_argument("--radius", type=float, default=None, help="circle radius [m]")
-    s.add_argument("--rcn-max", type=float, default=None, help="require max K <= this on the task")
+    s.add_argument(
+        "--radius", type=float, default=None, help="circle radius [m] (default: the catalog's)"
+    )
+    s.add_argument(
+        "--rcn-max",
+        type=float,
+        default=None,
+        help="require max K <= this on the task (default: no requirement)",
+    )
     s.add_argument("--candidates", type=int, default=128, help="quasi-random designs (default 128)")
     s.add_argument("--rounds", type=int, default=4, help="pattern-search rounds (default 4)")
-    s.add_argument("--grid", type=int, default=201, help="grid of the chosen design's map")
-    s.add_argument("--seed", type=int, default=0)
+    s.add_argument(
+        "--grid", type=int, default=201, help="grid of the chosen design's map (default 201)"
+    )
+    s.add_argument(
+        "--seed", type=int, default=0, help="seed of the quasi-random designs (default 0)"
+    )
     add_dask_options(s)
     s.set_defaults(func=run)
     return s

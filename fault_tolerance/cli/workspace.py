@@ -29,10 +29,21 @@ DASK_HELP = (
 def add_dask_options(p: argparse.ArgumentParser) -> None:
     """``--workers N | --scheduler ADDR``, ``--out DIR``, ``--no-progress`` (the sweeps' options)."""
     g = p.add_mutually_exclusive_group()
-    g.add_argument("--workers", type=int, default=1, help="local worker processes (default 1)")
-    g.add_argument("--scheduler", default=None, help="address of a running Dask scheduler")
-    p.add_argument("--out", required=True, help="output folder")
-    p.add_argument("--no-progress", action="store_true")
+    g.add_argument(
+        "--workers",
+        type=int,
+        default=1,
+        help="local worker processes (default 1: one worker in this process; 0: serial)",
+    )
+    g.add_argument(
+        "--scheduler",
+        default=None,
+        help="address of a running Dask scheduler (default: a local cluster of --workers)",
+    )
+    p.add_argument("--out", required=True, help="output folder (required; default: none)")
+    p.add_argument(
+        "--no-progress", action="store_true", help="no progress bar (default: the bar is shown)"
+    )
 
 
 def singletons(lockable) -> list[str]:
@@ -55,11 +66,33 @@ def add_parser(sub) -> argparse.ArgumentParser:
     )
     s.add_argument("--deg", action="store_true", help="--limits in degrees")
     s.add_argument(
-        "--grid", type=int, default=None, help="points per axis (planar 201, spatial 24)"
+        "--grid",
+        type=int,
+        default=None,
+        help="points per axis (default: 201 for a planar 3R; sampled method: 101 for other "
+        "planar arms, 24 for position tasks)",
     )
-    s.add_argument("--samples", type=int, default=None, help="self-motion / configuration samples")
-    s.add_argument("--theta-samples", type=int, default=None, help="sampled lock angles")
-    s.add_argument("--chunks", type=int, default=None, help="chunks of a planar map (default 16)")
+    s.add_argument(
+        "--samples",
+        type=int,
+        default=None,
+        help="joint-3 values of the self-motion for a planar 3R (default 120); configurations "
+        "of the sampled method (default: 20000 planar, 40000 position)",
+    )
+    s.add_argument(
+        "--theta-samples",
+        type=int,
+        default=None,
+        help="lock angles per joint where the exact test does not apply (default: 181 for a "
+        "planar 3R, 7 for the sampled method)",
+    )
+    s.add_argument(
+        "--chunks",
+        type=int,
+        default=None,
+        help="chunks of a planar-3R map, each a share of the radii (default 16); the sampled "
+        "method chunks by 10000 configurations",
+    )
     add_dask_options(s)
     s.set_defaults(func=run)
     return s
