@@ -225,7 +225,8 @@ def resolve_bounded(name: str, J, xdot, lockable=None, *, bounds, **options) -> 
         if _inside(qd, lo, hi):
             return BoundedRates(np.clip(qd, lo, hi), 1.0, np.zeros(n, dtype=bool), empty)
         a = proj.Jpinv @ xdot
-        sol = solve_box(qd - a, a, _null_basis(proj.N), lo, hi)
+        sol = solve_box(proj.N @ (qd - a), a, _null_basis(proj.N), lo, hi)  # near a singularity
+        # the damped qd - a is not in the null space exactly; its task part stays in a
         return BoundedRates(sol.qd, sol.scale, sol.active, empty)
     names = options.get("joint_names") or (options["arm"].joint_names if options.get("arm") else ())
     sc = _scenarios(J, lockable, options.pop("weights", None), names)
