@@ -116,13 +116,17 @@ def compiled_box_status() -> Callable:
 
 
 def bounded_step(ctrl, name: str, inner: Callable, horizon: float) -> Callable:
-    """``step(q, xdot, out=None)``: ``inner`` (the unbounded fast step), checked against the box.
+    """``step(q, xdot, out=None)``: ``inner`` (the unbounded fast step), inside the rate box.
 
-    ``ctrl`` is the :class:`~fault_tolerance.realtime.Controller` being built.
+    ``ctrl`` is the :class:`~fault_tolerance.realtime.Controller` being built. With the numba
+    backend the whole step after the Jacobian is one compiled call
+    (:func:`fault_tolerance.boxsolve.bounded_kernel`); otherwise, and for every step the compiled
+    solve refuses, the reference route: ``inner``, the box check, and
+    :func:`~fault_tolerance.bounded.resolve_bounded` only when a bound is met.
 
     Sets ``ctrl.last_scale`` (task scaling of the last step, 1 when ``ẋ`` was reached) and
     ``ctrl.last_active`` (joints held at a bound); counts ``ctrl.bounded_steps`` (steps that needed
-    the bounded solver).
+    the bounded solver) and ``ctrl.bounded_reference_steps`` (those solved by the reference).
     """
     if not (np.isfinite(horizon) and horizon > 0):
         raise InvalidInput(f"horizon must be finite and > 0 [s], got {horizon}")
@@ -132,6 +136,17 @@ def bounded_step(ctrl, name: str, inner: Callable, horizon: float) -> Callable:
     lim[1] = np.where(np.abs(arm.upper) < NO_LIMIT, arm.upper, np.inf)
     lim[2] = velocity_limits(arm)
     prm = np.array([1.0 / horizon, ctrl._alpha])
+    reference = _reference_step(ctrl, name, inner, lim, prm)
+    if ctrl.backend != "numba":
+        return reference
+    from .boxfast import compiled_bounded_step
+
+    return compiled_bounded_step(ctrl, name, inner, reference, lim, prm)
+
+
+def _reference_step(ctrl, name: str, inner: Callable, lim, prm) -> Callable:
+    """The reference route: ``inner``, the box check, :func:`resolve_bounded` when a bound is met."""
+    n = ctrl.n
     buf = np.empty((4, n))  # lo, hi, scratch (n), scratch (m <= n)
     lo, hi = buf[0], buf[1]
     ws = ctrl._jvja_ws  # [P, Q, c] of the last JVJA fast step, N = I - PᵀQ (set by the kernels)
@@ -141,18 +156,20 @@ def bounded_step(ctrl, name: str, inner: Callable, horizon: float) -> Callable:
     dummy = np.zeros((ctrl.m, n)), np.zeros((ctrl.m, n)), np.zeros(n)
     sc = ctrl.scenarios
     general = name == "jvja" and not ctrl._singletons
-    inactive = np.zeros(n, dtype=bool)
+    state = ctrl._box_state
 
     def slow(q, xdot, out):
         J = ctrl.jacobian(q)
         opts = {"tolerate": ctrl.tolerate}
         if name == "mda":
             opts.update(dJ=ctrl.jacobian_derivatives(q), gain=ctrl.gain, max_step=ctrl.max_step)
+        box_status_numpy(q, lim, prm, buf, out, *dummy, cols, False)  # the box (L1) at q
         box = (lo.copy(), hi.copy())
         res = resolve_bounded(name, J, np.asarray(xdot, dtype=float), sc, bounds=box, **opts)
         out[...] = res.qd
-        ctrl.last_scale, ctrl.last_active = res.scale, res.active
+        state[0], state[1], state[2:] = res.scale, 1.0, res.active
         ctrl.bounded_steps += 1
+        ctrl.bounded_reference_steps += 1
         return out
 
     def step(q: np.ndarray, xdot: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
@@ -163,11 +180,13 @@ def bounded_step(ctrl, name: str, inner: Callable, horizon: float) -> Callable:
         status = check(q, lim, prm, buf, out, P, Q, c, cols, fresh)
         if status or general or (jv and not fresh):
             return slow(q, xdot, out)
-        ctrl.last_scale, ctrl.last_active = 1.0, inactive
+        state[0], state[1] = 1.0, 0.0
+        state[2:] = 0.0
         return out
 
+    step.slow = slow
     step.__name__ = name
-    step.__doc__ = f"{name} inside the rate box of the joint limits (horizon {horizon} s)."
+    step.__doc__ = f"{name} inside the rate box of the joint limits (reference route)."
     return step
 
 

@@ -176,6 +176,9 @@ class Controller:
         last_scale: Task scaling of the last step (1 unless the task was out of reach in the box).
         last_active: Joints held at a bound in the last step, bool (n,).
         bounded_steps: Number of steps that met a bound and were solved as the bounded problem.
+        bounded_reference_steps: Those of them solved by the Python reference
+            (:func:`fault_tolerance.bounded.resolve_bounded`) rather than compiled (near a
+            singularity, an empty box, the lapack and numpy backends).
     """
 
     step: Callable[..., np.ndarray]
@@ -250,8 +253,12 @@ class Controller:
         self._init_scenario_tables()
         self._jvja_ws: list = [None, None, None]  # P, Q, c of the last JVJA step: N = I - PᵀQ (kernels)
         self.limits = bool(limits)
-        self.last_scale, self.last_active = 1.0, np.zeros(self.n, dtype=bool)
+        # [last scale, 1 after a bounded step, active joints (1.0)]: the bounded steps write it
+        self._box_state = np.zeros(self.n + 2)
+        self._box_state[0] = 1.0
+        self._box_ws = None  # the compiled bounded steps' workspace (boxfast)
         self.bounded_steps = 0
+        self.bounded_reference_steps = 0
         if backend == "numba":
             self.lnva = kernels.compiled_step(self, 0)
             if self._singletons:
@@ -274,6 +281,16 @@ class Controller:
         self.step = {"lnva": self.lnva, "jvja": self.jvja, "mda": self.mda}[method]
 
     # -- helpers ----------------------------------------------------------------------------
+    @property
+    def last_scale(self) -> float:
+        """Task scaling of the last step (1 unless the task was out of reach in the box)."""
+        return float(self._box_state[0])
+
+    @property
+    def last_active(self) -> np.ndarray:
+        """Joints held at a bound in the last step, bool (n,) (a new array)."""
+        return self._box_state[2:] != 0.0
+
     @property
     def f(self) -> int:
         """Number of failure scenarios."""

@@ -1,0 +1,122 @@
+"""The Controller's bounded step with the numba backend: one compiled call per step.
+
+:func:`compiled_bounded_step` builds the step around :func:`fault_tolerance.boxsolve.bounded_kernel`:
+the Jacobian from Pinocchio, then one call that takes the unbounded step, checks it against the
+rate box (L1) and, only when a bound is met, solves the bounded problem (L2)-(L4) compiled. No
+closure layers, no allocation (with ``out=``). What the kernel refuses (near a singularity of
+``J`` or of a reduced Jacobian, an intolerable scenario, an empty box, inputs of other types) takes
+the reference route of :mod:`fault_tolerance.boxstep`, counted in ``bounded_reference_steps``
+when it solves a bounded problem.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import numpy as np
+import pinocchio as pin
+
+from .errors import FaultToleranceError
+
+_LWA = pin.LOCAL_WORLD_ALIGNED
+_F64 = np.dtype(np.float64)
+_MODES = {"lnva": 0, "jvja": 1, "mda": 2}
+_ERRORS = (ValueError, TypeError, RuntimeError, AttributeError, IndexError)
+
+
+def _workspace(ctrl):
+    """One float workspace per controller (its three steps share the scratch and the state)."""
+    from .boxsolve import workspace
+    from .kernels import TRACE_MAX
+
+    if getattr(ctrl, "_box_ws", None) is None:
+        sc, n = ctrl.scenarios, ctrl.n
+        smax = max(len(S) for S in sc.sets)
+        sets = -np.ones((sc.f, smax), dtype=np.int64)
+        for k, S in enumerate(sc.sets):
+            sets[k, : len(S)] = S
+        cols = sc.columns if ctrl._singletons else np.zeros(0, dtype=np.int64)
+        F, I, views = workspace(n, ctrl.m, sets, cols, 0)
+        views["fw"][:] = ctrl._fw
+        views["p4"][:] = TRACE_MAX, ctrl._pivot_threshold, ctrl._rank_coef, ctrl._alpha
+        views["p3"][:] = TRACE_MAX, ctrl._pivot_threshold, ctrl._rank_coef
+        views["wrel"][:] = sc.weights / sc.weights.sum()
+        views["state"][:] = ctrl._box_state
+        ctrl._box_state = views["state"]  # last_scale / last_active read it
+        ctrl._box_ws = (F, I, views)
+    return ctrl._box_ws
+
+
+def compiled_bounded_step(ctrl, name: str, inner: Callable, reference: Callable, lim, prm):
+    """``step(q, xdot, out=None)`` of method ``name`` inside the box, compiled (see module doc).
+
+    ``inner`` is the unbounded fast step, ``reference`` the reference route (same signature);
+    ``lim`` (3, n) the position and velocity limits, ``prm = [1/h, alpha]``.
+    """
+    from .boxsolve import JVJA_MULTI, bounded_kernel
+
+    F, I0, views = _workspace(ctrl)
+    views["lim"][:] = lim
+    views["prm"][:] = prm
+    I = I0.copy()  # its own mode; the int scratch of the copy is its own too
+    I[4] = JVJA_MULTI if (name == "jvja" and not ctrl._singletons) else _MODES[name]
+    n, m = ctrl.n, ctrl.m
+    model, data, fid, rows = ctrl.model, ctrl.data, ctrl.frame_id, ctrl._rows
+    cfj, empty, ndarray = pin.computeFrameJacobian, np.empty, np.ndarray
+    slow = reference.slow
+    J0 = cfj(model, data, pin.neutral(model), fid, _LWA)[rows]  # the type of the steps' J
+    bounded_kernel(J0, np.zeros(n + 1), np.zeros(m), np.zeros(n), F, I)  # compile (refused: sizes)
+
+    def bad(q, xdot, out) -> bool:
+        return (
+            type(out) is not ndarray
+            or type(xdot) is not ndarray
+            or type(q) is not ndarray
+            or out.dtype is not _F64
+            or xdot.dtype is not _F64
+            or q.dtype is not _F64
+        )
+
+    if name == "mda":
+
+        def step(q: np.ndarray, xdot: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+            before = ctrl.fallbacks
+            out = inner(q, xdot, out)
+            if ctrl.fallbacks != before or bad(q, xdot, out):
+                return slow(q, xdot, out)
+            status = bounded_kernel(ctrl.jacobian(q), q, xdot, out, F, I)
+            if status == 1:
+                ctrl.bounded_steps += 1
+            elif status:
+                return slow(q, xdot, out)  # out still holds the unbounded rates
+            return out
+
+    else:
+
+        def step(q: np.ndarray, xdot: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+            if out is None:
+                out = empty(n)
+            if (
+                type(out) is not ndarray
+                or type(xdot) is not ndarray
+                or type(q) is not ndarray
+                or out.dtype is not _F64
+                or xdot.dtype is not _F64
+                or q.dtype is not _F64
+            ):
+                return reference(q, xdot, out)  # converts, or says what is wrong
+            try:
+                status = bounded_kernel(cfj(model, data, q, fid, _LWA)[rows], q, xdot, out, F, I)
+            except FaultToleranceError:
+                raise
+            except _ERRORS:
+                return reference(q, xdot, out)
+            if status == 1:
+                ctrl.bounded_steps += 1
+            elif status:
+                return reference(q, xdot, out)
+            return out
+
+    step.__name__ = name
+    step.__doc__ = f"{name} inside the rate box of the joint limits; compiled."
+    return step
