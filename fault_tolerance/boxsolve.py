@@ -466,3 +466,43 @@ def bounded_kernel(J, q, xdot, out, F, I):  # pragma: no cover - numba
     if st:
         return 3
     return 1 if state[1] != 0.0 else 0
+
+
+#: Modes of :func:`bounded_solve` by resolver name.
+SOLVE_MODES = {"lnva": 0, "jvja": 1, "mda": 2}
+
+
+def bounded_rates(name: str, J, xdot, sets, lo, hi, *, weights=None, unbounded=None, params=None):
+    """:func:`bounded_solve` on one problem (tests, and callers without a Controller).
+
+    ``sets``: the scenarios (tuples of column indices); ``unbounded``: MDA's unbounded rates;
+    ``params``: ``[TRACE_MAX, pivot threshold, rank coefficient]`` (default: the Controller's
+    without ``tolerate``, with the rank test). Returns ``(code, qd, scale, active, bounded)``;
+    ``qd`` is meaningful only for code 0 (see the module doc).
+
+    Example:
+        >>> import numpy as np
+        >>> J = np.array([[1.0, 1.0, 1.0]])
+        >>> code, qd, s, act, _ = bounded_rates("lnva", J, np.array([0.3]), [(0,)],
+        ...                                     -np.ones(3), np.array([1.0, 1.0, 0.05]))
+        >>> code, [round(float(v), 3) for v in qd], s, act.tolist()
+        (0, [0.125, 0.125, 0.05], 1.0, [False, False, True])
+    """
+    from .kernels import TRACE_MAX
+    from .linalg import PIVOT_TOL
+
+    J = np.ascontiguousarray(J, dtype=float)
+    m, n = J.shape
+    smax = max(len(S) for S in sets)
+    table = -np.ones((len(sets), smax), dtype=np.int64)
+    for k, S in enumerate(sets):
+        table[k, : len(S)] = S
+    F, I, views = workspace(n, m, table, np.zeros(0, dtype=np.int64), SOLVE_MODES[name])
+    w = np.ones(len(sets)) if weights is None else np.asarray(weights, dtype=float)
+    views["wrel"][:] = w / w.sum()
+    views["p3"][:] = [TRACE_MAX, PIVOT_TOL, RANK_RTOL**2] if params is None else params
+    views["buf"][0], views["buf"][1] = lo, hi
+    out = np.zeros(n) if unbounded is None else np.array(unbounded, dtype=float)
+    code = bounded_solve(J, np.ascontiguousarray(xdot, dtype=float), out, SOLVE_MODES[name], F, I)
+    state = views["state"]
+    return int(code), out, float(state[0]), state[2:] != 0.0, bool(state[1])

@@ -156,7 +156,6 @@ def _reference_step(ctrl, name: str, inner: Callable, lim, prm) -> Callable:
     dummy = np.zeros((ctrl.m, n)), np.zeros((ctrl.m, n)), np.zeros(n)
     sc = ctrl.scenarios
     general = name == "jvja" and not ctrl._singletons
-    state = ctrl._box_state
 
     def slow(q, xdot, out):
         J = ctrl.jacobian(q)
@@ -167,6 +166,7 @@ def _reference_step(ctrl, name: str, inner: Callable, lim, prm) -> Callable:
         box = (lo.copy(), hi.copy())
         res = resolve_bounded(name, J, np.asarray(xdot, dtype=float), sc, bounds=box, **opts)
         out[...] = res.qd
+        state = ctrl._box_state  # the compiled steps' state when there are any
         state[0], state[1], state[2:] = res.scale, 1.0, res.active
         ctrl.bounded_steps += 1
         ctrl.bounded_reference_steps += 1
@@ -180,6 +180,7 @@ def _reference_step(ctrl, name: str, inner: Callable, lim, prm) -> Callable:
         status = check(q, lim, prm, buf, out, P, Q, c, cols, fresh)
         if status or general or (jv and not fresh):
             return slow(q, xdot, out)
+        state = ctrl._box_state
         state[0], state[1] = 1.0, 0.0
         state[2:] = 0.0
         return out
