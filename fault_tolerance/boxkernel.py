@@ -6,7 +6,9 @@ response): the same rows in the same order, the same tolerances and steps, the s
 certificates, which :func:`solve_box_rates` turns into the task scaling (L3) as
 :func:`fault_tolerance.boxqp.solve_box` does. Besides ``u`` (r) it keeps the rates' motion
 ``Z u`` (n), so a violation costs one subtraction. Scratch is preallocated by the caller; compiled
-by numba (plain Python without it, and tested so).
+by numba (plain Python without it, and tested so). Row norms are those of ``Z``, accurate to
+~1e-16 even for a joint that cannot move (which ``1 − ‖Y_j‖²`` of a Cholesky factor is not), so
+the same rows are "flat" as in the reference. See docs/MATH.md "Joint limits, compiled" (L7).
 
 Return codes: 0 solved, 1 a Farkas certificate (:func:`nearest_rates`), 4 no rates in the box
 reach any ``s ≥ 0`` (:class:`~fault_tolerance.errors.InfeasibleBounds` in the reference), 5 the
@@ -149,7 +151,7 @@ def _flat_row(ws, lo, hi, mask, n) -> int:  # pragma: no cover - numba
     return -1
 
 
-# Goldfarb & Idnani (1983) on the rows ±Z_j: boxqp.nearest_point in scalar loops.
+# Eqn. (L7): Goldfarb & Idnani (1983) on the rows ±Z_j, boxqp.nearest_point in scalar loops.
 @_njit
 def nearest_rates(Z, r, lo, hi, mask, ws, rows, info, gram):  # pragma: no cover - numba
     """Rates ``x + Z u`` in the box on ``mask`` (``x = ws[6]``), ``‖u‖`` least; ``ws[7] = Z u``.

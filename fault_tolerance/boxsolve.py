@@ -2,13 +2,15 @@
 
 :func:`bounded_solve` solves the bounded problem of :mod:`fault_tolerance.bounded` for LNVA, JVJA
 (least-norm response, scenarios of any size, weights) and MDA from ``J`` and ``ẋ`` with the
-dual active set on the rates of :mod:`fault_tolerance.boxkernel`: one Cholesky factor of ``J Jᵀ``
-gives ``a = J⁺ẋ`` and ``N``, each scenario's (G1) rates and, only when those leave the box,
-its projector ``K_S`` (L7) and its bounded rates. :func:`bounded_kernel` is the whole bounded
-step after the Jacobian in one compiled call: the unbounded step kernel, the box check
+dual active set of :mod:`fault_tolerance.boxkernel`: a Cholesky factor of ``J Jᵀ`` gives
+``a = J⁺ẋ``, a Householder QR of ``Jᵀ`` an orthonormal null-space basis ``Z`` (``N = Z Zᵀ``,
+never formed), each scenario's (G1) rates come from ``Z`` and, only when they leave the box, the
+reduced robot's basis ``Z_S`` (L6: ``Z`` reflected so that the locked joints' rows vanish) and
+its bounded rates (L4). :func:`bounded_kernel` is the whole bounded step after the Jacobian in
+one compiled call: the unbounded step kernel, the box check
 (:func:`fault_tolerance.boxstep.box_status`) and, only when a bound is met, :func:`bounded_solve`,
 all in the buffers of :func:`workspace` (two arrays, so the call is cheap). Plain Python without
-numba (and tested so).
+numba (and tested so). See docs/MATH.md "Joint limits, compiled".
 
 Codes of :func:`bounded_solve`: 0 solved, 1 no certificate ``σ_min(J) ≥ SIGMA_EPS`` (the
 reference damps), 2 a pivot below the threshold (intolerable, or damped with ``tolerate``), 3 a
@@ -128,7 +130,7 @@ def reduced_rates(Z, r, a, S, k, post, NSS, ys, thr, zr):  # pragma: no cover - 
     return trinv
 
 
-# Eqn. (L7): orthonormal bases of the task's null space and of a reduced robot's.
+# Eqn. (L6): orthonormal bases of the task's null space and of a reduced robot's.
 @_njit
 def null_basis(J, Z, QA, hb) -> int:  # pragma: no cover - numba
     """``Z[:, :r]`` an orthonormal basis of ``{q̇ : J q̇ = 0}`` (Householder QR of ``Jᵀ``); r.
