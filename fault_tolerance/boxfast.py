@@ -36,14 +36,14 @@ def _workspace(ctrl):
         for k, S in enumerate(sc.sets):
             sets[k, : len(S)] = S
         cols = sc.columns if ctrl._singletons else np.zeros(0, dtype=np.int64)
-        F, I, views = workspace(n, ctrl.m, sets, cols, 0)
+        F, Iw, views = workspace(n, ctrl.m, sets, cols, 0)
         views["fw"][:] = ctrl._fw
         views["p4"][:] = TRACE_MAX, ctrl._pivot_threshold, ctrl._rank_coef, ctrl._alpha
         views["p3"][:] = TRACE_MAX, ctrl._pivot_threshold, ctrl._rank_coef
         views["wrel"][:] = sc.weights / sc.weights.sum()
         views["state"][:] = ctrl._box_state
         ctrl._box_state = views["state"]  # last_scale / last_active read it
-        ctrl._box_ws = (F, I, views)
+        ctrl._box_ws = (F, Iw, views)
     return ctrl._box_ws
 
 
@@ -58,14 +58,14 @@ def compiled_bounded_step(ctrl, name: str, inner: Callable, reference: Callable,
     F, I0, views = _workspace(ctrl)
     views["lim"][:] = lim
     views["prm"][:] = prm
-    I = I0.copy()  # its own mode; the int scratch of the copy is its own too
-    I[4] = JVJA_MULTI if (name == "jvja" and not ctrl._singletons) else _MODES[name]
+    Iw = I0.copy()  # its own mode; the int scratch of the copy is its own too
+    Iw[4] = JVJA_MULTI if (name == "jvja" and not ctrl._singletons) else _MODES[name]
     n, m = ctrl.n, ctrl.m
     model, data, fid, rows = ctrl.model, ctrl.data, ctrl.frame_id, ctrl._rows
     cfj, empty, ndarray = pin.computeFrameJacobian, np.empty, np.ndarray
     slow = reference.slow
     J0 = cfj(model, data, pin.neutral(model), fid, _LWA)[rows]  # the type of the steps' J
-    bounded_kernel(J0, np.zeros(n + 1), np.zeros(m), np.zeros(n), F, I)  # compile (refused: sizes)
+    bounded_kernel(J0, np.zeros(n + 1), np.zeros(m), np.zeros(n), F, Iw)  # compile (refused: sizes)
 
     def bad(q, xdot, out) -> bool:
         return (
@@ -84,7 +84,7 @@ def compiled_bounded_step(ctrl, name: str, inner: Callable, reference: Callable,
             out = inner(q, xdot, out)
             if ctrl.fallbacks != before or bad(q, xdot, out):
                 return slow(q, xdot, out)
-            status = bounded_kernel(ctrl.jacobian(q), q, xdot, out, F, I)
+            status = bounded_kernel(ctrl.jacobian(q), q, xdot, out, F, Iw)
             if status == 1:
                 ctrl.bounded_steps += 1
             elif status:
@@ -106,7 +106,7 @@ def compiled_bounded_step(ctrl, name: str, inner: Callable, reference: Callable,
             ):
                 return reference(q, xdot, out)  # converts, or says what is wrong
             try:
-                status = bounded_kernel(cfj(model, data, q, fid, _LWA)[rows], q, xdot, out, F, I)
+                status = bounded_kernel(cfj(model, data, q, fid, _LWA)[rows], q, xdot, out, F, Iw)
             except FaultToleranceError:
                 raise
             except _ERRORS:

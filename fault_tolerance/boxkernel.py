@@ -104,7 +104,9 @@ def _step_dir(Z, r, rows, nA, p, ws, gram, n) -> float:  # pragma: no cover - nu
         rr[a] = ra * rp * _dot_rows(Z, r, ja, jp)
         for b in range(a + 1):
             kb = rows[b]
-            gram[a, b] = ra * (-1.0 if kb < n else 1.0) * _dot_rows(Z, r, ja, kb if kb < n else kb - n)
+            gram[a, b] = (
+                ra * (-1.0 if kb < n else 1.0) * _dot_rows(Z, r, ja, kb if kb < n else kb - n)
+            )
     if nA and not _cholesky(gram, nA):
         return -1.0
     _chol_solve(gram, nA, rr)
@@ -246,7 +248,9 @@ def _certificate_root(p0, d, lo, hi, rows, ws, k, n):  # pragma: no cover - numb
 
 # (L2) with (L3): boxqp.solve_box in scalar loops.
 @_njit
-def solve_box_rates(p0, d, Z, r, lo, hi, mask, qd, act, ws, wsi, gram, out):  # pragma: no cover - numba
+def solve_box_rates(
+    p0, d, Z, r, lo, hi, mask, qd, act, ws, wsi, gram, out
+):  # pragma: no cover - numba
     """Rates ``p₀ + s d + Z u`` in the box on ``mask``, ``s ≤ 1`` largest; ``out[0] = s``.
 
     ``act`` (n,) gets 1.0 on joints held at a bound; ``out[1]`` is 1 when a bound was met. Joints

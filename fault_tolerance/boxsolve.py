@@ -20,202 +20,18 @@ active set did not converge. Every code but 0 is left to the reference.
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 
-from .boxkernel import _chol_solve, _cholesky, _dot_rows, _njit, solve_box_rates
+from .boxbasis import factor, null_basis, reduced_basis, reduced_rates, undamped
+from .boxcheck import compiled_box_status
+from .boxkernel import _njit, solve_box_rates
 from .boxqp import BOX_TOL
-from .linalg import RANK_RTOL
-from .boxstep import compiled_box_status
 from .kernels import compiled_kernel
+from .linalg import RANK_RTOL
 from .multi_kernel import multi_kernel
 
 _step_kernel = compiled_kernel("step")
 _box_status = compiled_box_status()
-
-
-@_njit
-def factor(J, xdot, L, Y, z, a, params):  # pragma: no cover - numba
-    """``J Jᵀ = L Lᵀ``, ``Y = L⁻¹J``, ``a = Yᵀ L⁻¹ẋ = J⁺ẋ``; returns ``(status, trace(G⁻¹))``.
-
-    Status 1 without the certificates of :func:`fault_tolerance.kernels.step_kernel`
-    (``trace(G⁻¹) = ‖L⁻¹‖_F² ≤ params[0]``, and the rank test when ``params[2] > 0``).
-    """
-    m, n = J.shape
-    for i in range(m):
-        for j in range(i + 1):
-            s = 0.0
-            for k in range(n):
-                s += J[i, k] * J[j, k]
-            L[i, j] = s
-    if not _cholesky(L, m):
-        return 1, math.inf
-    tr = 0.0
-    for j in range(m):  # column j of L⁻¹ into z (scratch)
-        for i in range(m):
-            z[i] = 0.0
-        for i in range(j, m):
-            t = 1.0 if i == j else 0.0
-            for k in range(j, i):
-                t -= L[i, k] * z[k]
-            z[i] = t / L[i, i]
-            tr += z[i] * z[i]
-    if not tr <= params[0]:
-        return 1, tr
-    if params[2] > 0.0:
-        s = 0.0
-        for i in range(m):
-            for k in range(n):
-                s += J[i, k] * J[i, k]
-        if not params[2] * s * tr < 1.0:
-            return 1, tr
-    for col in range(n):
-        for i in range(m):
-            t = J[i, col]
-            for k in range(i):
-                t -= L[i, k] * Y[k, col]
-            Y[i, col] = t / L[i, i]
-    for i in range(m):
-        t = xdot[i]
-        for k in range(i):
-            t -= L[i, k] * z[k]
-        z[i] = t / L[i, i]
-    for col in range(n):
-        t = 0.0
-        for i in range(m):
-            t += Y[i, col] * z[i]
-        a[col] = t
-    return 0, tr
-
-
-@_njit
-def reduced_rates(Z, r, a, S, k, post, NSS, ys, thr, zr):  # pragma: no cover - numba
-    """(G1) rates ``post`` of the reduced robot ``S = S[:k]`` (``N = Z Zᵀ``); ``tr(N[S,S]⁻¹)``.
-
-    Returns −1 when ``N[S, S] − thr·I`` is not positive definite (a pivot below the threshold).
-    ``zr`` (r,) is scratch.
-    """
-    n = a.shape[0]
-    for t in range(k):
-        for u in range(t + 1):
-            NSS[t, u] = _dot_rows(Z, r, S[t], S[u]) - (thr if t == u else 0.0)
-    if not _cholesky(NSS, k):
-        return -1.0
-    for t in range(k):
-        for u in range(t + 1):
-            NSS[t, u] = _dot_rows(Z, r, S[t], S[u])
-    _cholesky(NSS, k)
-    for t in range(k):
-        ys[t] = a[S[t]]
-    _chol_solve(NSS, k, ys)
-    for c in range(r):  # N[:, S] y = Z (Z_Sᵀ y)
-        t2 = 0.0
-        for t in range(k):
-            t2 += Z[S[t], c] * ys[t]
-        zr[c] = t2
-    for j in range(n):
-        v = a[j]
-        for c in range(r):
-            v -= Z[j, c] * zr[c]
-        post[j] = v
-    for t in range(k):
-        post[S[t]] = 0.0
-    trinv = 0.0
-    for t in range(k):  # tr(N[S,S]⁻¹): column t of the inverse, its t-th entry
-        for u in range(k):
-            ys[u] = 1.0 if u == t else 0.0
-        _chol_solve(NSS, k, ys)
-        trinv += ys[t]
-    return trinv
-
-
-# Eqn. (L6): orthonormal bases of the task's null space and of a reduced robot's.
-@_njit
-def null_basis(J, Z, QA, hb) -> int:  # pragma: no cover - numba
-    """``Z[:, :r]`` an orthonormal basis of ``{q̇ : J q̇ = 0}`` (Householder QR of ``Jᵀ``); r.
-
-    ``Z`` (n, n), ``QA`` (n, m), ``hb`` (m,) scratch. ``J`` has full rank (certified before).
-    """
-    m, n = J.shape
-    for j in range(n):
-        for i in range(m):
-            QA[j, i] = J[i, j]
-    for j in range(m):  # H_j = I − v vᵀ / β on rows j..n−1, v stored in QA[j:, j]
-        nrm = 0.0
-        for i in range(j, n):
-            nrm += QA[i, j] * QA[i, j]
-        nrm = math.sqrt(nrm)
-        QA[j, j] -= -nrm if QA[j, j] >= 0.0 else nrm
-        beta = 0.0
-        for i in range(j, n):
-            beta += QA[i, j] * QA[i, j]
-        hb[j] = beta / 2.0
-        if hb[j] == 0.0:
-            continue
-        for c in range(j + 1, m):
-            t = 0.0
-            for i in range(j, n):
-                t += QA[i, j] * QA[i, c]
-            t /= hb[j]
-            for i in range(j, n):
-                QA[i, c] -= t * QA[i, j]
-    r = n - m
-    for i in range(n):  # Z = H_0 ... H_{m−1} [0; I]: the last r columns of Q
-        for c in range(r):
-            Z[i, c] = 1.0 if i == m + c else 0.0
-    for j in range(m - 1, -1, -1):
-        if hb[j] == 0.0:
-            continue
-        for c in range(r):
-            t = 0.0
-            for i in range(j, n):
-                t += QA[i, j] * Z[i, c]
-            t /= hb[j]
-            for i in range(j, n):
-                Z[i, c] -= t * QA[i, j]
-    return r
-
-
-@_njit
-def reduced_basis(Z, r, S, k, Zs, w) -> int:  # pragma: no cover - numba
-    """``Zs[:, :r − k]``: orthonormal basis of ``{q̇ : J q̇ = 0, q̇_S = 0}`` from ``Z``; ``r − k``.
-
-    For each locked joint ``i`` a Householder reflection of the columns maps row ``i`` of the
-    basis onto its last column, which is dropped; the other columns keep row ``i`` at ~1e-16 (set
-    to 0). A joint that cannot move keeps rows of ~1e-16, as the reference's eigenvectors do.
-    ``w`` (r,) is scratch. −1 when a locked joint's row is zero (N_ii = 0: refused before).
-    """
-    n = Zs.shape[0]
-    for i in range(n):
-        for c in range(r):
-            Zs[i, c] = Z[i, c]
-    rc = r
-    for t in range(k):
-        i = S[t]
-        nrm = 0.0
-        for c in range(rc):
-            w[c] = Zs[i, c]
-            nrm += w[c] * w[c]
-        nrm = math.sqrt(nrm)
-        if nrm == 0.0:
-            return -1
-        last = rc - 1
-        w[last] -= -nrm if w[last] >= 0.0 else nrm  # w = v − α e_last, α = −sign(v_last) ‖v‖
-        beta = 0.0
-        for c in range(rc):
-            beta += w[c] * w[c]
-        for j in range(n):
-            d = 0.0
-            for c in range(rc):
-                d += Zs[j, c] * w[c]
-            d *= 2.0 / beta
-            for c in range(rc):
-                Zs[j, c] -= d * w[c]
-        rc -= 1
-        for c in range(rc):
-            Zs[i, c] = 0.0
-    return rc
 
 
 # -- the whole bounded step after the Jacobian, in one call --------------------------------------
@@ -246,7 +62,7 @@ def _shapes(n, m, f, s, k) -> dict[str, tuple[int, ...]]:
 
 
 def workspace(n: int, m: int, sets: np.ndarray, cols: np.ndarray, mode: int):
-    """``(F, I, views)``: the float and int buffers of :func:`bounded_kernel` and NumPy views of them.
+    """``(F, Iw, views)``: the float and int buffers of :func:`bounded_kernel` and NumPy views of them.
 
     ``sets`` (f, s) int, −1 padded; ``cols`` the lockable columns (single-joint scenarios).
     """
@@ -256,46 +72,46 @@ def workspace(n: int, m: int, sets: np.ndarray, cols: np.ndarray, mode: int):
     sizes_f = [int(np.prod(shapes[code])) for _, code in _FLOAT]
     sizes_i = [int(np.prod(shapes[code])) for _, code in _INT]
     F = np.zeros(sum(sizes_f))
-    I = np.zeros(_HEAD + len(_FLOAT) + len(_INT) + sum(sizes_i), dtype=np.int64)
-    I[:6] = n, m, f, s, mode, k
+    Iw = np.zeros(_HEAD + len(_FLOAT) + len(_INT) + sum(sizes_i), dtype=np.int64)
+    Iw[:6] = n, m, f, s, mode, k
     views, o = {}, 0
     for t, ((name, code), size) in enumerate(zip(_FLOAT, sizes_f, strict=True)):
-        I[_HEAD + t] = o
+        Iw[_HEAD + t] = o
         views[name] = F[o : o + size].reshape(shapes[code])
         o += size
     o = _HEAD + len(_FLOAT) + len(_INT)
     for t, ((name, code), size) in enumerate(zip(_INT, sizes_i, strict=True)):
-        I[_HEAD + len(_FLOAT) + t] = o
-        views[name] = I[o : o + size].reshape(shapes[code])
+        Iw[_HEAD + len(_FLOAT) + t] = o
+        views[name] = Iw[o : o + size].reshape(shapes[code])
         o += size
     views["cols"][:] = cols
     views["sets"][:] = sets
     views["state"][0] = 1.0
-    return F, I, views
+    return F, Iw, views
 
 
 @_njit
-def _fv(F, I, t, r):  # pragma: no cover - numba
-    o = I[_HEAD + t]
+def _fv(F, Iw, t, r):  # pragma: no cover - numba
+    o = Iw[_HEAD + t]
     return F[o : o + r]
 
 
 @_njit
-def _fm(F, I, t, r, c):  # pragma: no cover - numba
-    o = I[_HEAD + t]
+def _fm(F, Iw, t, r, c):  # pragma: no cover - numba
+    o = Iw[_HEAD + t]
     return F[o : o + r * c].reshape((r, c))
 
 
 @_njit
-def _im(F, I, t, r, c):  # pragma: no cover - numba
-    o = I[_HEAD + _NF + t]
-    return I[o : o + r * c].reshape((r, c))
+def _im(F, Iw, t, r, c):  # pragma: no cover - numba
+    o = Iw[_HEAD + _NF + t]
+    return Iw[o : o + r * c].reshape((r, c))
 
 
 @_njit
-def _iv(F, I, t, r):  # pragma: no cover - numba
-    o = I[_HEAD + _NF + t]
-    return I[o : o + r]
+def _iv(F, Iw, t, r):  # pragma: no cover - numba
+    o = Iw[_HEAD + _NF + t]
+    return Iw[o : o + r]
 
 
 @_njit
@@ -325,7 +141,7 @@ def _jvja_target(J, Z, r, V, tr, lo, hi, sets, wrel, params, W, res):  # pragma:
             for j in range(n):
                 cbar[j] += wrel[sc] * min(max(post[j], lo[j]), hi[j])
             continue
-        if not _undamped(J, S, k, tr * trinv, params, Gs):
+        if not undamped(J, S, k, tr * trinv, params, Gs):
             return 3
         rs = reduced_basis(Z, r, S, k, Zs, zr)
         if rs < 0:
@@ -346,37 +162,9 @@ def _jvja_target(J, Z, r, V, tr, lo, hi, sets, wrel, params, W, res):  # pragma:
     return 0
 
 
-@_njit
-def _undamped(J, S, k, bound, params, Gs) -> bool:  # pragma: no cover - numba
-    """Whether the reference's projection of ``J_S`` is undamped and of full rank (as ``J``'s).
-
-    First the certificate ``trace((J_S J_Sᵀ)⁻¹) ≤ trace(G⁻¹) λ_max(N[S,S]⁻¹) = bound ≤
-    TRACE_MAX``; else the eigenvalues of ``J_S J_Sᵀ`` (then ``λ_min`` must clear ``SIGMA_EPS²``
-    by a margin of 1e-8, so rounding cannot flip the reference's choice).
-    """
-    m, n = J.shape
-    fro = 0.0
-    for i in range(m):
-        for j in range(i + 1):
-            t = 0.0
-            for c in range(n):
-                locked = False
-                for u in range(k):
-                    locked = locked or S[u] == c
-                if not locked:
-                    t += J[i, c] * J[j, c]
-            Gs[i, j] = t
-            Gs[j, i] = t
-        fro += Gs[i, i]
-    if bound <= params[0] and params[2] * fro * bound < 1.0:
-        return True
-    lam = np.linalg.eigvalsh(Gs.copy())
-    return lam[0] > (1.0 + 1e-8) / params[0] and lam[0] > (1.0 + 1e-8) * RANK_RTOL**2 * lam[-1]
-
-
 # The Controller's bounded step after its unbounded rates: (L2)-(L4) for LNVA, JVJA and MDA.
 @_njit
-def bounded_solve(J, xdot, out, mode, F, I):  # pragma: no cover - numba
+def bounded_solve(J, xdot, out, mode, F, Iw):  # pragma: no cover - numba
     """Rates of ``mode`` (0 LNVA, 1 JVJA least-norm response, 2 MDA) in the box into ``out``.
 
     The box is ``buf[0], buf[1]`` of the workspace (:func:`workspace`; the box check writes it).
@@ -385,24 +173,24 @@ def bounded_solve(J, xdot, out, mode, F, I):  # pragma: no cover - numba
     ``state[2:]`` 1.0 on joints held at a bound. Returns a code of the module doc (0: solved;
     otherwise ``out`` is untouched).
     """
-    n, m, f, s = I[0], I[1], I[2], I[3]
-    buf, state = _fm(F, I, _BUF, 4, n), _fv(F, I, _STATE, n + 2)
+    n, m, f, s = Iw[0], Iw[1], Iw[2], Iw[3]
+    buf, state = _fm(F, Iw, _BUF, 4, n), _fv(F, Iw, _STATE, n + 2)
     lo, hi = buf[0], buf[1]
-    Z, V, p3 = _fm(F, I, _ZM, n, n), _fm(F, I, _V, 7, n), _fv(F, I, _P3, 3)
+    Z, V, p3 = _fm(F, Iw, _ZM, n, n), _fm(F, Iw, _V, 7, n), _fv(F, Iw, _P3, 3)
     a, p0, qd, zr = V[0], V[3], V[4], V[6]
-    Gs = _fm(F, I, _LM, m, m)
-    st, tr = factor(J, xdot, Gs, _fm(F, I, _Y, m, n), _fv(F, I, _Z, m), a, p3)
+    Gs = _fm(F, Iw, _LM, m, m)
+    st, tr = factor(J, xdot, Gs, _fm(F, Iw, _Y, m, n), _fv(F, Iw, _Z, m), a, p3)
     if st:
         return 1
-    r = null_basis(J, Z, _fm(F, I, _QA, n, m), _fv(F, I, _HB, m))
-    mask, ws, wsi = _iv(F, I, _MASK, n), _fm(F, I, _WSF, 8, n + 1), _im(F, I, _WSI, 2, n + 1)
-    gram = _fm(F, I, _GRAM, n + 1, n + 1)
+    r = null_basis(J, Z, _fm(F, Iw, _QA, n, m), _fv(F, Iw, _HB, m))
+    mask, ws, wsi = _iv(F, Iw, _MASK, n), _fm(F, Iw, _WSF, 8, n + 1), _im(F, Iw, _WSI, 2, n + 1)
+    gram = _fm(F, Iw, _GRAM, n + 1, n + 1)
     res = state[:2]
     res[1] = 0.0
     if mode == 1:
-        W = (_fm(F, I, _ZS, n, n), _fm(F, I, _NSS, s, s), _fv(F, I, _YS, s), Gs, mask, ws, wsi,
+        W = (_fm(F, Iw, _ZS, n, n), _fm(F, Iw, _NSS, s, s), _fv(F, Iw, _YS, s), Gs, mask, ws, wsi,
              gram)  # fmt: skip
-        st = _jvja_target(J, Z, r, V, tr, lo, hi, _im(F, I, _SETS, f, s), _fv(F, I, _WREL, f),
+        st = _jvja_target(J, Z, r, V, tr, lo, hi, _im(F, Iw, _SETS, f, s), _fv(F, Iw, _WREL, f),
                           p3, W, res)  # fmt: skip
         if st:
             return st
@@ -432,8 +220,8 @@ def bounded_solve(J, xdot, out, mode, F, I):  # pragma: no cover - numba
 
 
 @_njit
-def bounded_kernel(J, q, xdot, out, F, I):  # pragma: no cover - numba
-    """The bounded step of mode ``I[4]`` after the Jacobian ``J``, rates into ``out``.
+def bounded_kernel(J, q, xdot, out, F, Iw):  # pragma: no cover - numba
+    """The bounded step of mode ``Iw[4]`` after the Jacobian ``J``, rates into ``out``.
 
     The unbounded step (LNVA / single-joint JVJA: the step kernel; multi-joint JVJA: the multi
     kernel; MDA: ``out`` holds its rates on entry), the box check, and :func:`bounded_solve` when
@@ -441,30 +229,30 @@ def bounded_kernel(J, q, xdot, out, F, I):  # pragma: no cover - numba
     step refused: wrong sizes, no certificate, a small pivot) or 3 (:func:`bounded_solve`
     refused): with 2 and 3 the caller takes the reference route.
     """
-    n, m, f, s, mode, k = I[0], I[1], I[2], I[3], I[4], I[5]
+    n, m, f, s, mode, k = Iw[0], Iw[1], Iw[2], Iw[3], Iw[4], Iw[5]
     if xdot.shape[0] != m or out.shape[0] != n or q.shape[0] != n or J.shape[1] != n:
         return 2
-    state = _fv(F, I, _STATE, n + 2)
-    B, c = _fm(F, I, _B, m, n), _fv(F, I, _C, n)
+    state = _fv(F, Iw, _STATE, n + 2)
+    B, c = _fm(F, Iw, _B, m, n), _fv(F, Iw, _C, n)
     if mode == 3:
-        st = multi_kernel(J, xdot, out, _fv(F, I, _MWS, m * m + m * n + n + 2 * s * s + 2 * s),
-                          _im(F, I, _SETS, f, s), _fv(F, I, _WREL, f), _fv(F, I, _P3, 3))  # fmt: skip
+        st = multi_kernel(J, xdot, out, _fv(F, Iw, _MWS, m * m + m * n + n + 2 * s * s + 2 * s),
+                          _im(F, Iw, _SETS, f, s), _fv(F, Iw, _WREL, f), _fv(F, Iw, _P3, 3))  # fmt: skip
     elif mode != 2:
-        st = _step_kernel(J, xdot, out, _fm(F, I, _G, m, m), B, c, _fm(F, I, _FW, 2, n),
-                          _fv(F, I, _P4, 4), mode)  # fmt: skip
+        st = _step_kernel(J, xdot, out, _fm(F, Iw, _G, m, m), B, c, _fm(F, Iw, _FW, 2, n),
+                          _fv(F, Iw, _P4, 4), mode)  # fmt: skip
     else:
         st = 0
     if st:
         return 2
-    inside = _box_status(q, _fm(F, I, _LIM, 3, n), _fv(F, I, _PRM, 2), _fm(F, I, _BUF, 4, n),
-                         out, B, B, c, _iv(F, I, _COLS, k), mode == 1) == 0  # fmt: skip
+    inside = _box_status(q, _fm(F, Iw, _LIM, 3, n), _fv(F, Iw, _PRM, 2), _fm(F, Iw, _BUF, 4, n),
+                         out, B, B, c, _iv(F, Iw, _COLS, k), mode == 1) == 0  # fmt: skip
     if inside and mode != 3:
         if state[1] != 0.0 or state[0] != 1.0:
             state[0], state[1] = 1.0, 0.0
             for j in range(n):
                 state[2 + j] = 0.0
         return 0
-    st = bounded_solve(J, xdot, out, 1 if mode == 3 else mode, F, I)
+    st = bounded_solve(J, xdot, out, 1 if mode == 3 else mode, F, Iw)
     if st:
         return 3
     return 1 if state[1] != 0.0 else 0
@@ -499,12 +287,12 @@ def bounded_rates(name: str, J, xdot, sets, lo, hi, *, weights=None, unbounded=N
     table = -np.ones((len(sets), smax), dtype=np.int64)
     for k, S in enumerate(sets):
         table[k, : len(S)] = S
-    F, I, views = workspace(n, m, table, np.zeros(0, dtype=np.int64), SOLVE_MODES[name])
+    F, Iw, views = workspace(n, m, table, np.zeros(0, dtype=np.int64), SOLVE_MODES[name])
     w = np.ones(len(sets)) if weights is None else np.asarray(weights, dtype=float)
     views["wrel"][:] = w / w.sum()
     views["p3"][:] = [TRACE_MAX, PIVOT_TOL, RANK_RTOL**2] if params is None else params
     views["buf"][0], views["buf"][1] = lo, hi
     out = np.zeros(n) if unbounded is None else np.array(unbounded, dtype=float)
-    code = bounded_solve(J, np.ascontiguousarray(xdot, dtype=float), out, SOLVE_MODES[name], F, I)
+    code = bounded_solve(J, np.ascontiguousarray(xdot, dtype=float), out, SOLVE_MODES[name], F, Iw)
     state = views["state"]
     return int(code), out, float(state[0]), state[2:] != 0.0, bool(state[1])
