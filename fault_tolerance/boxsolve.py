@@ -168,8 +168,8 @@ def bounded_solve(J, xdot, out, mode, F, Iw):  # pragma: no cover - numba
     """Rates of ``mode`` (0 LNVA, 1 JVJA least-norm response, 2 MDA) in the box into ``out``.
 
     The box is ``buf[0], buf[1]`` of the workspace (:func:`workspace`; the box check writes it).
-    MDA: ``out`` holds its unbounded rates on entry (their null-space part is kept as the
-    target). ``state[0]`` gets the task scaling, ``state[1]`` 1 when a bound was met,
+    MDA: ``out`` holds its unbounded rates on entry (their null-space part ``N (q̇ − a)`` is
+    kept as the target, as in the reference). ``state[0]`` gets the task scaling, ``state[1]`` 1 when a bound was met,
     ``state[2:]`` 1.0 on joints held at a bound. Returns a code of the module doc (0: solved;
     otherwise ``out`` is untouched).
     """
@@ -204,9 +204,29 @@ def bounded_solve(J, xdot, out, mode, F, Iw):  # pragma: no cover - numba
             for c in range(r):
                 t += Z[j, c] * zr[c]
             p0[j] = t
+    elif mode == 2:  # as the reference: out itself when inside, else N (q̇ − a) as the target
+        inside = True
+        for j in range(n):
+            inside = inside and lo[j] - BOX_TOL <= out[j] <= hi[j] + BOX_TOL
+        if inside:
+            for j in range(n):
+                out[j] = min(max(out[j], lo[j]), hi[j])
+                state[2 + j] = 0.0
+            state[0] = 1.0
+            return 0
+        for c in range(r):
+            t = 0.0
+            for j in range(n):
+                t += Z[j, c] * (out[j] - a[j])
+            zr[c] = t
+        for j in range(n):
+            t = 0.0
+            for c in range(r):
+                t += Z[j, c] * zr[c]
+            p0[j] = t
     else:
         for j in range(n):
-            p0[j] = out[j] - a[j] if mode == 2 else 0.0
+            p0[j] = 0.0
     bounded = res[1]
     for j in range(n):
         mask[j] = 1

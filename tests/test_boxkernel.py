@@ -144,7 +144,7 @@ def _mda_reference(J, xd, unb, lo, hi):
     a = proj.Jpinv @ xd
     if np.all(unb >= lo - boxqp.BOX_TOL) and np.all(unb <= hi + boxqp.BOX_TOL):
         return np.clip(unb, lo, hi), 1.0, np.zeros(len(a), dtype=bool), np.zeros(0)
-    sol = boxqp.solve_box(unb - a, a, bounded._null_basis(proj.N), lo, hi)
+    sol = boxqp.solve_box(proj.N @ (unb - a), a, bounded._null_basis(proj.N), lo, hi)
     return sol.qd, sol.scale, sol.active, np.zeros(0)
 
 
