@@ -3,8 +3,8 @@
 Used by :mod:`fault_tolerance.boxsolve`: :func:`factor` (Cholesky of ``J Jᵀ``, ``J⁺ẋ``, the
 certificates of the step kernel), :func:`null_basis` (Householder QR of ``Jᵀ``),
 :func:`reduced_basis` (a reduced robot's basis from the task's by reflections),
-:func:`reduced_rates` ((G1) from the basis) and :func:`undamped` (whether the reference would
-damp a reduced Jacobian). Scalar loops in caller-given buffers; compiled by numba (plain Python
+:func:`reduced_rates` ((G1) from the basis), :func:`undamped` (whether and how much the
+reference damps a reduced Jacobian) and :func:`damped_rates` (its damped least-norm rates then). Scalar loops in caller-given buffers; compiled by numba (plain Python
 without it). See docs/MATH.md "Joint limits, compiled".
 """
 
@@ -15,7 +15,7 @@ import math
 import numpy as np
 
 from .boxkernel import _chol_solve, _cholesky, _dot_rows, _njit
-from .linalg import RANK_RTOL
+from .linalg import DAMPING, RANK_RTOL
 
 
 @_njit
@@ -202,12 +202,14 @@ def reduced_basis(Z, r, S, k, Zs, w) -> int:  # pragma: no cover - numba
 
 
 @_njit
-def undamped(J, S, k, bound, params, Gs) -> bool:  # pragma: no cover - numba
-    """Whether the reference's projection of ``J_S`` is undamped and of full rank (as ``J``'s).
+def undamped(J, S, k, bound, params, Gs) -> float:  # pragma: no cover - numba
+    """The damping ``μ²`` the reference's projection of ``J_S`` takes: 0, > 0, or −1 (refused).
 
     First the certificate ``trace((J_S J_Sᵀ)⁻¹) ≤ trace(G⁻¹) λ_max(N[S,S]⁻¹) = bound ≤
-    TRACE_MAX``; else the eigenvalues of ``J_S J_Sᵀ`` (then ``λ_min`` must clear ``SIGMA_EPS²``
-    by a margin of 1e-8, so rounding cannot flip the reference's choice).
+    TRACE_MAX`` (0); else the eigenvalues of ``J_S J_Sᵀ``: ``λ_min`` clear of ``SIGMA_EPS²`` by a
+    relative margin of 1e-8 either way, so rounding cannot flip the reference's choice (0, or its
+    ``μ² = DAMPING² (1 − λ_min/SIGMA_EPS²)``), and clear of its rank threshold; −1 otherwise.
+    ``Gs`` (m, m) gets ``J_S J_Sᵀ``.
     """
     m, n = J.shape
     fro = 0.0
@@ -224,6 +226,38 @@ def undamped(J, S, k, bound, params, Gs) -> bool:  # pragma: no cover - numba
             Gs[j, i] = t
         fro += Gs[i, i]
     if bound <= params[0] and params[2] * fro * bound < 1.0:
-        return True
+        return 0.0
     lam = np.linalg.eigvalsh(Gs.copy())
-    return lam[0] > (1.0 + 1e-8) / params[0] and lam[0] > (1.0 + 1e-8) * RANK_RTOL**2 * lam[-1]
+    if not lam[0] > (1.0 + 1e-8) * RANK_RTOL**2 * lam[-1]:
+        return -1.0
+    eps2 = 1.0 / params[0]  # SIGMA_EPS²
+    if lam[0] > (1.0 + 1e-8) * eps2:
+        return 0.0
+    if lam[0] < (1.0 - 1e-8) * eps2:
+        return DAMPING**2 * (1.0 - max(lam[0], 0.0) / eps2)
+    return -1.0
+
+
+# The reference's damped least-norm rates of a reduced robot near its singularity.
+@_njit
+def damped_rates(J, xdot, S, k, Gs, mu2, out, y) -> bool:  # pragma: no cover - numba
+    """``out = J_Sᵀ (J_S J_Sᵀ + μ² I)⁻¹ ẋ`` in full size (0 on ``S``); ``Gs`` holds ``J_S J_Sᵀ``.
+
+    ``y`` (≥ m,) is scratch. False when the factorisation fails.
+    """
+    m, n = J.shape
+    for i in range(m):
+        Gs[i, i] += mu2
+    if not _cholesky(Gs, m):
+        return False
+    for i in range(m):
+        y[i] = xdot[i]
+    _chol_solve(Gs, m, y)
+    for j in range(n):
+        t = 0.0
+        for i in range(m):
+            t += J[i, j] * y[i]
+        out[j] = t
+    for u in range(k):
+        out[S[u]] = 0.0
+    return True

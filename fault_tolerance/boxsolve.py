@@ -14,7 +14,8 @@ numba (and tested so). See docs/MATH.md "Joint limits, compiled".
 
 Codes of :func:`bounded_solve`: 0 solved, 1 no certificate ``σ_min(J) ≥ SIGMA_EPS`` (the
 reference damps), 2 a pivot below the threshold (intolerable, or damped with ``tolerate``), 3 a
-reduced Jacobian without that certificate, 4 no rates in the box reach any ``s ≥ 0``, 5 the
+reduced Jacobian too near the reference's damping or rank threshold to decide (a damped one is
+solved, with the reference's damped rates), 4 no rates in the box reach any ``s ≥ 0``, 5 the
 active set did not converge. Every code but 0 is left to the reference.
 """
 
@@ -22,7 +23,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .boxbasis import factor, null_basis, reduced_basis, reduced_rates, undamped
+from .boxbasis import damped_rates, factor, null_basis, reduced_basis, reduced_rates, undamped
 from .boxcheck import compiled_box_status
 from .boxkernel import _njit, solve_box_rates
 from .boxqp import BOX_TOL
@@ -115,7 +116,9 @@ def _iv(F, Iw, t, r):  # pragma: no cover - numba
 
 
 @_njit
-def _jvja_target(J, Z, r, V, tr, lo, hi, sets, wrel, params, W, res):  # pragma: no cover - numba
+def _jvja_target(
+    J, xdot, Z, r, V, tr, lo, hi, sets, wrel, params, W, res
+):  # pragma: no cover - numba
     """``c = Σ_S (w_S/W) ˢq̇'_b`` (L4) into ``V[2]``; returns a code, ``res[1] = 1`` if a bound met.
 
     ``W = (Zs, NSS, ys, Gs, mask, ws, wsi, gram)`` is scratch.
@@ -141,8 +144,11 @@ def _jvja_target(J, Z, r, V, tr, lo, hi, sets, wrel, params, W, res):  # pragma:
             for j in range(n):
                 cbar[j] += wrel[sc] * min(max(post[j], lo[j]), hi[j])
             continue
-        if not undamped(J, S, k, tr * trinv, params, Gs):
+        mu2 = undamped(J, S, k, tr * trinv, params, Gs)
+        if mu2 < 0.0:
             return 3
+        if mu2 > 0.0 and not damped_rates(J, xdot, S, k, Gs, mu2, post, zr):
+            return 3  # near its singularity the reference's reduced robot takes damped rates
         rs = reduced_basis(Z, r, S, k, Zs, zr)
         if rs < 0:
             return 3
@@ -190,7 +196,7 @@ def bounded_solve(J, xdot, out, mode, F, Iw):  # pragma: no cover - numba
     if mode == 1:
         W = (_fm(F, Iw, _ZS, n, n), _fm(F, Iw, _NSS, s, s), _fv(F, Iw, _YS, s), Gs, mask, ws, wsi,
              gram)  # fmt: skip
-        st = _jvja_target(J, Z, r, V, tr, lo, hi, _im(F, Iw, _SETS, f, s), _fv(F, Iw, _WREL, f),
+        st = _jvja_target(J, xdot, Z, r, V, tr, lo, hi, _im(F, Iw, _SETS, f, s), _fv(F, Iw, _WREL, f),
                           p3, W, res)  # fmt: skip
         if st:
             return st

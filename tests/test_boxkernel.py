@@ -93,9 +93,6 @@ def test_compiled_jvja_equals_reference_and_quadprog(m, n, tight, weights):
             assert bounded_rates("jvja", J, xd, sets, lo, hi, weights=w)[0] == 4
             continue
         code, qd, s, active, _ = bounded_rates("jvja", J, xd, sets, lo, hi, weights=w)
-        if code == 3:  # a reduced Jacobian the reference damps: left to it, honestly
-            assert min(np.linalg.svd(np.delete(J, S, 1), compute_uv=False)[-1] for S in sets) < 2e-3
-            continue
         assert code == 0
         assert s == pytest.approx(ref.scale, rel=1e-9)
         assert np.allclose(qd, ref.qd, atol=1e-8 * max(1.0, np.abs(ref.qd).max()))
@@ -202,6 +199,36 @@ def test_controller_compiled_step_equals_reference(robot, task, lockable, weight
         checked += 1
     compiled = ctrl.bounded_steps - ctrl.bounded_reference_steps
     assert checked > trials // 2 and compiled > 0, (checked, ctrl.bounded_steps)
+
+
+def test_damped_reduced_robots_compiled():
+    """A reduced Jacobian near its singularity: the reference's damped rates, compiled."""
+    arm = ft.load_arm("panda")
+    ctrl = Controller(arm, [0, 2, 4, 6], backend="numba")
+    rng = np.random.default_rng(4)
+    damped = 0
+    for trial in range(120):
+        q = arm.random_q(rng)
+        if trial % 2:
+            k = rng.integers(arm.n)
+            q[k] = arm.upper[k] - rng.uniform(0, 0.02)
+        J = arm.jacobian(q)
+        xd = rng.normal(size=arm.m) * (0.02 if trial % 3 else 0.5)
+        try:
+            ref = ft.resolve_bounded("jvja", J, xd, ctrl.scenarios, bounds=arm.rate_bounds(q))
+        except ft.FaultToleranceError:
+            continue
+        before, bounded_before = ctrl.bounded_reference_steps, ctrl.bounded_steps
+        qd = ctrl.step(q, xd)
+        assert np.allclose(qd, ref.qd, atol=1e-8 * max(1.0, np.abs(ref.qd).max()))
+        assert ctrl.last_scale == pytest.approx(ref.scale, rel=REL)
+        smin = min(
+            np.linalg.svd(np.delete(J, S, 1), compute_uv=False)[-1] for S in ctrl.scenarios.sets
+        )
+        compiled = ctrl.bounded_reference_steps == before and ctrl.bounded_steps > bounded_before
+        if compiled and smin < 1e-3:
+            damped += 1
+    assert damped >= 5
 
 
 def test_reference_route_is_taken_and_counted():
