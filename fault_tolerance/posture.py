@@ -1,4 +1,4 @@
-"""Initial posture and the planning loop of the paper's Sec. III.D.
+"""Initial posture of the paper's Sec. III.D, step (i).
 
 Step (i): at the start point ``x0`` with zero task velocity, move through the self-motion
 (null space) to the configuration of minimum square-sum RCN ``K = Σ k_S²``. For one degree of
@@ -7,9 +7,8 @@ each one (predictor along the null vector, Newton corrector back onto ``x(q) = x
 :func:`initial_posture` takes the global minimum over all of them. For ``r > 1`` it runs projected
 gradient descent on ``K`` from several inverse-kinematics seeds (local, with restarts).
 
-Steps (ii)-(iii): :func:`plan` runs the path from the best start, compares the largest reduced
-condition number met with a threshold, and tries the next-best start configurations (the other
-local minima of ``K``) until one holds.
+Steps (ii)-(iii), which run the path, are :func:`fault_tolerance.planning.plan` (a module above
+:mod:`.simulation`; this one is below it, so the whole-path planner can start from here).
 """
 
 from __future__ import annotations
@@ -277,56 +276,6 @@ def _posture_by_descent(arm, x0, sols, sc, iters: int = 300) -> Posture:
     return Posture(cands[0][1], cands[0][0], cands, [], "projected gradient descent with restarts")
 
 
-@dataclass
-class PlanAttempt:
-    """One start configuration tried by :func:`plan`."""
-
-    q0: np.ndarray
-    K0: float
-    rcn_max: float
-    accepted: bool
-    reason: str
-
-
-def plan(
-    arm: Arm,
-    path,
-    algorithm: str = "jvja",
-    *,
-    lockable=None,
-    threshold: float = RCN_THRESHOLD,
-    max_attempts: int = 5,
-    posture: Posture | None = None,
-    **sim_options,
-):
-    """Steps (i)-(iii) of Sec. III.D: best start, run, accept if ``max k_S <= threshold``.
-
-    Returns ``(run, attempts)``: the accepted run (or, if none holds, the one with the smallest
-    largest RCN) and the list of :class:`PlanAttempt` saying which start was chosen and why.
-    """
-    from .simulation import simulate
-
-    posture = posture or initial_posture(arm, path.x0, lockable)
-    tried: list[tuple[PlanAttempt, object]] = []
-    for K0, q0 in posture.candidates[:max_attempts]:
-        run = simulate(arm, path, algorithm, q0=q0, lockable=lockable, **sim_options)
-        worst = float(np.max(run.rcn))
-        ok = worst <= threshold
-        reason = (
-            f"largest RCN {worst:.3g} <= threshold {threshold:g}"
-            if ok
-            else f"largest RCN {worst:.3g} > threshold {threshold:g}; trying the next start"
-        )
-        tried.append((PlanAttempt(q0, K0, worst, ok, reason), run))
-        if ok:
-            break
-    if not any(a.accepted for a, _ in tried):
-        best = min(range(len(tried)), key=lambda i: tried[i][0].rcn_max)
-        tried[best][0].reason += "; no start met the threshold, keeping the one with the smallest"
-        return tried[best][1], [a for a, _ in tried]
-    return tried[-1][1], [a for a, _ in tried]
-
-
 def lockable_scenarios(arm: Arm, lockable: Sequence | None) -> Scenarios:
     """The arm's scenarios for ``lockable`` (default: its default lockable joints)."""
     return scenarios(
@@ -335,3 +284,12 @@ def lockable_scenarios(arm: Arm, lockable: Sequence | None) -> Scenarios:
         r=arm.redundancy,
         joint_names=arm.joint_names,
     )
+
+
+def __getattr__(name: str):
+    """``plan`` and ``PlanAttempt`` moved to :mod:`.planning` (#11); still importable here."""
+    if name in ("plan", "PlanAttempt"):
+        from . import planning
+
+        return getattr(planning, name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -18,7 +18,9 @@ chunk):
   left by a dead process is taken over at once. Locks are re-entrant within one process.
 
 :func:`in_progress` marks a folder that accumulates results (``reproduce --out``) while a command
-fills it, and :func:`check_path_names` refuses names the file system cannot hold.
+fills it, and :func:`check_path_names` refuses names the file system cannot hold. The lock and the
+marker live in :mod:`.folder_lock`, the name checks and synced writes in :mod:`.folder_io`; all are
+importable from here.
 
 Example (a workspace chunk, written whole or not at all)::
 
@@ -35,23 +37,44 @@ from __future__ import annotations
 import contextlib
 import ctypes
 import errno
-import fcntl
 import hashlib
 import json
 import os
 import shutil
-import socket
 import sys
 import time
 from collections.abc import Iterable, Iterator
 from pathlib import Path
 
-from .errors import FolderLocked, IncompleteResult, InvalidInput, OutputError
+from .errors import IncompleteResult, InvalidInput, OutputError
+from .folder_io import (
+    check_path_names,
+    command_line,
+    files_below,
+    fsync,
+    output_error,
+    write_synced,
+)
+from .folder_lock import IN_PROGRESS, FolderLock, in_progress, lock_holder, lock_path
+
+__all__ = [  # the lock, the marker and the name checks are importable from here as before
+    "IN_PROGRESS",
+    "RECORD",
+    "FolderLock",
+    "check_path_names",
+    "check_target",
+    "file_digest",
+    "in_progress",
+    "lock_holder",
+    "lock_path",
+    "read_record",
+    "staged_folder",
+    "verify_folder",
+    "write_record",
+]
 
 #: The completion record's file name; written last, lists every other file of the folder.
 RECORD = "complete.json"
-#: The marker of a folder a command is still filling (see :func:`in_progress`).
-IN_PROGRESS = "in_progress.json"
 #: ``format`` field of the completion record.
 RECORD_FORMAT = "fault_tolerance result folder"
 RECORD_VERSION = 1
@@ -99,11 +122,11 @@ def staged_folder(
             write_record(stage)
             _commit(stage, target)
         except OSError as err:
-            raise _output_error(err, target) from err
+            raise output_error(err, target) from err
         finally:
             if stage.exists():
                 shutil.rmtree(stage, ignore_errors=True)
-        _fsync(parent)
+        fsync(parent)
 
 
 def check_target(target: str | Path, replaceable: Iterable[str] = ()) -> Path:
@@ -119,21 +142,21 @@ def write_record(folder: str | Path, **extra) -> dict:
     folder = Path(folder)
     files = {
         rel: {"bytes": (folder / rel).stat().st_size, "sha256": file_digest(folder / rel)}
-        for rel in _files(folder)
+        for rel in files_below(folder)
         if rel != RECORD
     }
     for rel in files:
-        _fsync(folder / rel)
+        fsync(folder / rel)
     record = {
         "format": RECORD_FORMAT,
         "version": RECORD_VERSION,
         "finished": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
         "pid": os.getpid(),
-        "command": _command(),
+        "command": command_line(),
         "files": files,
         **extra,
     }
-    _write_synced(folder / RECORD, (json.dumps(record, indent=2) + "\n").encode())
+    write_synced(folder / RECORD, (json.dumps(record, indent=2) + "\n").encode())
     return record
 
 
@@ -188,7 +211,7 @@ def verify_folder(folder: str | Path, files: Iterable[str] | None = None) -> dic
     folder = Path(folder)
     record = read_record(folder)
     listed = record["files"]
-    present = set(_files(folder)) - {RECORD}
+    present = set(files_below(folder)) - {RECORD}
     extra = sorted(present - set(listed))
     if extra:
         raise IncompleteResult(
@@ -225,200 +248,6 @@ def file_digest(path: str | Path) -> str:
     return h.hexdigest()
 
 
-# -- the lock ----------------------------------------------------------------------------------
-
-_held: dict[str, list] = {}  # lock path -> [fd, depth], locks this process holds
-
-
-class FolderLock:
-    """Exclusive, advisory lock on writing ``folder``: ``with FolderLock(out): ...``.
-
-    The lock is ``flock`` on the hidden sibling ``.NAME.lock`` (or ``NAME/.lock`` when the parent is
-    not writable), which holds the holder's pid, command and start time. A live holder makes
-    :meth:`acquire` raise :class:`~.errors.FolderLocked` at once; a dead one's lock is gone with its
-    process. Re-entrant within one process.
-    """
-
-    def __init__(self, folder: str | Path) -> None:
-        self.folder = Path(folder)
-        self.path = lock_path(self.folder)
-
-    def acquire(self) -> FolderLock:
-        """Take the lock, or raise :class:`~.errors.FolderLocked` naming the holder."""
-        key = str(self.path)
-        if key in _held:
-            _held[key][1] += 1
-            return self
-        self.path.parent.mkdir(parents=True, exist_ok=True)
-        for _ in range(20):  # retry only if the file was replaced between open and flock
-            try:
-                fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o644)
-            except OSError as err:
-                raise _output_error(err, self.folder) from err
-            try:
-                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-            except BlockingIOError:
-                info = _read_holder(fd)
-                os.close(fd)
-                raise FolderLocked(self.folder, info) from None
-            try:
-                same = os.fstat(fd).st_ino == os.stat(self.path).st_ino
-            except FileNotFoundError:
-                same = False
-            if not same:  # the holder removed it as we opened it; take the new file
-                os.close(fd)
-                continue
-            info = {
-                "pid": os.getpid(),
-                "host": socket.gethostname(),
-                "command": _command(),
-                "started": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
-            }
-            os.ftruncate(fd, 0)
-            os.pwrite(fd, (json.dumps(info) + "\n").encode(), 0)
-            _held[key] = [fd, 1]
-            return self
-        raise OutputError(f"{self.folder}: could not take the lock {self.path}")  # pragma: no cover
-
-    def release(self) -> None:
-        """Give the lock back (the lock file is removed when the outermost holder releases)."""
-        key = str(self.path)
-        entry = _held.get(key)
-        if entry is None:
-            return
-        entry[1] -= 1
-        if entry[1] > 0:
-            return
-        del _held[key]
-        with contextlib.suppress(OSError):
-            os.unlink(self.path)
-        os.close(entry[0])
-
-    def __enter__(self) -> FolderLock:
-        return self.acquire()
-
-    def __exit__(self, *exc) -> None:
-        self.release()
-
-
-def lock_path(folder: str | Path) -> Path:
-    """Where the lock of ``folder`` lives: ``.NAME.lock`` beside it, or inside if the parent is read-only."""
-    folder = Path(os.path.abspath(folder))
-    parent = folder.parent
-    if parent.exists() and not os.access(parent, os.W_OK | os.X_OK) and folder.is_dir():
-        return folder / ".lock"
-    return parent / f".{folder.name}.lock"
-
-
-def lock_holder(folder: str | Path) -> dict | None:
-    """Who holds the lock of ``folder`` (pid, host, command, started), or None if nobody does."""
-    path = lock_path(folder)
-    try:
-        fd = os.open(path, os.O_RDONLY)
-    except OSError:
-        return None
-    try:
-        try:
-            fcntl.flock(fd, fcntl.LOCK_SH | fcntl.LOCK_NB)
-        except BlockingIOError:
-            return _read_holder(fd)
-        fcntl.flock(fd, fcntl.LOCK_UN)
-        return None
-    finally:
-        os.close(fd)
-
-
-def _read_holder(fd: int) -> dict:
-    try:
-        raw = os.pread(fd, 4096, 0)
-        info = json.loads(raw.decode("utf-8", "replace") or "{}")
-        return info if isinstance(info, dict) else {}
-    except (OSError, ValueError):
-        return {}
-
-
-# -- a folder being filled -------------------------------------------------------------------
-
-
-@contextlib.contextmanager
-def in_progress(folder: str | Path, **info) -> Iterator[Path]:
-    """Lock ``folder`` and mark it with ``in_progress.json`` until the block ends without error.
-
-    For folders that accumulate results (``reproduce --out``): the marker says a command is filling
-    it (pid, command, start); it is removed when the block finishes, and kept when the block is
-    stopped (Ctrl-C, an error) or killed, so a reader knows the folder's top-level summary is not
-    the final one of this command.
-    """
-    folder = check_path_names(Path(folder))
-    if folder.exists() and not folder.is_dir():
-        raise InvalidInput(f"{folder}: exists and is not a folder; choose a folder for the output")
-    with FolderLock(folder):
-        marker = folder / IN_PROGRESS
-        text = {
-            "pid": os.getpid(),
-            "command": _command(),
-            "started": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
-            **info,
-        }
-        try:
-            folder.mkdir(parents=True, exist_ok=True)
-            _write_synced(folder / f".{IN_PROGRESS}.tmp", (json.dumps(text) + "\n").encode())
-            os.replace(folder / f".{IN_PROGRESS}.tmp", marker)
-        except OSError as err:
-            raise _output_error(err, folder) from err
-        yield folder
-        marker.unlink(missing_ok=True)
-
-
-# -- names -----------------------------------------------------------------------------------
-
-
-def check_path_names(path: str | Path) -> Path:
-    """Refuse (``InvalidInput``) a path whose name or length the file system cannot hold."""
-    path = Path(path)
-    text = os.fsencode(path)
-    if b"\x00" in text:
-        raise InvalidInput(f"{str(path)!r}: a path cannot contain a NUL character")
-    base = _existing_ancestor(path)
-    name_max = _pathconf(base, "PC_NAME_MAX", 255)
-    path_max = _pathconf(base, "PC_PATH_MAX", 4096)
-    # the staging sibling adds ".", ".tmp-" and 8 characters to the last name
-    for part in path.parts:
-        size = len(os.fsencode(part))
-        room = name_max - (16 if part == path.name else 0)
-        if size > room:
-            raise InvalidInput(
-                f"{part[:40]}...: a name of {size} bytes is longer than this file system allows "
-                f"({room} bytes for this name); choose a shorter name"
-            )
-    if len(os.fsencode(os.path.abspath(path))) + 40 > path_max:
-        raise InvalidInput(
-            f"{str(path)[:60]}...: the path is longer than this file system allows ({path_max} "
-            "bytes); choose a shorter one"
-        )
-    return path
-
-
-def _existing_ancestor(path: Path) -> Path:
-    p = Path(os.path.abspath(path))
-    while p != p.parent:
-        try:
-            if p.exists():
-                break
-        except OSError:  # e.g. a name too long to stat
-            pass
-        p = p.parent
-    return p
-
-
-def _pathconf(path: Path, name: str, default: int) -> int:
-    try:
-        value = os.pathconf(path, name)
-    except (OSError, ValueError):
-        return default
-    return value if value and value > 0 else default
-
-
 # -- helpers ---------------------------------------------------------------------------------
 
 
@@ -429,7 +258,7 @@ def _make_parent(target: Path) -> Path:
     try:
         parent.mkdir(parents=True, exist_ok=True)
     except OSError as err:
-        raise _output_error(err, target) from err
+        raise output_error(err, target) from err
     if not os.access(parent, os.W_OK | os.X_OK):
         raise InvalidInput(f"{parent}: not writable; choose an output folder you can write")
     return parent
@@ -441,7 +270,7 @@ def _check_replaceable(target: Path, replaceable: set[str]) -> None:
     ours = set(replaceable) | {RECORD, IN_PROGRESS}
     with contextlib.suppress(IncompleteResult):
         ours |= set(read_record(target)["files"])
-    foreign = sorted(rel for rel in _files(target) if rel not in ours)
+    foreign = sorted(rel for rel in files_below(target) if rel not in ours)
     if foreign:
         raise InvalidInput(
             f"{target}: holds files that are not part of a result ({foreign[:5]}); they would be "
@@ -451,7 +280,7 @@ def _check_replaceable(target: Path, replaceable: set[str]) -> None:
 
 def _commit(stage: Path, target: Path) -> None:
     """Move the complete ``stage`` to ``target`` (swapping out an existing one)."""
-    _fsync(stage)
+    fsync(stage)
     if not target.exists():
         os.rename(stage, target)
         return
@@ -518,54 +347,3 @@ def _sweep(target: Path) -> None:
             rest = p.name[len(prefix) :] if p.name.startswith(prefix) else ""
             if rest.startswith((_STAGE, _OLD)) and len(rest) == len(_STAGE) + 8 and p.is_dir():
                 shutil.rmtree(p, ignore_errors=True)
-
-
-def _files(folder: Path) -> list[str]:
-    """Relative paths of the regular files (and links) under ``folder``, sorted, '/'-separated."""
-    out = []
-    for root, dirs, names in os.walk(folder):
-        dirs.sort()
-        for name in names:
-            out.append(os.path.relpath(os.path.join(root, name), folder).replace(os.sep, "/"))
-    return sorted(out)
-
-
-def _write_synced(path: Path, data: bytes) -> None:
-    with open(path, "wb") as fh:
-        fh.write(data)
-        fh.flush()
-        os.fsync(fh.fileno())
-
-
-def _fsync(path: Path) -> None:
-    """Flush a file or a folder (its entries) to disk, ignoring file systems that cannot."""
-    with contextlib.suppress(OSError):
-        fd = os.open(path, os.O_RDONLY)
-        try:
-            os.fsync(fd)
-        finally:
-            os.close(fd)
-
-
-def _command() -> str:
-    argv = [os.path.basename(sys.argv[0] or "python")] + sys.argv[1:]
-    text = " ".join(argv)
-    return text if len(text) <= 200 else text[:197] + "..."
-
-
-def _output_error(err: OSError, target: Path) -> Exception:
-    """An OSError while writing results as the toolkit's one-line error (not a bug: exit 2)."""
-    if isinstance(err, (FolderLocked, IncompleteResult)):
-        return err
-    reason = {
-        errno.ENOSPC: "no space left on the device",
-        errno.EDQUOT: "the disk quota is exceeded",
-        errno.EROFS: "the file system is read-only",
-        errno.EACCES: "permission denied",
-        errno.EPERM: "operation not permitted",
-        errno.ENAMETOOLONG: "a name is too long for the file system",
-    }.get(err.errno or 0, err.strerror or str(err))
-    return OutputError(
-        f"{target}: could not write the result ({reason}); nothing was written there, an earlier "
-        "result is as it was"
-    )

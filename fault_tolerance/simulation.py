@@ -223,7 +223,7 @@ def simulate(
         from .wholepath.run import simulate_global
 
         return simulate_global(
-            arm, path, q0=q0, plan_options=plan_options, progress=progress, **sim
+            arm, path, q0=q0, plan_options=plan_options, progress=progress, loop=_simulate, **sim
         )
     if plan_options is not None:
         raise InvalidInput(f"plan_options are options of algorithm 'global', not of '{algorithm}'")

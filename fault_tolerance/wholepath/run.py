@@ -6,6 +6,9 @@ space (MATH.md (W3)) inside :func:`~fault_tolerance.simulation.simulate`'s own l
 JVJA and MDA. Without a lock the run is then compared with simulate's own LNVA and JVJA runs from
 the same start and the best one (within the limits first, then the objective) is returned under the
 name ``global``: from the same start its objective is never above theirs.
+
+This module sits below :mod:`~fault_tolerance.simulation`: simulate hands its own loop in
+(``loop``), so nothing here imports simulation and the run does not come back through it.
 """
 
 from __future__ import annotations
@@ -51,10 +54,13 @@ def _shows(progress) -> bool:
     return getattr(progress, "bar", True) is not None
 
 
-def simulate_global(arm, path, *, q0, plan_options, progress, **sim):
-    """The global run (see the module doc): plan, run the plan, keep the best of it, LNVA, JVJA."""
-    from ..simulation import _simulate, simulate
+def simulate_global(arm, path, *, q0, plan_options, progress, loop, **sim):
+    """The global run (see the module doc): plan, run the plan, keep the best of it, LNVA, JVJA.
 
+    ``loop`` is simulate's loop (``simulation._simulate``: ``loop(arm, path, algorithm, q0=...,
+    progress=..., reference=..., **sim)``); LNVA and JVJA run through it exactly as ``simulate``
+    runs them (``engine="auto"``).
+    """
     opts = check_plan_options(plan_options)
     if sim.get("response", "least_norm") != "least_norm":
         raise InvalidInput(
@@ -75,16 +81,16 @@ def simulate_global(arm, path, *, q0, plan_options, progress, **sim):
     )
     limits = opts.get("limits", True)
     if plan.warm_start_used:  # the local run is the plan: run it as itself
-        run = simulate(arm, path, plan.warm_start_used, q0=plan.q0, progress=progress, **sim)
+        run = loop(arm, path, plan.warm_start_used, q0=plan.q0, progress=progress, **sim)
     else:
-        run = _simulate(
+        run = loop(
             arm, path, "global", q0=plan.q0, progress=progress, reference=plan.q_ref, **sim
         )
     choice = "plan"
     if sim.get("lock_joint") is None:  # the guarantee, on simulate's own numbers
         runs = {"plan": run}
         for alg in ("lnva", "jvja"):
-            runs[alg] = simulate(arm, path, alg, q0=plan.q0, **sim)
+            runs[alg] = loop(arm, path, alg, q0=plan.q0, **sim)
         choice = min(
             runs,
             key=lambda a: (_over_limits(arm, runs[a], limits), _objective(runs[a], plan.objective)),
