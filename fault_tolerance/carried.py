@@ -252,7 +252,7 @@ def confine_meshes(xml: str, roots: Sequence[Path]) -> tuple[str, list[str]]:
     that is a file inside ``ROOT`` after links are followed. Returns the new XML and a list saying
     which names were refused and why. ``<collision>`` elements are removed (never drawn).
     """
-    from .urdf import _parse_safely
+    from .urdf_xml import _parse_safely
 
     root = _parse_safely(Path("carried URDF"), xml.encode("utf-8"))
     real_roots = [Path(os.path.realpath(r)) for r in roots if Path(r).is_dir()]

@@ -17,14 +17,8 @@ from lxml import etree
 
 from .errors import URDFError
 from .sources import PackageNotFound, expand_xacro, is_xacro, resolve_uri
-from .urdf import (
-    URDFDescription,
-    _parse_safely,
-    native_reason,
-    native_stderr,
-    prefix_notice,
-    read_urdf,
-)
+from .urdf import URDFDescription, native_reason, native_stderr, read_urdf
+from .urdf_xml import _parse_safely, prefix_notice
 
 
 def load_urdf_models(

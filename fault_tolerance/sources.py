@@ -179,7 +179,7 @@ def _quiet() -> Iterator[io.StringIO]:
 @contextlib.contextmanager
 def _patched(xacro, package_dirs: PackageDirs, notices: list[str]) -> Iterator[None]:
     """Xacro with ``$(find)`` from our package folders, checked file reads and collected warnings."""
-    from .urdf import check_bytes, prefix_notice
+    from .urdf_xml import check_bytes, prefix_notice
 
     subst = xacro.substitution_args
     saved = (subst._eval_find, subst._eval_dict["find"], xacro.parse, xacro.warning)

@@ -1,21 +1,11 @@
-"""URDF files: safe reading, structural checks and inspection (with yourdfpy).
+"""URDF trees: the structural checks Pinocchio does not make, and inspection (with yourdfpy).
 
-URDF is XML, and XML can carry document type declarations whose entities expand to gigabytes
-("billion laughs") or pull in local files and URLs (external entities). A URDF never needs
-either. :func:`check_urdf_file` therefore refuses any file that is not UTF-8, is too large, or has
-a ``<!DOCTYPE``/``<!ENTITY`` (checked on the raw bytes *and* on the parsed document, so another
-declared encoding cannot hide one), and parses the rest with lxml with entity resolution, DTD
-loading and network access switched off. Every later parser gets the bytes (or text) that passed
-these checks, never the file again:
-
-* Pinocchio (urdfdom on tinyxml2) ignores DTDs altogether and expands no entity;
-* yourdfpy (lxml with its default parser, falling back to a *recovering* parser on errors) would
-  resolve internal entities, so it must only ever see checked bytes.
-
-:func:`read_urdf` adds the structural checks Pinocchio does not make (a link with two parents is
-silently mis-built, a zero joint axis accepted) or makes with messages only on stderr (several root
-links, unknown links, unknown joint types), and rewrites ``continuous`` joints as revolute joints
-with limits ±π, so the arm has one coordinate per joint.
+The XML safety checks come first (:mod:`.urdf_xml`: size, UTF-8, no DTD or entities,
+well-formed; importable from here as before). :func:`read_urdf` adds the structural checks
+Pinocchio does not make (a link with two parents is silently mis-built, a zero joint axis
+accepted) or makes with messages only on stderr (several root links, unknown links, unknown joint
+types), and rewrites ``continuous`` joints as revolute joints with limits ±π, so the arm has one
+coordinate per joint.
 """
 
 from __future__ import annotations
@@ -23,18 +13,37 @@ from __future__ import annotations
 import contextlib
 import math
 import os
-import re
 import sys
 import tempfile
 from collections import Counter
-from collections.abc import Iterator, Sequence
+from collections.abc import Iterator
 from pathlib import Path
 from typing import NamedTuple
 
 from .errors import URDFError
+from .urdf_xml import (
+    MAX_URDF_BYTES,
+    _checked,
+    check_bytes,
+    check_urdf_file,
+    prefix_notice,
+)
 
-#: Largest URDF file accepted [bytes]; real robot descriptions are far smaller.
-MAX_URDF_BYTES = 20 * 1024 * 1024
+__all__ = [  # the XML checks moved to .urdf_xml (#11); still importable from here
+    "MAX_URDF_BYTES",
+    "MAX_URDF_JOINTS",
+    "MOVING_JOINT_TYPES",
+    "URDF_JOINT_TYPES",
+    "URDFDescription",
+    "check_bytes",
+    "check_urdf_file",
+    "default_tip",
+    "native_reason",
+    "native_stderr",
+    "prefix_notice",
+    "read_urdf",
+]
+
 #: Most joints accepted in one URDF. Pinocchio's URDF reader recurses along the tree (a chain of
 #: ~4000 joints overflows an 8 MB stack and kills the process) and is quadratic in the number of
 #: joints; the largest real robots have a few hundred.
@@ -43,137 +52,6 @@ MAX_URDF_JOINTS = 1000
 #: Joint types of the URDF specification, and those an arm may move.
 URDF_JOINT_TYPES = ("revolute", "continuous", "prismatic", "fixed", "floating", "planar")
 MOVING_JOINT_TYPES = ("revolute", "continuous", "prismatic")
-
-_DTD = re.compile(rb"<!\s*(DOCTYPE|ENTITY)", re.IGNORECASE)
-_BOMS = (b"\xff\xfe", b"\xfe\xff", b"\x00\x00\xfe\xff", b"\xff\xfe\x00\x00")
-
-
-def check_urdf_file(path: str | Path) -> bytes:
-    """Return the bytes of a URDF file after checking it is safe, well-formed XML with a ``<robot>``.
-
-    Raises:
-        URDFError: naming the file and the problem (missing, too large, not UTF-8, DTD/entities,
-            malformed XML, root element not ``robot``).
-    """
-    return _checked(Path(path))[0]
-
-
-def _checked(path: Path, data: bytes | None = None):
-    """The bytes (prefixes declared), the lxml root element and the undeclared prefixes.
-
-    ``data`` is the text to check in place of the file's (a xacro expansion of ``path``).
-    """
-    if data is None:
-        if not path.is_file():
-            raise URDFError(f"{path}: no such URDF file")
-        size = path.stat().st_size
-        if size > MAX_URDF_BYTES:
-            raise URDFError(
-                f"{path}: {size} bytes is larger than the {MAX_URDF_BYTES} bytes allowed"
-            )
-        data = path.read_bytes()
-    data, prefixes, root = _checked_bytes(data, str(path))
-    if root.tag != "robot":
-        raise URDFError(f"{path}: the root element is <{root.tag}>, a URDF needs <robot>")
-    return data, root, prefixes
-
-
-def check_bytes(
-    data: bytes, where: str, *, require_robot: bool = True
-) -> tuple[bytes, tuple[str, ...]]:
-    """Safety checks of XML bytes (size, UTF-8, no DTD/entities, well-formed).
-
-    Returns the bytes, with a declaration added for each namespace prefix the text uses but never
-    declares (Gazebo/ROS extensions such as ``<gazebo:plugin>``; URDF readers ignore those
-    elements), and the prefixes so declared. ``where`` names the source in errors.
-    """
-    data, prefixes, root = _checked_bytes(data, where)
-    if require_robot and root.tag != "robot":
-        raise URDFError(f"{where}: the root element is <{root.tag}>, a URDF needs <robot>")
-    return data, prefixes
-
-
-def _checked_bytes(data: bytes, where: str):
-    if len(data) > MAX_URDF_BYTES:
-        raise URDFError(
-            f"{where}: {len(data)} bytes is larger than the {MAX_URDF_BYTES} bytes allowed"
-        )
-    if data.startswith(_BOMS) or b"\x00" in data:
-        raise URDFError(f"{where}: not UTF-8 text (UTF-16/32 or binary); a URDF must be UTF-8")
-    try:
-        data.decode("utf-8")
-    except UnicodeDecodeError as err:
-        raise URDFError(
-            f"{where}: not UTF-8 text (invalid byte at offset {err.start}); a URDF must be UTF-8"
-        ) from None
-    if _DTD.search(data):
-        raise URDFError(_DTD_MESSAGE.format(path=where))
-    data, prefixes, root = _parse_declaring_prefixes(where, data)
-    docinfo = root.getroottree().docinfo
-    if docinfo.doctype or docinfo.internalDTD is not None or docinfo.externalDTD is not None:
-        raise URDFError(_DTD_MESSAGE.format(path=where))
-    return data, prefixes, root
-
-
-_UNDECLARED = re.compile(r"Namespace prefix \S+ (?:on|for) \S+ is not defined")
-_ROOT_TAG = re.compile(rb"<(?![?!])[A-Za-z_][\w.:-]*")
-_COMMENT = re.compile(rb"<!--.*?-->", re.S)
-_USED_PREFIX = re.compile(
-    rb"<\s*/?\s*([A-Za-z_][\w.-]*):[A-Za-z_]|\s([A-Za-z_][\w.-]*):[A-Za-z_][\w.-]*\s*="
-)
-_DECLARED_PREFIX = re.compile(rb"xmlns:([A-Za-z_][\w.-]*)\s*=")
-
-
-def _parse_declaring_prefixes(where: str, data: bytes):
-    """Parse; if namespace prefixes are undeclared, declare them on the root element and retry."""
-    try:
-        return data, (), _parse_safely(where, data)
-    except URDFError as err:
-        if not _UNDECLARED.search(str(err.__cause__ or "")):
-            raise
-        text = _COMMENT.sub(b"", data)
-        used = {(a or b).decode() for a, b in _USED_PREFIX.findall(text)}
-        declared = {p.decode() for p in _DECLARED_PREFIX.findall(text)}
-        prefixes = sorted(used - declared - {"xml", "xmlns"})
-        root = _ROOT_TAG.search(data)
-        if not prefixes or root is None:
-            raise
-        decl = b"".join(f' xmlns:{p}="urn:undeclared:{p}"'.encode() for p in prefixes)
-        data = data[: root.end()] + decl + data[root.end() :]
-        return data, tuple(prefixes), _parse_safely(where, data)
-
-
-def prefix_notice(where: str, prefixes: Sequence[str]) -> str:
-    """The one warning for undeclared namespace prefixes."""
-    return (
-        f"{where}: XML namespace prefix(es) {list(prefixes)} used without a declaration "
-        "(Gazebo/ROS extensions); their elements are ignored"
-    )
-
-
-_DTD_MESSAGE = (
-    "{path}: document type declarations and entities (<!DOCTYPE>, <!ENTITY>) are not allowed in a "
-    "URDF; they are refused to rule out entity expansion and external entities"
-)
-
-
-def _parse_safely(path: Path | str, data: bytes):
-    """Parse XML with lxml: entities unresolved, no DTD, no network, no huge trees."""
-    from lxml import etree
-
-    parser = etree.XMLParser(
-        resolve_entities=False,
-        no_network=True,
-        huge_tree=False,
-        load_dtd=False,
-        dtd_validation=False,
-        remove_comments=True,
-        remove_pis=True,
-    )
-    try:
-        return etree.fromstring(data, parser)
-    except etree.XMLSyntaxError as err:
-        raise URDFError(f"{path}: not well-formed XML: {err}") from err
 
 
 class URDFDescription(NamedTuple):
@@ -207,6 +85,31 @@ def read_urdf(path: str | Path, data: bytes | None = None) -> URDFDescription:
     path = Path(path)
     data, root, prefixes = _checked(path, data)
     where = str(path)
+    links = _links(where, root)
+    tree = _JointTree(links)
+    for joint in root.findall("joint"):
+        tree.add(where, joint)
+    root_link = _root_link(where, links, tree.parent_of)
+    _check_reachable(where, root_link, links, tree.parent_of, root)
+    from lxml import etree
+
+    xml = etree.tostring(root, encoding="unicode")
+    leaves = tuple(lk for lk in links if lk not in tree.parents)
+    return URDFDescription(
+        path,
+        data,
+        xml,
+        tree.types,
+        leaves,
+        tree.mimic,
+        tuple(tree.continuous),
+        tuple(tree.unlimited),
+        prefixes,
+    )
+
+
+def _links(where: str, root) -> list[str]:
+    """The robot's link names, after the checks of the ``<robot>`` element and its size."""
     if not root.get("name"):
         raise URDFError(f'{where}: <robot> has no name; a URDF starts with <robot name="...">')
     n_joints = len(root.findall("joint"))
@@ -218,18 +121,50 @@ def read_urdf(path: str | Path, data: bytes | None = None) -> URDFDescription:
     dup = sorted(n for n, k in Counter(links).items() if k > 1)
     if dup:
         raise URDFError(f"{where}: link(s) {dup} defined more than once; link names must be unique")
-    link_set = set(links)
-    types: dict[str, str] = {}
-    parent_of: dict[str, str] = {}  # child link -> joint
-    parents: set[str] = set()
-    mimic: dict[str, str] = {}
-    continuous: list[str] = []
-    unlimited: list[str] = []
-    for joint in root.findall("joint"):
+    return links
+
+
+class _JointTree:
+    """The joints read so far: types, which joint each link hangs from, mimic and continuous."""
+
+    def __init__(self, links: list[str]) -> None:
+        self.links, self.link_set = links, set(links)
+        self.types: dict[str, str] = {}
+        self.parent_of: dict[str, str] = {}  # child link -> joint
+        self.parents: set[str] = set()
+        self.mimic: dict[str, str] = {}
+        self.continuous: list[str] = []
+        self.unlimited: list[str] = []
+
+    def add(self, where: str, joint) -> None:
+        """Check one ``<joint>`` against the links and the joints before it, and record it."""
+        name, jtype = self._name_and_type(where, joint)
+        parent, child = _joint_ends(where, joint, name, self.links, self.link_set)
+        if child in self.parent_of:
+            raise URDFError(
+                f"{where}: link '{child}' is the child of two joints ('{self.parent_of[child]}' "
+                f"and '{name}'); a URDF is a tree: every link has at most one parent joint"
+            )
+        if child == parent:
+            raise URDFError(f"{where}: joint '{name}' connects link '{child}' to itself")
+        self.parent_of[child] = name
+        self.parents.add(parent)
+        if jtype in MOVING_JOINT_TYPES:
+            _check_axis(where, name, joint.find("axis"))
+            _check_limit(where, name, jtype, joint.find("limit"))
+        el = joint.find("mimic")
+        if el is not None:
+            self.mimic[name] = el.get("joint") or "?"
+        if jtype == "continuous":
+            self.continuous.append(name)
+            if _as_revolute(joint):
+                self.unlimited.append(name)
+
+    def _name_and_type(self, where: str, joint) -> tuple[str, str]:
         name = joint.get("name")
         if not name:
             raise URDFError(f'{where}: a <joint> has no name; every joint needs name="..."')
-        if name in types:
+        if name in self.types:
             raise URDFError(
                 f"{where}: joint '{name}' is defined more than once; joint names must be unique"
             )
@@ -239,38 +174,28 @@ def read_urdf(path: str | Path, data: bytes | None = None) -> URDFDescription:
                 f"{where}: joint '{name}' has type {jtype!r}; URDF joint types are "
                 f"{list(URDF_JOINT_TYPES)}"
             )
-        types[name] = jtype
-        ends = {}
-        for end in ("parent", "child"):
-            el = joint.find(end)
-            ends[end] = None if el is None else el.get("link")
-            if not ends[end]:
-                raise URDFError(f"{where}: joint '{name}' has no <{end} link=\"...\"/>")
-            if ends[end] not in link_set:
-                raise URDFError(
-                    f"{where}: joint '{name}' names {end} link '{ends[end]}', which is "
-                    f"not a <link> of the file; its links are {links}"
-                )
-        child = ends["child"]
-        if child in parent_of:
+        self.types[name] = jtype
+        return name, jtype
+
+
+def _joint_ends(where: str, joint, name: str, links: list[str], link_set: set) -> tuple[str, str]:
+    """The parent and child links of a joint, both links of the file."""
+    ends = {}
+    for end in ("parent", "child"):
+        el = joint.find(end)
+        ends[end] = None if el is None else el.get("link")
+        if not ends[end]:
+            raise URDFError(f"{where}: joint '{name}' has no <{end} link=\"...\"/>")
+        if ends[end] not in link_set:
             raise URDFError(
-                f"{where}: link '{child}' is the child of two joints ('{parent_of[child]}' "
-                f"and '{name}'); a URDF is a tree: every link has at most one parent joint"
+                f"{where}: joint '{name}' names {end} link '{ends[end]}', which is "
+                f"not a <link> of the file; its links are {links}"
             )
-        if child == ends["parent"]:
-            raise URDFError(f"{where}: joint '{name}' connects link '{child}' to itself")
-        parent_of[child] = name
-        parents.add(ends["parent"])
-        if jtype in MOVING_JOINT_TYPES:
-            _check_axis(where, name, joint.find("axis"))
-            _check_limit(where, name, jtype, joint.find("limit"))
-        el = joint.find("mimic")
-        if el is not None:
-            mimic[name] = el.get("joint") or "?"
-        if jtype == "continuous":
-            continuous.append(name)
-            if _as_revolute(joint):
-                unlimited.append(name)
+    return ends["parent"], ends["child"]
+
+
+def _root_link(where: str, links: list[str], parent_of: dict[str, str]) -> str:
+    """The one link without a parent joint."""
     roots = [lk for lk in links if lk not in parent_of]
     if not links:
         raise URDFError(f"{where}: the robot has no <link>; a URDF needs at least one")
@@ -281,14 +206,7 @@ def read_urdf(path: str | Path, data: bytes | None = None) -> URDFDescription:
         )
     if not roots:
         raise URDFError(f"{where}: no root link: the joints form a cycle; a URDF must be a tree")
-    _check_reachable(where, roots[0], links, parent_of, root)
-    from lxml import etree
-
-    xml = etree.tostring(root, encoding="unicode")
-    leaves = tuple(lk for lk in links if lk not in parents)
-    return URDFDescription(
-        path, data, xml, types, leaves, mimic, tuple(continuous), tuple(unlimited), prefixes
-    )
+    return roots[0]
 
 
 def _check_axis(where: str, name: str, axis) -> None:
