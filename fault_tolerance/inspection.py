@@ -14,6 +14,7 @@ from .failures import scenarios
 from .linalg import PIVOT_TOL, projection
 from .loading import arm_from_description, is_description_path, load_arm
 from .models import build_model, read_description
+from .start_checks import STRUCTURAL_SAMPLES, intolerable_everywhere
 from .urdf import read_urdf
 
 
@@ -47,27 +48,42 @@ def inspect_text(
     ``target`` is a robot name, a URDF or a xacro file; the tree is read with yourdfpy from the
     checked (expanded) text.
     """
-    named = target in catalog() or target in example_robot_names()
-    if named:
-        path = urdf_path_of(target)
+    path, desc, arm = _read_target(target, tip, task, joints, package_dirs, xacro_args)
+    urdf = _yourdfpy_tree(path, desc)
+    lines = [f"{target}: {path}"] + _tree_lines(urdf, desc) + _chain_lines(desc)
+    if arm is None:
+        lines.append(
+            "no tip frame given and there are several leaf links: name one with --tip to "
+            "see the chain"
+        )
+        return "\n".join(lines)
+    return "\n".join(lines + _arm_lines(arm))
+
+
+def _read_target(target, tip, task, joints, package_dirs, xacro_args):
+    """``(path, description, arm)``; the arm is None when a tip must be chosen among leaves."""
+    path = urdf_path_of(target)
+    if target in catalog() or target in example_robot_names():
         desc = read_urdf(path)
         arm = load_arm(target, tip=tip, task=task, joints=joints, package_dirs=package_dirs)
-    else:
-        path = urdf_path_of(target)
-        if not path.is_file():
-            raise URDFError(f"{path}: no such URDF file")
-        desc = read_description(path, package_dirs, xacro_args)
-        choose_tip = tip is None and len(desc.leaves) > 1
-        # Pinocchio's checks first (their messages are the clearer), then the tree from yourdfpy
-        arm = (
-            None
-            if choose_tip
-            else arm_from_description(desc, tip, task, joints, package_dirs, xacro_args)
-        )
+        return path, desc, arm
+    if not path.is_file():
+        raise URDFError(f"{path}: no such URDF file")
+    desc = read_description(path, package_dirs, xacro_args)
+    choose_tip = tip is None and len(desc.leaves) > 1
+    # Pinocchio's checks first (their messages are the clearer), then the tree from yourdfpy
+    arm = (
+        None if choose_tip else arm_from_description(desc, tip, task, joints, package_dirs, xacro_args)
+    )
+    return path, desc, arm
+
+
+def _yourdfpy_tree(path: Path, desc):
+    """The tree as yourdfpy reads it, from the checked bytes (never the file itself)."""
     import yourdfpy  # after the checks: a hostile file is refused without this import's cost
 
-    try:  # yourdfpy parses the checked bytes, never the file itself
-        urdf = yourdfpy.URDF.load(
+    try:
+        return yourdfpy.URDF.load(
             io.BytesIO(desc.data),
             load_meshes=False,
             build_scene_graph=False,
@@ -75,8 +91,11 @@ def inspect_text(
         )
     except Exception as err:  # yourdfpy raises many types
         raise URDFError(f"{path}: yourdfpy could not read it: {err}") from err
+
+
+def _tree_lines(urdf, desc) -> list[str]:
+    """The robot's links and joints, continuous and mimic joints, the candidate tips."""
     lines = [
-        f"{target}: {path}",
         f"robot '{urdf.robot.name}': {len(urdf.robot.links)} links, "
         f"{len(urdf.robot.joints)} joints",
         "",
@@ -101,48 +120,43 @@ def inspect_text(
             "mimic joints (held fixed; they cannot be active joints): "
             + ", ".join(f"{a} follows {b}" for a, b in desc.mimic.items())
         )
-    lines += ["", f"candidate tip frames (leaf links): {', '.join(desc.leaves)}"]
-    lines += _chain_lines(desc)
-    if arm is None:
-        lines.append(
-            "no tip frame given and there are several leaf links: name one with --tip to "
-            "see the chain"
-        )
-        return "\n".join(lines)
-    lines += [
+    return lines + ["", f"candidate tip frames (leaf links): {', '.join(desc.leaves)}"]
+
+
+def _arm_lines(arm) -> list[str]:
+    """The chain, the task, σ_min(J) at the reference configuration, the intolerable joints."""
+    lines = [
         "",
         f"chain to tip '{arm.tip}': {' -> '.join(arm.joint_names)}",
         f"task {'/'.join(arm.task)}: n = {arm.n}, m = {arm.m}, redundancy r = {arm.redundancy}",
     ]
     q = arm.q_reference
-    J = arm.jacobian(q)
-    proj = projection(J)
+    proj = projection(arm.jacobian(q))
     label = "reference" if np.any(q != arm.neutral()) else "neutral"
     lines.append(
         f"at the {label} configuration {np.round(q, 4).tolist()}: "
         f"σ_min(J) = {proj.sigma_min:.3g}" + ("  (singular)" if proj.sigma_min < 1e-6 else "")
     )
-    if arm.redundancy >= 1:
-        sc = scenarios("all", arm.n, r=arm.redundancy, joint_names=arm.joint_names)
-        bad = [arm.joint_names[i] for i in sc.columns if proj.N[i, i] < PIVOT_TOL]
-        note = "  (J is singular there, so this says little)" if proj.sigma_min < 1e-6 else ""
-        lines.append(
-            "intolerable joints there (locking one loses the task): "
-            + (", ".join(bad) if bad else "none")
-            + note
-        )
-        from .limits import inspect_lines
+    if arm.redundancy < 1:
+        return lines + ["not redundant for this task: any locked joint loses it"]
+    sc = scenarios("all", arm.n, r=arm.redundancy, joint_names=arm.joint_names)
+    bad = [arm.joint_names[i] for i in sc.columns if proj.N[i, i] < PIVOT_TOL]
+    note = "  (J is singular there, so this says little)" if proj.sigma_min < 1e-6 else ""
+    lines.append(
+        "intolerable joints there (locking one loses the task): "
+        + (", ".join(bad) if bad else "none")
+        + note
+    )
+    from .limits import inspect_lines
 
-        lines += inspect_lines(arm, q, sc.columns)
-        always = _always_intolerable(arm, sc.columns)
-        lines.append(
-            f"intolerable at all of {STRUCTURAL_SAMPLES} random regular configurations "
-            "(structurally; leave them out of the lockable set): "
-            + (", ".join(arm.joint_names[i] for i in always) if always else "none")
-        )
-    else:
-        lines.append("not redundant for this task: any locked joint loses it")
-    return "\n".join(lines)
+    lines += inspect_lines(arm, q, sc.columns)
+    always = [name for (name,) in intolerable_everywhere(arm, sc)]
+    lines.append(
+        f"intolerable at all of {STRUCTURAL_SAMPLES} random regular configurations "
+        "(structurally; leave them out of the lockable set): "
+        + (", ".join(always) if always else "none")
+    )
+    return lines
 
 
 #: Most serial chains ``inspect`` lists.
@@ -170,23 +184,3 @@ def _chain_lines(desc) -> list[str]:
     if len(chains) > MAX_CHAINS_SHOWN:
         lines.append(f"  ... and {len(chains) - MAX_CHAINS_SHOWN} shorter chains")
     return lines
-
-
-#: Random configurations ``inspect`` draws to find structurally intolerable joints.
-STRUCTURAL_SAMPLES = 50
-
-
-def _always_intolerable(arm, columns) -> list[int]:
-    """Joints whose pivot ``N_ii`` vanishes at every sampled regular configuration (seeded)."""
-    rng = np.random.default_rng(0)
-    always = set(int(i) for i in columns)
-    seen = 0
-    for _ in range(20 * STRUCTURAL_SAMPLES):
-        proj = projection(arm.jacobian(arm.random_q(rng)))
-        if proj.sigma_min < 1e-3:
-            continue
-        always &= {i for i in always if proj.N[i, i] < 1e3 * PIVOT_TOL}
-        seen += 1
-        if seen == STRUCTURAL_SAMPLES or not always:
-            break
-    return sorted(always)
