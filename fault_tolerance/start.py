@@ -251,19 +251,8 @@ def default_start(
     """
     sc = lockable_scenarios(arm, lockable)
     _refuse_structural(arm, sc, seed)  # no start can help such a scenario: say so, not search
-    if hasattr(path, "x") and hasattr(path, "xdot"):  # a ready TaskPath fixes the start point
-        fixed, x0 = path, np.asarray(path.x0, dtype=float)  # type: ignore[union-attr]
-        make = lambda _x0: fixed  # noqa: E731
-    else:
-        make = path if path is not None else (lambda p: default_path(arm, p))
-    if x0 is not None:
-        x0 = np.asarray(x0, dtype=float)
-        if x0.shape != (arm.m,):
-            raise InvalidInput(f"x0 must be {arm.m} numbers for task {'/'.join(arm.task)}")
-        sources = [(None, x0, "given x0")]
-    else:
-        rng = np.random.default_rng(seed)
-        sources = ((q, arm.fk(q), why) for q, why in _seeds(arm, sc, rng, max_seeds))
+    make, x0 = _task_maker(arm, path, x0)
+    sources = _start_points(arm, sc, x0, seed, max_seeds)
     last, tried, fallback = "no regular configuration found within the joint limits", 0, None
     for seed_q, point, origin in sources:
         task = make(point)
@@ -292,6 +281,25 @@ def default_start(
         f"no start {where} for {arm.name} passed the checks ({last}); give --q0 or --x0, a smaller "
         "path (--radius) or fewer lockable joints"
     )
+
+
+def _task_maker(arm: Arm, path, x0):
+    """``(make, x0)``: ``make(point)`` is the task checked from ``point``; a TaskPath fixes x0."""
+    if hasattr(path, "x") and hasattr(path, "xdot"):  # a ready TaskPath fixes the start point
+        fixed, x0 = path, np.asarray(path.x0, dtype=float)  # type: ignore[union-attr]
+        return (lambda _x0: fixed), x0
+    return (path if path is not None else (lambda p: default_path(arm, p))), x0
+
+
+def _start_points(arm: Arm, sc: Scenarios, x0, seed: int, max_seeds: int):
+    """``(seed q or None, start point, origin)``: the given x0, or points of regular seeds."""
+    if x0 is not None:
+        x0 = np.asarray(x0, dtype=float)
+        if x0.shape != (arm.m,):
+            raise InvalidInput(f"x0 must be {arm.m} numbers for task {'/'.join(arm.task)}")
+        return [(None, x0, "given x0")]
+    rng = np.random.default_rng(seed)
+    return ((q, arm.fk(q), why) for q, why in _seeds(arm, sc, rng, max_seeds))
 
 
 def _refuse_structural(arm: Arm, sc: Scenarios, seed: int) -> None:

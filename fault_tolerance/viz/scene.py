@@ -161,7 +161,6 @@ def _build_scene(
     ``package_dirs``: where ``package://`` meshes of a run's carried arm may be read.
     """
     meshcat = _require_meshcat()
-    import meshcat.geometry as mg
     from pinocchio.visualize import MeshcatVisualizer
 
     if meshes not in ("compact", "original"):
@@ -182,120 +181,21 @@ def _build_scene(
         viz.initViewer(viewer=vis)
         viz.loadViewerModel(rootNodeName="robot")
         viz.display(motion.q[0])
-    animations = []
-
-    def placements(visualizer: MeshcatVisualizer):
-        """Per geometry: positions (F, 3) and quaternions (F, 4) of its node over the frames."""
-        gm, gd = visualizer.visual_model, visualizer.visual_data
-        pos = np.empty((len(gm.geometryObjects), len(q_frames), 3))
-        rot: list[list[np.ndarray]] = [[] for _ in gm.geometryObjects]
-        for k, q in enumerate(q_frames):
-            pin.forwardKinematics(arm.model, visualizer.data, q)
-            pin.updateGeometryPlacements(arm.model, visualizer.data, gm, gd)
-            for i in range(len(gm.geometryObjects)):
-                M = gd.oMg[i]
-                pos[i, k] = M.translation
-                rot[i].append(M.rotation.copy())
-        return pos, [_quaternions(r) for r in rot]
-
-    pos, quats = placements(viz)
-    # bounding spheres of the geometry over the frames, for the camera framing
-    radii, centres = [], np.empty_like(pos)
-    for i, g in enumerate(geom.geometryObjects):
-        scale = np.asarray(g.meshScale, dtype=float)
-        try:
-            g.geometry.computeLocalAABB()
-            radii.append(float(g.geometry.aabb_radius) * float(np.max(np.abs(scale))))
-            local = np.asarray(g.geometry.aabb_center, dtype=float) * scale
-        except Exception:  # pragma: no cover - geometry without a bounding box
-            radii.append(0.0)
-            local = np.zeros(3)
-        centres[i] = pos[i] + np.array([_rotation(qk) @ local for qk in quats[i]])
-    lock_tau = None
-    locked_names: set[str] = set()
+    pos, quats = _placements(arm, viz, q_frames)
+    radii, centres = _bounding_spheres(geom, pos, quats)
+    animations: list[dict] = []
+    lock_tau, locked_names = None, set()
     if lock is not None:
         lock_tau = float(np.clip((lock["time"] - motion.t[0]) / speed, 0.0, tau[-1]))
-        lgeom = _lock_model(arm, geom, lock["joint"])
-        locked_names = {
-            g.name
-            for g in geom.geometryObjects
-            if g.parentJoint == arm.model.getJointId(lock["joint"])
-        }
-        with _quiet():
-            lviz = MeshcatVisualizer(arm.model, None, lgeom)
-            lviz.initViewer(viewer=vis)
-            lviz.loadViewerModel(rootNodeName="locked")
-            lviz.display(motion.q[0])
-        lpos, lquats = placements(lviz)
-        for i, g in enumerate(lgeom.geometryObjects):
-            node = lviz.getViewerNodeName(g, pin.GeometryType.VISUAL)
-            vis[node].set_property("visible", lock_tau <= 0)
-            animations.append(
-                _clip(
-                    vis[node].path.lower(),
-                    tau,
-                    lpos[i],
-                    lquats[i],
-                    visible=([0.0, lock_tau], [lock_tau <= 0, True]),
-                )
-            )
+        locked_names, clips = _lock_ghost(vis, arm, geom, motion.q[0], q_frames, tau, lock, lock_tau)
+        animations += clips
     for i, g in enumerate(geom.geometryObjects):
         node = vis[viz.getViewerNodeName(g, pin.GeometryType.VISUAL)].path.lower()
         shown = ([0.0, lock_tau], [lock_tau > 0, False]) if g.name in locked_names else None
         animations.append(_clip(node, tau, pos[i], quats[i], visible=shown))
-
-    # paths: desired (dark), actual trace (teal), the moving target and the lock moment
-    tool = _tool_positions(arm, motion.q)
-    desired = _desired_positions(arm, motion.x_des, tool)
-    scene_pts = [centres.reshape(-1, 3), tool]
-    scene_r = [np.repeat(radii, len(q_frames)), np.zeros(len(tool))]
-    if desired is not None:
-        scene_pts.append(desired)
-        scene_r.append(np.zeros(len(desired)))
-    points, point_r = np.vstack(scene_pts), np.concatenate(scene_r)
-    size = float(np.max(np.ptp(points, axis=0)))
-    tube_r = max(0.0035 * size, 5e-4)
-    k_lock = int(np.searchsorted(motion.t, lock["time"])) if lock else None
-    must = [k_lock] if k_lock is not None else []
-    extras = vis["replay"]
-    if desired is not None:
-        v, f = _tube(_decimate(desired, PATH_POINTS, must), tube_r)
-        extras["desired_path"].set_object(
-            mg.TriangularMeshGeometry(v, f), mg.MeshLambertMaterial(color=_hex(PATH_COLOR))
-        )
-        target = _interp_rows(t_frames, motion.t, desired)
-        extras["target"].set_object(
-            mg.Sphere(2.0 * tube_r), mg.MeshLambertMaterial(color=_hex(PATH_COLOR))
-        )
-        extras["target"].set_transform(_translation(target[0]))
-        animations.append(_clip(extras["target"].path.lower(), tau, positions=target))
-    v, f = _tube(_decimate(tool, PATH_POINTS, must), 0.6 * tube_r)
-    extras["tool_trace"].set_object(
-        mg.TriangularMeshGeometry(v, f), mg.MeshLambertMaterial(color=_hex(TRACE_COLOR))
-    )
-    if lock is not None:
-        where = _interp_rows(
-            np.array([lock["time"]]), motion.t, desired if desired is not None else tool
-        )[0]
-        extras["lock_moment"].set_object(
-            mg.Sphere(3.2 * tube_r), mg.MeshLambertMaterial(color=_hex(LOCK_COLOR))
-        )
-        extras["lock_moment"].set_transform(_translation(where))
-
-    # stage: light background, no axes helper, camera framing the whole arm and path
-    vis["/Background"].set_property("top_color", list(BACKGROUND[0]))
-    vis["/Background"].set_property("bottom_color", list(BACKGROUND[1]))
-    vis["/Axes"].set_property("visible", False)
-    vis["/Grid"].set_object(_grid(points))
-    centre, offset = _camera(points, point_r, desired if desired is not None else tool)
-    # meshcat's orbit controls look at the world origin, so the scene moves there, not the camera
-    vis.set_transform(_translation(-centre))
-    vis["/Grid"].set_transform(_translation(-centre))
-    dx, dy, dz = offset
-    vis["/Cameras/default/rotated/<object>"].set_property(
-        "position", [float(dx), float(dz), float(-dy)]
-    )
-
+    paths = _draw_paths(vis, arm, motion, t_frames, tau, centres, radii, len(q_frames))
+    animations += paths.clips
+    _stage(vis, paths.points, paths.point_r, paths.focus)
     vis.window.send(
         _Lowered(
             {
@@ -308,8 +208,148 @@ def _build_scene(
     )
     commands = list(recorder.commands.values())
     commands.sort(key=lambda c: c[0] == b"set_animation")  # stable: the animation last
-    meta = motion.meta
-    info = {
+    info = _scene_info(motion, arm, speed, fps, tau, lock_tau, locked_names, recorder, geom)
+    info["has_desired_path"] = paths.desired is not None
+    return _Scene(commands, info, motion, arm)
+
+
+def _placements(arm: Arm, visualizer, q_frames: np.ndarray):
+    """Per geometry: positions (F, 3) and quaternions (F, 4) of its node over the frames."""
+    gm, gd = visualizer.visual_model, visualizer.visual_data
+    pos = np.empty((len(gm.geometryObjects), len(q_frames), 3))
+    rot: list[list[np.ndarray]] = [[] for _ in gm.geometryObjects]
+    for k, q in enumerate(q_frames):
+        pin.forwardKinematics(arm.model, visualizer.data, q)
+        pin.updateGeometryPlacements(arm.model, visualizer.data, gm, gd)
+        for i in range(len(gm.geometryObjects)):
+            M = gd.oMg[i]
+            pos[i, k] = M.translation
+            rot[i].append(M.rotation.copy())
+    return pos, [_quaternions(r) for r in rot]
+
+
+def _bounding_spheres(geom, pos: np.ndarray, quats: list) -> tuple[list[float], np.ndarray]:
+    """Radii and centres (per geometry and frame) of the geometry's bounding spheres (camera)."""
+    radii, centres = [], np.empty_like(pos)
+    for i, g in enumerate(geom.geometryObjects):
+        scale = np.asarray(g.meshScale, dtype=float)
+        try:
+            g.geometry.computeLocalAABB()
+            radii.append(float(g.geometry.aabb_radius) * float(np.max(np.abs(scale))))
+            local = np.asarray(g.geometry.aabb_center, dtype=float) * scale
+        except Exception:  # pragma: no cover - geometry without a bounding box
+            radii.append(0.0)
+            local = np.zeros(3)
+        centres[i] = pos[i] + np.array([_rotation(qk) @ local for qk in quats[i]])
+    return radii, centres
+
+
+def _lock_ghost(vis, arm: Arm, geom, q0, q_frames, tau, lock: dict, lock_tau: float):
+    """The lock colours: a copy of the locked links, shown from the lock moment on.
+
+    Returns the names of the geometry the locked joint moves and the clips of its coloured copy.
+    """
+    from pinocchio.visualize import MeshcatVisualizer
+
+    lgeom = _lock_model(arm, geom, lock["joint"])
+    joint = arm.model.getJointId(lock["joint"])
+    locked = {g.name for g in geom.geometryObjects if g.parentJoint == joint}
+    clips = []
+    with _quiet():
+        lviz = MeshcatVisualizer(arm.model, None, lgeom)
+        lviz.initViewer(viewer=vis)
+        lviz.loadViewerModel(rootNodeName="locked")
+        lviz.display(q0)
+    lpos, lquats = _placements(arm, lviz, q_frames)
+    for i, g in enumerate(lgeom.geometryObjects):
+        node = lviz.getViewerNodeName(g, pin.GeometryType.VISUAL)
+        vis[node].set_property("visible", lock_tau <= 0)
+        clips.append(
+            _clip(
+                vis[node].path.lower(),
+                tau,
+                lpos[i],
+                lquats[i],
+                visible=([0.0, lock_tau], [lock_tau <= 0, True]),
+            )
+        )
+    return locked, clips
+
+
+@dataclass
+class _Paths:
+    """What :func:`_draw_paths` drew: the points framed by the camera, its clips, the focus."""
+
+    points: np.ndarray
+    point_r: np.ndarray
+    desired: np.ndarray | None
+    focus: np.ndarray
+    clips: list[dict]
+
+
+def _draw_paths(vis, arm: Arm, motion, t_frames, tau, centres, radii, frames: int) -> _Paths:
+    """Paths: desired (dark), actual trace (teal), the moving target and the lock moment."""
+    import meshcat.geometry as mg
+
+    lock = motion.lock
+    tool = _tool_positions(arm, motion.q)
+    desired = _desired_positions(arm, motion.x_des, tool)
+    scene_pts = [centres.reshape(-1, 3), tool]
+    scene_r = [np.repeat(radii, frames), np.zeros(len(tool))]
+    if desired is not None:
+        scene_pts.append(desired)
+        scene_r.append(np.zeros(len(desired)))
+    points, point_r = np.vstack(scene_pts), np.concatenate(scene_r)
+    size = float(np.max(np.ptp(points, axis=0)))
+    tube_r = max(0.0035 * size, 5e-4)
+    k_lock = int(np.searchsorted(motion.t, lock["time"])) if lock else None
+    must = [k_lock] if k_lock is not None else []
+    extras, clips = vis["replay"], []
+    if desired is not None:
+        v, f = _tube(_decimate(desired, PATH_POINTS, must), tube_r)
+        extras["desired_path"].set_object(
+            mg.TriangularMeshGeometry(v, f), mg.MeshLambertMaterial(color=_hex(PATH_COLOR))
+        )
+        target = _interp_rows(t_frames, motion.t, desired)
+        extras["target"].set_object(
+            mg.Sphere(2.0 * tube_r), mg.MeshLambertMaterial(color=_hex(PATH_COLOR))
+        )
+        extras["target"].set_transform(_translation(target[0]))
+        clips.append(_clip(extras["target"].path.lower(), tau, positions=target))
+    v, f = _tube(_decimate(tool, PATH_POINTS, must), 0.6 * tube_r)
+    extras["tool_trace"].set_object(
+        mg.TriangularMeshGeometry(v, f), mg.MeshLambertMaterial(color=_hex(TRACE_COLOR))
+    )
+    focus = desired if desired is not None else tool
+    if lock is not None:
+        where = _interp_rows(np.array([lock["time"]]), motion.t, focus)[0]
+        extras["lock_moment"].set_object(
+            mg.Sphere(3.2 * tube_r), mg.MeshLambertMaterial(color=_hex(LOCK_COLOR))
+        )
+        extras["lock_moment"].set_transform(_translation(where))
+    return _Paths(points, point_r, desired, focus, clips)
+
+
+def _stage(vis, points: np.ndarray, point_r: np.ndarray, focus: np.ndarray) -> None:
+    """Light background, no axes helper, camera framing the whole arm and path."""
+    vis["/Background"].set_property("top_color", list(BACKGROUND[0]))
+    vis["/Background"].set_property("bottom_color", list(BACKGROUND[1]))
+    vis["/Axes"].set_property("visible", False)
+    vis["/Grid"].set_object(_grid(points))
+    centre, offset = _camera(points, point_r, focus)
+    # meshcat's orbit controls look at the world origin, so the scene moves there, not the camera
+    vis.set_transform(_translation(-centre))
+    vis["/Grid"].set_transform(_translation(-centre))
+    dx, dy, dz = offset
+    vis["/Cameras/default/rotated/<object>"].set_property(
+        "position", [float(dx), float(dz), float(-dy)]
+    )
+
+
+def _scene_info(motion, arm: Arm, speed, fps, tau, lock_tau, locked_names, recorder, geom) -> dict:
+    """What the page needs to know about the replay (robot, timing, lock, colours)."""
+    meta, lock = motion.meta, motion.lock
+    return {
         "robot": meta.get("robot", arm.name),
         "algorithm": meta.get("algorithm"),
         "joints": arm.joint_names,
@@ -330,9 +370,7 @@ def _build_scene(
             "path": PATH_COLOR,
             "links": {g.name: [float(c) for c in g.meshColor[:3]] for g in geom.geometryObjects},
         },
-        "has_desired_path": desired is not None,
     }
-    return _Scene(commands, info, motion, arm)
 
 
 @contextlib.contextmanager
