@@ -7,8 +7,8 @@ nor matplotlib.
 
 __version__ = "0.1.0"
 
-from .arm import Arm, parse_task  # noqa: E402
 from .api import jvj, resolve  # noqa: E402
+from .arm import Arm, parse_task  # noqa: E402
 from .bounded import BoundedRates, rate_box, resolve_bounded  # noqa: E402
 from .errors import (  # noqa: E402
     FaultToleranceError,

@@ -38,8 +38,11 @@ def _prismatic(joint) -> bool:
 
 
 def velocity_limits(arm) -> np.ndarray:
-    """The arm's velocity limits [rad/s or m/s], (n,); where the URDF gives none (0, missing or
-    infinite): :data:`DEFAULT_REVOLUTE_SPEED` or :data:`DEFAULT_PRISMATIC_SPEED`."""
+    """The arm's velocity limits [rad/s or m/s], (n,).
+
+    Where the URDF gives none (0, missing or infinite): :data:`DEFAULT_REVOLUTE_SPEED` or
+    :data:`DEFAULT_PRISMATIC_SPEED`.
+    """
     v = np.abs(arm.velocity_limit)
     model = arm.model
     kinds = [_prismatic(model.joints[j]) for j in range(1, model.njoints) if model.joints[j].nv > 0]

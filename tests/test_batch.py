@@ -32,7 +32,7 @@ def case(request):
 def test_jacobians_are_pinocchio_rows(case):
     """batch.jacobians stacks Arm.jacobian row by row."""
     arm, Q, Js, _, _ = case
-    for q, J in zip(Q, Js):
+    for q, J in zip(Q, Js, strict=True):
         np.testing.assert_allclose(J, arm.jacobian(q), atol=1e-14)
 
 
@@ -51,10 +51,10 @@ def test_resolve_jvj_rcn_equal_scalar(case, name, chunk):
     good = np.array(good)
     Js, xd = Js[good], xd[good]
     qd = batch.resolve(name, Js, xd, lockable, chunk=chunk)
-    ref = np.array([ft.resolve(name, J, x, lockable) for J, x in zip(Js, xd)])
+    ref = np.array([ft.resolve(name, J, x, lockable) for J, x in zip(Js, xd, strict=True)])
     assert _rel(qd, ref) < 1e-9
     lam = batch.jvj(Js, xd, qd, lockable, chunk=chunk)
-    lref = np.array([ft.jvj(J, x, v, lockable) for J, x, v in zip(Js, xd, ref)])
+    lref = np.array([ft.jvj(J, x, v, lockable) for J, x, v in zip(Js, xd, ref, strict=True)])
     assert _rel(lam, lref) < 1e-9
     k = batch.rcn(Js, lockable, chunk=chunk)
     kref = np.array([ft.rcn(J, lockable) for J in Js])
@@ -73,11 +73,11 @@ def test_multi_joint_weights_and_continuation():
     for response in ("least_norm", "continuation"):
         qd = batch.resolve("jvja", Js, xd, lock, weights=w, response=response)
         ref = np.array(
-            [ft.resolve("jvja", J, x, lock, weights=w, response=response) for J, x in zip(Js, xd)]
+            [ft.resolve("jvja", J, x, lock, weights=w, response=response) for J, x in zip(Js, xd, strict=True)]
         )
         assert _rel(qd, ref) < 1e-9
         lam = batch.jvj(Js, xd, qd, lock, weights=w, response=response)
-        lref = [ft.jvj(J, x, v, lock, weights=w, response=response) for J, x, v in zip(Js, xd, ref)]
+        lref = [ft.jvj(J, x, v, lock, weights=w, response=response) for J, x, v in zip(Js, xd, ref, strict=True)]
         assert _rel(lam, np.array(lref)) < 1e-9
 
 

@@ -111,7 +111,7 @@ def test_jvja_least_norm_equals_qp(m, n, tight, weights):
             check_scaled(J, xd, out, lo, hi)
             continue
         ref = qp_ref(np.eye(n), c, J, xd, lo, hi)
-        lam = lambda qd: float(ww @ ((post - qd) ** 2).sum(axis=1))  # noqa: E731
+        lam = lambda qd, ww=ww, post=post: float(ww @ ((post - qd) ** 2).sum(axis=1))  # noqa: E731
         assert abs(lam(out.qd) - lam(ref)) <= REL * lam(ref)
         assert np.allclose(out.qd, ref, atol=1e-7)
         # inside the box and no reduced bound: the unbounded JVJA unchanged
@@ -141,7 +141,7 @@ def test_jvja_continuation_equals_qp(m, n, tight):
             check_scaled(J, xd, out, lo, hi)
             continue
         ref = qp_ref(H, np.zeros(n), J, xd, lo, hi)
-        Z = lambda qd: float(qd @ W @ qd)  # noqa: E731  the (G3) jump
+        Z = lambda qd, W=W: float(qd @ W @ qd)  # noqa: E731  the (G3) jump
         assert abs(Z(out.qd) - Z(ref)) <= REL * Z(ref)
         assert np.allclose(out.qd, ref, atol=1e-6)
         if not out.active.any():
@@ -166,7 +166,7 @@ def test_mda_equals_qp(tight):
             continue
         c = unb - np.linalg.pinv(J) @ xd  # −α N∇K (capped): the target MDA projects
         ref = qp_ref(np.eye(4), c, J, xd, lo, hi)
-        f = lambda qd: float((qd - c) @ (qd - c))  # noqa: E731
+        f = lambda qd, c=c: float((qd - c) @ (qd - c))  # noqa: E731
         assert abs(f(out.qd) - f(ref)) <= REL * f(ref)
         assert np.allclose(out.qd, ref, atol=1e-7)
 

@@ -36,6 +36,7 @@ def test_readme_python_blocks_run(tmp_path, monkeypatch):
         "loading",
         "indices",
         "planner",
+        "planning",
         "realtime",
         "failures",
         "trajectories",

@@ -16,7 +16,6 @@ import pytest
 import fault_tolerance as ft
 import fault_tolerance.experiments as experiments
 import fault_tolerance.files as files
-import fault_tolerance.run as run_module
 import fault_tolerance.simulation as simulation
 from fault_tolerance.files import write_atomic
 from fault_tolerance.run import Run

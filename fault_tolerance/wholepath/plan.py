@@ -101,14 +101,18 @@ def plan_path(
         q0: Fixed start (kept exactly). Without it the start is free on the self-motion of
             ``x0`` (default: the path's start), searched from the minimum-RCN posture.
         x0: Task point of a free start (only without ``q0``).
-        lockable, weights: Failure scenarios, as for the other planners.
-        dt, duration, feedback_gain: As for ``simulate`` (same discretisation and task feedback).
+        lockable: Joints that may lock (failure scenarios), as for the other planners.
+        weights: Scenario weights, as for the other planners.
+        dt: Time step [s], as for ``simulate`` (the same discretisation).
+        duration: Length [s] (default: the path's), as for ``simulate``.
+        feedback_gain: Task feedback ``K_p`` [1/s], as for ``simulate``.
         limits: Enforce the URDF joint position and velocity limits.
         rcn_max: Optional bound on every reduced condition number ``k_S`` (Sec. III.D).
         objective: ``"mean"`` or ``"max"`` of λ over the path.
         method: ``"auto"``, ``"dp"`` (r = 1 only) or ``"scp"``.
         iterations: Most SCP iterations.
-        dp_step, dp_stage: DP grid: arclength spacing [rad] and stage interval [s].
+        dp_step: DP grid: arclength spacing [rad].
+        dp_stage: DP grid: stage interval [s].
         progress: ``True`` for a tqdm bar, or a tqdm-like object with ``update``.
 
     Example:
@@ -120,26 +124,12 @@ def plan_path(
         >>> plan.scores["final"] <= min(plan.scores["lnva"], plan.scores["jvja"])
         True
     """
-    if method not in METHODS:
-        raise InvalidInput(f"global planner method {method!r} is not one of {list(METHODS)}")
-    if objective not in OBJECTIVES:
-        raise InvalidInput(f"objective {objective!r} is not one of {list(OBJECTIVES)}")
-    if method == "dp" and arm.redundancy != 1:
-        raise InvalidInput(
-            f"method 'dp' needs one degree of redundancy; {arm.name} has r = {arm.redundancy} "
-            "for this task: use method 'scp' or 'auto'"
-        )
-    if not (isinstance(iterations, int) and iterations >= 0):
-        raise InvalidInput(f"iterations must be an integer >= 0, got {iterations!r}")
-    duration = path.duration if duration is None else float(duration)
-    steps = int(round(duration / dt))
-    if not (np.isfinite(dt) and dt > 0 and steps >= 1):
-        raise InvalidInput(f"dt = {dt} and duration = {duration} give no time step")
+    _check_options(arm, method, objective, iterations)
     prob = build_problem(
         arm,
         path,
         dt=dt,
-        steps=steps,
+        steps=_steps(path, duration, dt),
         lockable=lockable,
         weights=weights,
         feedback_gain=feedback_gain,
@@ -156,6 +146,30 @@ def plan_path(
     finally:
         if own:
             bar.close()
+
+
+def _check_options(arm: Arm, method: str, objective: str, iterations) -> None:
+    """Refuse an unknown method or objective, DP without r = 1, or a bad iteration count."""
+    if method not in METHODS:
+        raise InvalidInput(f"global planner method {method!r} is not one of {list(METHODS)}")
+    if objective not in OBJECTIVES:
+        raise InvalidInput(f"objective {objective!r} is not one of {list(OBJECTIVES)}")
+    if method == "dp" and arm.redundancy != 1:
+        raise InvalidInput(
+            f"method 'dp' needs one degree of redundancy; {arm.name} has r = {arm.redundancy} "
+            "for this task: use method 'scp' or 'auto'"
+        )
+    if not (isinstance(iterations, int) and iterations >= 0):
+        raise InvalidInput(f"iterations must be an integer >= 0, got {iterations!r}")
+
+
+def _steps(path, duration: float | None, dt: float) -> int:
+    """Time steps of the plan (as ``simulate`` counts them), or :class:`InvalidInput`."""
+    duration = path.duration if duration is None else float(duration)
+    steps = int(round(duration / dt))
+    if not (np.isfinite(dt) and dt > 0 and steps >= 1):
+        raise InvalidInput(f"dt = {dt} and duration = {duration} give no time step")
+    return steps
 
 
 def _plan(prob, start, fixed, method, iterations, dp_step, dp_stage, bar, tic) -> Plan:

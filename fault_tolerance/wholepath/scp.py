@@ -232,10 +232,13 @@ def _violated(qp: QP, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 def solve_qp(qp: QP, rounds: int = 6) -> np.ndarray | None:
-    """Solve the QP: the equality-constrained KKT system by sparse LU; where its solution breaks
-    inequalities, those rows are held at their bounds and the system solved again (a few rounds of
-    an active-set guess); OSQP (warm-started) when that does not settle. ``None`` when nothing does.
-    The candidate is checked on its exact rollout anyway, so a feasible point suffices."""
+    """Solve the QP; ``None`` when nothing does.
+
+    The equality-constrained KKT system by sparse LU; where its solution breaks inequalities,
+    those rows are held at their bounds and the system solved again (a few rounds of an
+    active-set guess); OSQP (warm-started) when that does not settle. The candidate is checked on
+    its exact rollout anyway, so a feasible point suffices.
+    """
     x = _kkt(qp.P, qp.c, qp.Aeq, qp.beq)
     if not np.all(np.isfinite(x)):
         return None
@@ -312,7 +315,7 @@ def scp(
     history = [warm.score]
     accepted = rejected = 0
     it = 0
-    for it in range(1, iterations + 1):
+    for it in range(1, iterations + 1):  # noqa: B007 - the count is returned below
         lin = linearise(prob, cur)
         qp = build_qp(prob, cur, lin, mu, fixed_start)
         x = solve_qp(qp)
