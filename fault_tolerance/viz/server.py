@@ -322,20 +322,17 @@ def serve(
 
 
 def _serve_page(page: _Page, port: int | None) -> ReplayServer:
-    server = ReplayServer.start(port, page=_page_html(page, live=True))
-    scene = page.scenes[0]
-    try:
-        server.send(scene.commands)
-    except BaseException:
-        server.close()
-        raise
-    server.info = scene.info
-    return server
+    """Serve the replay page (viewer and plots), live, with its first scene."""
+    return _serve(ReplayServer.start(port, page=_page_html(page, live=True)), page.scenes[0])
 
 
 def _serve_scene(scene: _Scene, port: int | None) -> ReplayServer:
     """Serve one recorded scene with meshcat's bare viewer (no plots)."""
-    server = ReplayServer.start(port)
+    return _serve(ReplayServer.start(port), scene)
+
+
+def _serve(server: ReplayServer, scene: _Scene) -> ReplayServer:
+    """Send ``scene`` to a started server (closed again if that fails)."""
     try:
         server.send(scene.commands)
     except BaseException:
