@@ -18,14 +18,13 @@ from .. import __version__
 from . import bench, design, inspect, lock, replay, reproduce, robots, simulate, workspace
 from .common import (
     FORMATTER,
-    Parser,
     add_path_options,
     add_robot_options,
     load_robot,
     lockable_of,
-    run_command,
     state_defaults,
 )
+from .runner import Parser, run_command
 from .start_options import choose_start, start_and_path
 
 __all__ = [

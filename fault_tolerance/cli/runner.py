@@ -1,0 +1,105 @@
+"""The command line's parser and how a command ends: exit codes, one-line errors and warnings.
+
+:class:`Parser` gives argparse's errors on one line (exit 2) and takes negative numbers as option
+values; :func:`run_command` runs a sub-command and maps what it raises to the exit codes of
+:mod:`.common` (0 success, 2 bad input, 1 unexpected failure, 130 interrupted).
+"""
+
+from __future__ import annotations
+
+import argparse
+import errno
+import re
+import sys
+import warnings
+from collections.abc import Callable
+
+from ..errors import FaultToleranceError
+from .common import EXIT_BAD_INPUT, EXIT_FAILURE, EXIT_INTERRUPTED, close_bars
+
+#: Option values that begin with ``-`` and are numbers, not options: ``-0.21``, ``-1e-3``,
+#: ``-0.21,0.20,0.35``, ``-1.5:1.5,-2:2``. argparse's own pattern takes only a single plain number,
+#: so ``--x0 -0.21,0.20,0.35`` failed ("expected one argument").
+NEGATIVE_NUMBERS = re.compile(r"^-(\d|\.\d)[\d.eE+\-,:;]*$")
+
+
+class Parser(argparse.ArgumentParser):
+    """argparse with a one-line error message (exit code 2); values may be negative numbers.
+
+    Every subcommand's parser is of this class (``add_subparsers`` uses the parent's class), so
+    any option taking numbers accepts ``--opt -1,2`` as well as ``--opt=-1,2``.
+    """
+
+    def __init__(self, *args, **kwargs) -> None:
+        super().__init__(*args, **kwargs)
+        self._negative_number_matcher = NEGATIVE_NUMBERS
+
+    def error(self, message: str):  # type: ignore[override]
+        """Exit 2 with one line on stderr."""
+        self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+
+
+def run_command(func: Callable, args: argparse.Namespace) -> int:
+    """Run one command; map errors to exit codes and warnings to one line on stderr."""
+    shown = warnings.showwarning
+    if not args.debug:  # a warning is one line on stderr too
+        warnings.showwarning = _warning_line
+    try:
+        return int(func(args) or 0)
+    except FaultToleranceError as err:
+        close_bars()
+        if args.debug:
+            raise
+        print(f"fault-tolerance {args.command}: error: {one_line(err)}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    except KeyboardInterrupt:
+        close_bars()
+        print("interrupted", file=sys.stderr)
+        return EXIT_INTERRUPTED
+    except BrokenPipeError:  # `fault-tolerance robots | head`: the reader left, not an error
+        _quiet_stdout()
+        return 0
+    except Exception as err:  # noqa: BLE001 - the last line of defence
+        close_bars()
+        if args.debug:
+            raise
+        if isinstance(err, OSError) and err.errno in _REFUSED_BY_THE_SYSTEM:
+            # the file system refused (full, read-only, permissions, a name too long): not a bug
+            print(f"fault-tolerance {args.command}: error: {one_line(err)}", file=sys.stderr)
+            return EXIT_BAD_INPUT
+        print(
+            f"fault-tolerance {args.command}: unexpected error: {type(err).__name__}: "
+            f"{one_line(err)} (run with --debug for the traceback)",
+            file=sys.stderr,
+        )
+        return EXIT_FAILURE
+    finally:
+        warnings.showwarning = shown
+
+
+def _quiet_stdout() -> None:
+    """Point stdout at /dev/null so the interpreter's final flush does not fail again."""
+    import os
+
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    try:
+        os.dup2(devnull, sys.stdout.fileno())
+    except (OSError, ValueError):  # pragma: no cover - stdout without a file descriptor
+        pass
+    finally:
+        os.close(devnull)
+
+
+#: errno values of an OSError that mean the system refused the output, not that the code is wrong.
+_REFUSED_BY_THE_SYSTEM = frozenset(
+    {errno.ENOSPC, errno.EDQUOT, errno.EROFS, errno.EACCES, errno.EPERM, errno.ENAMETOOLONG}
+)
+
+
+def one_line(message) -> str:
+    """``message`` on one line."""
+    return " ".join(str(message).split("\n"))
+
+
+def _warning_line(message, category, filename, lineno, file=None, line=None) -> None:
+    print(f"fault-tolerance: warning: {one_line(message)}", file=sys.stderr)
