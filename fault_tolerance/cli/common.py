@@ -305,10 +305,21 @@ def report_warnings(command: str, label: str, run_, arm) -> list[dict]:
     return [w.as_dict() for w in found]
 
 
+#: Names that moved to :mod:`.runner` (#11), still importable from here.
+_IN_RUNNER = ("NEGATIVE_NUMBERS", "Parser", "one_line", "run_command")
+
+
 def __getattr__(name: str):
-    """``start_and_path`` moved to :mod:`.start_options` (old import path kept)."""
+    """Forward names that moved (old import paths kept).
+
+    ``start_and_path`` is in :mod:`.start_options`; the parser and ``run_command`` in :mod:`.runner`.
+    """
     if name == "start_and_path":
         from .start_options import start_and_path
 
         return start_and_path
+    if name in _IN_RUNNER:
+        from . import runner
+
+        return getattr(runner, name)
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
