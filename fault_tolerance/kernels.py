@@ -29,15 +29,12 @@ from .linalg import SIGMA_EPS, projection
 __all__ = [
     "TRACE_MAX",
     "Workspace",
-    "compiled_kernel",
-    "compiled_step",
     "lapack_jvja",
     "lapack_linalg",
     "lapack_linalg_or_numpy",
     "lapack_lnva",
     "lapack_mda",
     "numpy_linalg",
-    "step_kernel",
 ]
 
 #: ``trace((J Jᵀ)⁻¹)`` up to which ``σ_min(J) ≥ SIGMA_EPS`` is certain, so no damping is needed.
@@ -154,176 +151,6 @@ def lapack_linalg_or_numpy() -> SimpleNamespace:
 
 
 # Eqn. (5) in closed form (G2), one step after the Jacobian; compiled by numba.
-def step_kernel(J, xdot, out, G, B, c, fw, params, jvja):  # pragma: no cover - numba
-    """LNVA (``jvja=0``) or single-joint JVJA (``jvja=1``) rates into ``out``; returns a status.
-
-    ``params = [TRACE_MAX, pivot threshold, rank coefficient, alpha]``; ``fw[0]`` is 0 on lockable
-    columns and +inf elsewhere, ``fw[1]`` the weight ``w_i/W`` (or 1 with uniform weights, then
-    ``alpha = -1/f``). Status 0: done; 1: no certificate of ``σ_min ≥ SIGMA_EPS`` (or non-finite
-    numbers), the caller falls back to the planner; 2: a pivot ``N_ii`` is below the threshold
-    (``PIVOT_TOL``: intolerable; ``PIVOT_EPS`` with ``tolerate``: to be damped by the planner).
-    Status 3: ``xdot`` or ``out`` has the wrong size (nothing written).
-    Plain Python (valid without numba, and tested so): only scalar loops.
-    """
-    m, n = J.shape
-    if xdot.shape[0] != m or out.shape[0] != n:
-        return 3
-    # G = J Jᵀ (lower triangle) and its Cholesky factor L, in place.
-    for i in range(m):
-        for j in range(i + 1):
-            s = 0.0
-            for k in range(n):
-                s += J[i, k] * J[j, k]
-            G[i, j] = s
-    for j in range(m):
-        s = G[j, j]
-        for k in range(j):
-            s -= G[j, k] * G[j, k]
-        if not s > 0.0:
-            return 1
-        s = math.sqrt(s)
-        G[j, j] = s
-        for i in range(j + 1, m):
-            t = G[i, j]
-            for k in range(j):
-                t -= G[i, k] * G[j, k]
-            G[i, j] = t / s
-    # trace(G⁻¹) = ‖L⁻¹‖_F², column by column of L⁻¹ (c as scratch): the certificate.
-    tr = 0.0
-    for j in range(m):
-        for i in range(j, m):
-            t = 1.0 if i == j else 0.0
-            for k in range(j, i):
-                t -= G[i, k] * c[k]
-            c[i] = t / G[i, i]
-            tr += c[i] * c[i]
-    if not tr <= params[0]:
-        return 1
-    if not jvja:
-        # LNVA: y = G⁻¹ ẋ (L z = ẋ, Lᵀ y = z, in c), a = Jᵀ y.
-        for i in range(m):
-            t = xdot[i]
-            for k in range(i):
-                t -= G[i, k] * c[k]
-            c[i] = t / G[i, i]
-        for i in range(m - 1, -1, -1):
-            t = c[i]
-            for k in range(i + 1, m):
-                t -= G[k, i] * c[k]
-            c[i] = t / G[i, i]
-        s = 0.0
-        for col in range(n):
-            t = 0.0
-            for i in range(m):
-                t += J[i, col] * c[i]
-            out[col] = t
-            s += t * t
-        if not s < _INF:
-            return 1
-        return 0
-    # JVJA: Y = L⁻¹ J (in B) and z = L⁻¹ ẋ (in c), forward substitutions only: a = Yᵀ z,
-    # N_ii = 1 - ‖Y_i‖², N c = c - Yᵀ (Y c). N is never formed: O(m² n), linear in n.
-    for col in range(n):
-        for i in range(m):
-            t = J[i, col]
-            for k in range(i):
-                t -= G[i, k] * B[k, col]
-            B[i, col] = t / G[i, i]
-    for i in range(m):
-        t = xdot[i]
-        for k in range(i):
-            t -= G[i, k] * c[k]
-        c[i] = t / G[i, i]
-    for col in range(n):
-        s = 0.0
-        for i in range(m):
-            s += B[i, col] * c[i]
-        out[col] = s
-    if params[2] > 0.0:  # rank certificate (linalg.RANK_RTOL) for arms without a static bound
-        s = 0.0
-        for i in range(m):
-            for k in range(n):
-                s += J[i, k] * J[i, k]
-        if not params[2] * s * tr < 1.0:
-            return 1
-    # c_i = (w_i / W) a_i / N_ii on lockable columns; out = a + alpha N c.
-    for i in range(n):
-        d = 1.0 + fw[0, i]
-        for r in range(m):
-            d -= B[r, i] * B[r, i]
-        if d < params[1]:
-            return 2
-        c[i] = out[i] / d * fw[1, i]
-    alpha = params[3]
-    for r in range(m):
-        s = 0.0
-        for i in range(n):
-            s += B[r, i] * c[i]
-        G[r, 0] = s  # the factor is no longer needed: its first column is scratch
-    for i in range(n):
-        s = c[i]
-        for r in range(m):
-            s -= B[r, i] * G[r, 0]
-        out[i] += alpha * s
-    s = 0.0
-    for i in range(n):
-        s += out[i] * out[i]
-    if not s < _INF:
-        return 1
-    return 0
-
-
-# The floor of a control step after the Jacobian: least-norm rates with no check at all.
-def floor_kernel(J, xdot, out, G, y):  # pragma: no cover - numba
-    """``out = Jᵀ (J Jᵀ)⁻¹ ẋ`` by Cholesky, nothing else (the benchmark's floor)."""
-    m, n = J.shape
-    for i in range(m):
-        for j in range(i + 1):
-            s = 0.0
-            for k in range(n):
-                s += J[i, k] * J[j, k]
-            G[i, j] = s
-    for j in range(m):
-        s = G[j, j]
-        for k in range(j):
-            s -= G[j, k] * G[j, k]
-        s = math.sqrt(s)
-        G[j, j] = s
-        for i in range(j + 1, m):
-            t = G[i, j]
-            for k in range(j):
-                t -= G[i, k] * G[j, k]
-            G[i, j] = t / s
-    for i in range(m):
-        t = xdot[i]
-        for k in range(i):
-            t -= G[i, k] * y[k]
-        y[i] = t / G[i, i]
-    for i in range(m - 1, -1, -1):
-        t = y[i]
-        for k in range(i + 1, m):
-            t -= G[k, i] * y[k]
-        y[i] = t / G[i, i]
-    for col in range(n):
-        t = 0.0
-        for i in range(m):
-            t += J[i, col] * y[i]
-        out[col] = t
-
-
-_COMPILED: dict[str, Callable] = {}
-
-
-def compiled_kernel(name: str = "step") -> Callable:
-    """:func:`step_kernel` (or ``"floor"``: :func:`floor_kernel`) compiled by numba, once."""
-    if name not in _COMPILED:
-        import numba
-
-        fn = {"step": step_kernel, "floor": floor_kernel}[name]
-        _COMPILED[name] = numba.njit(cache=True, nogil=True, error_model="numpy")(fn)
-    return _COMPILED[name]
-
-
 # -- LNVA / JVJA / MDA with LAPACK (or NumPy) calls --------------------------------------------
 
 
@@ -496,64 +323,13 @@ def lapack_mda(ctrl: Workspace) -> Callable[..., np.ndarray]:
 # -- LNVA / JVJA in one compiled kernel -------------------------------------------------------
 
 
-def compiled_step(ctrl: Workspace, jvja: int) -> Callable[..., np.ndarray]:
-    """The LNVA (``jvja=0``) or single-joint JVJA (``jvja=1``) step of ``ctrl``, numba-compiled.
+def __getattr__(name: str):
+    """The compiled steps, moved to :mod:`fault_tolerance.single_kernel` (imported on demand).
 
-    Compiles :func:`step_kernel` on first use (here, not in the loop) and runs it once.
+    This module imports no numba.
     """
-    model, data, fid, rows = ctrl.model, ctrl.data, ctrl.frame_id, ctrl._rows
-    n, m = ctrl.n, ctrl.m
-    kernel = compiled_kernel()
-    cfj, empty, ndarray, f64 = pin.computeFrameJacobian, np.empty, np.ndarray, np.float64
-    G, B, c = np.empty((m, m)), np.empty((m, n)), np.empty(n)
-    fw = ctrl._fw
-    params = np.array([TRACE_MAX, ctrl._pivot_threshold, ctrl._rank_coef, ctrl._alpha])
-    tolerate = ctrl.tolerate
-    shape_n, shape_m = (n,), (m,)
-    fallback, bad_call = ctrl._fallback, ctrl._bad_call
-    check_tolerable = ctrl.scenarios.check_tolerable
-    name = "jvja" if jvja else "lnva"
-    if jvja:  # N = I - YᵀY with Y = L⁻¹J in B, for the bounded step's box check (boxstep)
-        ctrl._jvja_ws[0], ctrl._jvja_ws[1], ctrl._jvja_ws[2] = B, B, c
-    kernel(np.zeros((m, n)), np.zeros(m), np.zeros(n), G, B, c, fw, params, jvja)  # compile
+    if name in ("compiled_kernel", "compiled_step", "step_kernel", "floor_kernel"):
+        from . import single_kernel
 
-    def slow(q, xdot, out, err: Exception) -> np.ndarray:
-        """A call the compiled kernel refused (types, shapes): convert ``xdot`` once, or say why."""
-        if type(out) is ndarray and out.shape == shape_n and out.dtype == f64:
-            if not (type(xdot) is ndarray and xdot.dtype == f64):
-                x2 = np.asarray(xdot, dtype=float)
-                if x2.shape == shape_m:
-                    return step(q, np.ascontiguousarray(x2), out)
-        raise bad_call(err, q, xdot, out) from err
-
-    def step(q: np.ndarray, xdot: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
-        if out is None:
-            out = empty(n)
-        if type(out) is not ndarray or type(xdot) is not ndarray or out.dtype is not F64:
-            return slow(q, xdot, out, TypeError("not a float64 array"))  # numba would compile it
-        if xdot.dtype is not F64:
-            return slow(q, xdot, out, TypeError("not a float64 array"))
-        try:  # the kernel checks the sizes (status 3); numba checks the dtypes (TypeError)
-            status = kernel(
-                cfj(model, data, q, fid, _LWA)[rows], xdot, out, G, B, c, fw, params, jvja
-            )
-        except FaultToleranceError:
-            raise
-        except _STEP_ERRORS as err:
-            return slow(q, xdot, out, err)
-        if status:
-            if status == 3:
-                return slow(q, xdot, out, ValueError("shape"))
-            J = cfj(model, data, q, fid, _LWA)[rows]
-            if status == 2 and not tolerate:
-                check_tolerable(projection(J).N)  # raises IntolerableFailure naming the joint
-            return fallback(name, J, xdot, out)
-        return out
-
-    step.__name__ = name
-    step.__doc__ = (
-        "JVJA, minimum square-sum jump rates, eq. (5) in closed form (G2); compiled."
-        if jvja
-        else "LNVA, least-norm rates ``q̇ = J⁺ẋ``; compiled."
-    )
-    return step
+        return getattr(single_kernel, name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -260,9 +260,11 @@ class Controller:
         self.bounded_steps = 0
         self.bounded_reference_steps = 0
         if backend == "numba":
-            self.lnva = kernels.compiled_step(self, 0)
+            from .single_kernel import compiled_step
+
+            self.lnva = compiled_step(self, 0)
             if self._singletons:
-                self.jvja = kernels.compiled_step(self, 1)
+                self.jvja = compiled_step(self, 1)
             else:  # multi-joint scenarios (G1), compiled too
                 from .multi_kernel import compiled_multi_step
 

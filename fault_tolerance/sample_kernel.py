@@ -239,7 +239,9 @@ def _gram(J, G) -> None:  # pragma: no cover - numba
 
 
 @njit
-def _rates(J, xd, qd_in, grad, q, cols, w, params, method, parts, box, ws) -> int:  # pragma: no cover
+def _rates(
+    J, xd, qd_in, grad, q, cols, w, params, method, parts, box, ws
+) -> int:  # pragma: no cover
     """Rates into ``ws``'s ``qd``, the jumps into ``parts``; the flags so far, or -1 / -2.
 
     ``box = (lim, prm, buf)`` of :func:`_in_box` (used when ``params[P_BOUNDED]``).
@@ -292,8 +294,27 @@ def _views(ws, m, n):  # pragma: no cover - numba
 
 @njit
 def sample_kernel(
-    J, xd, qd_in, grad, q, qd_prev, x, x_des, err, cols, w, vmax, params, method, k, T, off, ws,
-    lim, prm, buf,
+    J,
+    xd,
+    qd_in,
+    grad,
+    q,
+    qd_prev,
+    x,
+    x_des,
+    err,
+    cols,
+    w,
+    vmax,
+    params,
+    method,
+    k,
+    T,
+    off,
+    ws,
+    lim,
+    prm,
+    buf,
 ) -> int:  # pragma: no cover - numba
     """Sample ``k`` after the Jacobian into row ``k`` of the run table ``T``; the flags, or -1 / -2.
 
@@ -317,7 +338,9 @@ def sample_kernel(
     flag = _rates(J, xd, qd_in, grad, q, cols, w, params, method, parts, (lim, prm, buf), ws)
     if flag < 0:
         return flag
-    return _finish(J, q, qd_prev, x, x_des, err, cols, vmax, params, method, k, row, off, ws, lim, flag)
+    return _finish(
+        J, q, qd_prev, x, x_des, err, cols, vmax, params, method, k, row, off, ws, lim, flag
+    )
 
 
 @njit
@@ -334,7 +357,9 @@ def finish_kernel(
     for c in range(n):
         qd[c] = qd_cmd[c]
     ws[-1] = jv
-    return _finish(J, q, qd_prev, x, x_des, err, cols, vmax, params, method, k, T[k], off, ws, lim, flag)
+    return _finish(
+        J, q, qd_prev, x, x_des, err, cols, vmax, params, method, k, T[k], off, ws, lim, flag
+    )
 
 
 @njit

@@ -71,8 +71,14 @@ class Sampler:
 
         arm, sc = s.arm, s.sc
         self.ctrl = Controller(
-            arm, sc, method=s.algorithm, gain=s.gain, max_step=s.max_step, tolerate=True,
-            backend="lapack" if "lapack" in _backends() else "numpy", limits=False,
+            arm,
+            sc,
+            method=s.algorithm,
+            gain=s.gain,
+            max_step=s.max_step,
+            tolerate=True,
+            backend="lapack" if "lapack" in _backends() else "numpy",
+            limits=False,
         )  # fmt: skip (its workspace; the box check is the kernel's own)
         self.kernel = sk.compiled_sample_kernel()
         self.model, self.data, self.fid = arm.model, self.ctrl.data, arm.frame_id
@@ -196,8 +202,11 @@ class Sampler:
         )  # fmt: skip
 
     def _locked(self, state, k: int, J, xd_cmd, x, x_des, err, lo, hi) -> int:
-        """After the lock, a sample that meets a bound: the reduced robot's bounded least-norm
-        rates (L4, :func:`~fault_tolerance.bounded.bounded_least_norm`), as ``simulation._step``."""
+        """After the lock, a sample that meets a bound: the reduced robot's bounded rates.
+
+        Its bounded least-norm rates (L4, :func:`~fault_tolerance.bounded.bounded_least_norm`),
+        as ``simulation._step``.
+        """
         from .bounded import SCALE_TOL, bounded_least_norm
         from .run import FLAG_BOUND_ACTIVE, FLAG_LOCKED
 
@@ -215,12 +224,14 @@ class Sampler:
         )  # fmt: skip
 
     def _posts(self, J, xd_cmd, qd_cmd, lo, hi) -> tuple[np.ndarray, np.ndarray]:
-        """Rates each reduced robot takes under the box and its task scaling (L4), as
-        :func:`~fault_tolerance.limits.post_failure_under_limits`: its unbounded rates (G1, G3)
+        """Rates each reduced robot takes under the box and its task scaling (L4).
+
+        As :func:`~fault_tolerance.limits.post_failure_under_limits`: its unbounded rates (G1, G3)
         from the kernel's factors where they are inside the box, the bounded solve
-        (:func:`~fault_tolerance.bounded.reduced_bounded`) for those that are not."""
-        from .boxqp import BOX_TOL
+        (:func:`~fault_tolerance.bounded.reduced_bounded`) for those that are not.
+        """
         from .bounded import reduced_bounded
+        from .boxqp import BOX_TOL
 
         m, n = J.shape
         cols, f = self.cols, len(self.cols)

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 import fault_tolerance as ft
-from fault_tolerance import kernels, planner, realtime
+from fault_tolerance import planner, realtime
 from fault_tolerance.indices import rcn_gradient
 from fault_tolerance.linalg import PIVOT_TOL, SIGMA_EPS
 from fault_tolerance.planner import jvja_explicit
@@ -163,10 +163,13 @@ def test_mda_matches_resolve(robot, draw_q, draw_xdot, rng):
 
 def test_kernel_as_plain_python(robot, draw_q, draw_xdot, rng):
     """The compiled kernel's source, run as plain Python, gives the planner's LNVA and JVJA."""
+    from fault_tolerance import single_kernel
+
     ctrl = _controllers(robot, "numpy")
-    n, m = robot.n, robot.m
-    G, B, c = np.empty((m, m)), np.empty((m, n)), np.empty(n)
-    params = np.array([realtime.TRACE_MAX, PIVOT_TOL, ctrl._rank_coef, ctrl._alpha])
+    n = robot.n
+    ws, (params, *_) = single_kernel.workspace(ctrl)
+    params[1] = PIVOT_TOL
+    kernel = single_kernel.step_kernel.py_func
     for q, xd in _samples(robot, draw_q, draw_xdot, rng, k=3):
         J = robot.arm.jacobian(q)
         out = np.empty(n)
@@ -174,7 +177,7 @@ def test_kernel_as_plain_python(robot, draw_q, draw_xdot, rng):
             (0, ft.resolve("lnva", J, xd)),
             (1, ft.resolve("jvja", J, xd, lockable=list(robot.lockable))),
         ):
-            assert kernels.step_kernel(J, xd, out, G, B, c, ctrl._fw, params, jvja) == 0
+            assert kernel(J, xd, out, ws, jvja) == 0
             assert_close(out, ref)
 
 

@@ -89,12 +89,17 @@ class Case:
 
 
 def _pool(arm, sc, rng: np.random.Generator, size: int) -> tuple[list, list]:
-    """Generic configurations: σ_min(J) ≥ 0.01 and every scenario pivot ≥ 1e-4; unit ẋ."""
+    """Generic configurations inside the joint limits; unit ẋ.
+
+    Full-turn joints are wrapped into their limits; σ_min(J) ≥ 0.01 and every scenario pivot
+    ≥ 1e-4.
+    """
+    from ..limits import wrap_into_limits
     from ..linalg import min_pivot, projection
 
     qs, xds = [], []
     for _ in range(200 * size):
-        q = arm.random_q(rng)
+        q = wrap_into_limits(arm, arm.random_q(rng))
         proj = projection(arm.jacobian(q))
         if proj.sigma_min < 1e-2 or min(min_pivot(proj.N, S) for S in sc.sets) < 1e-4:
             continue
@@ -155,7 +160,7 @@ def floor_rows(case: Case) -> dict[str, Row]:
     """The floor of a step: Pinocchio's Jacobian and a compiled least-norm solve, nothing else."""
     import pinocchio as pin
 
-    from ..kernels import compiled_kernel
+    from ..single_kernel import compiled_kernel
 
     ctrl, m = case.ctrl, case.arm.m
     kernel, cfj, lwa = compiled_kernel("floor"), pin.computeFrameJacobian, pin.LOCAL_WORLD_ALIGNED
@@ -170,8 +175,11 @@ def floor_rows(case: Case) -> dict[str, Row]:
 
 
 def simulated_rows(case: Case) -> dict[str, Row]:
-    """One sample of ``simulate`` (the loop body), LNVA and JVJA, along a 1 s circle of 1 cm; the
-    paper's sample (no limits) and JVJA's under the joint limits (simulate's default)."""
+    """One sample of ``simulate`` (the loop body), LNVA and JVJA, along a 1 s circle of 1 cm.
+
+    The paper's sample (no limits) and JVJA's under the joint limits (simulate's default), each
+    sample of one run in order.
+    """
     from .. import simulation as sim
     from ..sampler import Sampler, covers
     from ..trajectories import CirclePath
@@ -188,14 +196,20 @@ def simulated_rows(case: Case) -> dict[str, Row]:
         rec = sim._allocate(s.steps + 1, arm.n, arm.m, sc.f, s.dt)
         X, XD = sim.sample_path(path, rec["t"], arm.m)
         state = sim._State(q=q0.copy(), qd=np.zeros(arm.n), keep=np.arange(arm.n))
-        smp = Sampler(s, rec)
+        smp, K1 = Sampler(s, rec), s.steps + 1
 
-        def sample(k, s=s, state=state, smp=smp, rec=rec, X=X, XD=XD):
+        at = np.array([-1])
+
+        def sample(i, s=s, state=state, smp=smp, rec=rec, X=X, XD=XD, K1=K1, q0=q0, at=at):
+            """The next sample of one run, in order (the run starts over at its end)."""
+            at[0] = k = (int(at[0]) + 1) % K1
+            if k == 0:
+                state.q, state.qd = q0.copy(), np.zeros(len(q0))
             sim._maybe_lock(s, state, k * s.dt)
             if not smp.step(state, k, X[k], XD[k]):
                 sim._step(s, state, k, rec, X[k], XD[k])
 
-        rows[f"sim_{alg}" + ("_lim" if limits else "")] = (sample, [(k,) for k in range(s.steps + 1)])
+        rows[f"sim_{alg}" + ("_lim" if limits else "")] = (sample, [(k,) for k in range(K1)])
     return rows
 
 

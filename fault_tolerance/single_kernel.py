@@ -1,0 +1,332 @@
+"""The LNVA and single-joint JVJA step in one compiled kernel (numba backend), and the floor.
+
+:func:`step_kernel` is the whole step after the Jacobian as scalar loops: one Cholesky factor of
+``G = J Jᵀ`` with the certificate ``trace(G⁻¹) ≤ TRACE_MAX`` (``σ_min(J) ≥ SIGMA_EPS``), then
+LNVA ``a = Jᵀ G⁻¹ ẋ``, or JVJA in closed form (G2) with ``Y = L⁻¹J``: ``a = Yᵀ(L⁻¹ẋ)``,
+``N_ii = 1 − ‖Y_i‖²``, ``N c = c − Yᵀ(Y c)``, N never formed (O(m² n), linear in n).
+:func:`compiled_step` builds a :class:`~fault_tolerance.realtime.Controller`'s step around it,
+with all of its tables in one float workspace (one argument per call: the fixed cost of a call
+is the Jacobian, the kernel and the dispatch of five arguments). :func:`floor_kernel` is the
+benchmark's floor: least-norm rates by Cholesky and nothing else.
+
+Plain Python without numba (valid, and tested so: ``step_kernel.py_func``).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+
+import numpy as np
+import pinocchio as pin
+
+from .errors import FaultToleranceError
+from .kernels import _LWA, _STEP_ERRORS, F64, TRACE_MAX, Workspace
+from .linalg import projection
+
+try:  # compiled when numba is there (lazily, on first call; cached on disk)
+    import numba
+
+    _njit = numba.njit(cache=True, nogil=True, error_model="numpy")
+except ImportError:  # pragma: no cover - numba is a core dependency
+
+    def _njit(fn):
+        return fn
+
+
+_INF = math.inf
+#: Offsets in the step's workspace: ``params`` (4), then ``fw`` (2, n), ``G`` (m, m), ``B`` (m, n),
+#: ``c`` (n); see :func:`workspace`.
+N_PARAMS = 4
+
+
+@_njit
+def _factor(J, G) -> bool:  # pragma: no cover - numba
+    """``G = J Jᵀ`` (lower triangle) and its Cholesky factor ``L``, in place; False unless PD."""
+    m, n = J.shape
+    for i in range(m):
+        for j in range(i + 1):
+            s = 0.0
+            for k in range(n):
+                s += J[i, k] * J[j, k]
+            G[i, j] = s
+    for j in range(m):
+        s = G[j, j]
+        for k in range(j):
+            s -= G[j, k] * G[j, k]
+        if not s > 0.0:
+            return False
+        s = math.sqrt(s)
+        G[j, j] = s
+        for i in range(j + 1, m):
+            t = G[i, j]
+            for k in range(j):
+                t -= G[i, k] * G[j, k]
+            G[i, j] = t / s
+    return True
+
+
+@_njit
+def _trace_inverse(G, c, m) -> float:  # pragma: no cover - numba
+    """``trace(G⁻¹) = ‖L⁻¹‖_F²``, column by column of ``L⁻¹`` (``c`` as scratch): the certificate."""
+    tr = 0.0
+    for j in range(m):
+        for i in range(j, m):
+            t = 1.0 if i == j else 0.0
+            for k in range(j, i):
+                t -= G[i, k] * c[k]
+            c[i] = t / G[i, i]
+            tr += c[i] * c[i]
+    return tr
+
+
+@_njit
+def _forward(G, b, y, m) -> None:  # pragma: no cover - numba
+    """``y = L⁻¹ b`` (``y`` may be ``b``)."""
+    for i in range(m):
+        t = b[i]
+        for k in range(i):
+            t -= G[i, k] * y[k]
+        y[i] = t / G[i, i]
+
+
+@_njit
+def _lnva(J, xdot, out, G, c) -> int:  # pragma: no cover - numba
+    """LNVA: ``y = G⁻¹ ẋ`` (``L z = ẋ``, ``Lᵀ y = z``, in ``c``), ``a = Jᵀ y``; status."""
+    m, n = J.shape
+    _forward(G, xdot, c, m)
+    for i in range(m - 1, -1, -1):
+        t = c[i]
+        for k in range(i + 1, m):
+            t -= G[k, i] * c[k]
+        c[i] = t / G[i, i]
+    s = 0.0
+    for col in range(n):
+        t = 0.0
+        for i in range(m):
+            t += J[i, col] * c[i]
+        out[col] = t
+        s += t * t
+    return 0 if s < _INF else 1
+
+
+@_njit
+def _jvja(J, xdot, out, G, B, c, fw, params, tr) -> int:  # pragma: no cover - numba
+    """JVJA (G2): ``out = a + alpha N c``, ``c_i = (w_i/W) a_i / N_ii`` on lockable columns."""
+    m, n = J.shape
+    for col in range(n):  # Y = L⁻¹ J (in B) and z = L⁻¹ ẋ (in c): a = Yᵀ z
+        for i in range(m):
+            t = J[i, col]
+            for k in range(i):
+                t -= G[i, k] * B[k, col]
+            B[i, col] = t / G[i, i]
+    _forward(G, xdot, c, m)
+    for col in range(n):
+        s = 0.0
+        for i in range(m):
+            s += B[i, col] * c[i]
+        out[col] = s
+    if params[2] > 0.0:  # rank certificate (linalg.RANK_RTOL) for arms without a static bound
+        s = 0.0
+        for i in range(m):
+            for k in range(n):
+                s += J[i, k] * J[i, k]
+        if not params[2] * s * tr < 1.0:
+            return 1
+    for i in range(n):  # fw[0]: 0 on lockable columns, +inf elsewhere (then c_i = 0)
+        d = 1.0 + fw[0, i]
+        for r in range(m):
+            d -= B[r, i] * B[r, i]
+        if d < params[1]:
+            return 2
+        c[i] = out[i] / d * fw[1, i]
+    alpha = params[3]
+    for r in range(m):
+        s = 0.0
+        for i in range(n):
+            s += B[r, i] * c[i]
+        G[r, 0] = s  # the factor is no longer needed: its first column is scratch
+    s2 = 0.0
+    for i in range(n):
+        s = c[i]
+        for r in range(m):
+            s -= B[r, i] * G[r, 0]
+        out[i] += alpha * s
+        s2 += out[i] * out[i]
+    return 0 if s2 < _INF else 1
+
+
+@_njit
+def step_kernel(J, xdot, out, ws, jvja):  # pragma: no cover - numba
+    """LNVA (``jvja=0``) or single-joint JVJA (``jvja=1``) rates into ``out``; returns a status.
+
+    ``ws`` is the step's workspace (:func:`workspace`): ``params = [TRACE_MAX, pivot threshold,
+    rank coefficient, alpha]``; ``fw[0]`` is 0 on lockable columns and +inf elsewhere, ``fw[1]``
+    the weight ``w_i/W`` (or 1 with uniform weights, then ``alpha = -1/f``); scratch ``G``, ``B``,
+    ``c``. Status 0: done; 1: no certificate of ``σ_min ≥ SIGMA_EPS`` (or non-finite numbers),
+    the caller falls back to the planner; 2: a pivot ``N_ii`` is below the threshold
+    (``PIVOT_TOL``: intolerable; ``PIVOT_EPS`` with ``tolerate``: to be damped by the planner).
+    Status 3: ``xdot``, ``out`` or ``ws`` has the wrong size (nothing written).
+    """
+    m, n = J.shape
+    if xdot.shape[0] != m or out.shape[0] != n or ws.shape[0] != workspace_size(m, n):
+        return 3
+    params, fw, G, B, c = _views(ws, m, n)
+    if not _factor(J, G):
+        return 1
+    tr = _trace_inverse(G, c, m)
+    if not tr <= params[0]:
+        return 1
+    if not jvja:
+        return _lnva(J, xdot, out, G, c)
+    return _jvja(J, xdot, out, G, B, c, fw, params, tr)
+
+
+@_njit
+def workspace_size(m, n) -> int:  # pragma: no cover - numba
+    """Length of the workspace of :func:`step_kernel`."""
+    return N_PARAMS + 2 * n + m * m + m * n + n
+
+
+@_njit
+def _views(ws, m, n):  # pragma: no cover - numba
+    """``params, fw, G, B, c`` in the workspace."""
+    o = N_PARAMS
+    fw = ws[o : o + 2 * n].reshape((2, n))
+    o += 2 * n
+    G = ws[o : o + m * m].reshape((m, m))
+    o += m * m
+    B = ws[o : o + m * n].reshape((m, n))
+    o += m * n
+    return ws[:N_PARAMS], fw, G, B, ws[o : o + n]
+
+
+def workspace(ctrl: Workspace) -> tuple[np.ndarray, tuple]:
+    """The workspace of ``ctrl``'s compiled step and its views ``(params, fw, G, B, c)``."""
+    m, n = ctrl.m, ctrl.n
+    ws = np.zeros(workspace_size(m, n))
+    views = _views.py_func(ws, m, n)
+    views[0][:] = TRACE_MAX, ctrl._pivot_threshold, ctrl._rank_coef, ctrl._alpha
+    views[1][:] = ctrl._fw
+    return ws, views
+
+
+# The floor of a control step after the Jacobian: least-norm rates with no check at all.
+def floor_kernel(J, xdot, out, G, y):  # pragma: no cover - numba
+    """``out = Jᵀ (J Jᵀ)⁻¹ ẋ`` by Cholesky, nothing else (the benchmark's floor)."""
+    m, n = J.shape
+    for i in range(m):
+        for j in range(i + 1):
+            s = 0.0
+            for k in range(n):
+                s += J[i, k] * J[j, k]
+            G[i, j] = s
+    for j in range(m):
+        s = G[j, j]
+        for k in range(j):
+            s -= G[j, k] * G[j, k]
+        s = math.sqrt(s)
+        G[j, j] = s
+        for i in range(j + 1, m):
+            t = G[i, j]
+            for k in range(j):
+                t -= G[i, k] * G[j, k]
+            G[i, j] = t / s
+    for i in range(m):
+        t = xdot[i]
+        for k in range(i):
+            t -= G[i, k] * y[k]
+        y[i] = t / G[i, i]
+    for i in range(m - 1, -1, -1):
+        t = y[i]
+        for k in range(i + 1, m):
+            t -= G[k, i] * y[k]
+        y[i] = t / G[i, i]
+    for col in range(n):
+        t = 0.0
+        for i in range(m):
+            t += J[i, col] * y[i]
+        out[col] = t
+
+
+_COMPILED: dict[str, Callable] = {}
+
+
+def compiled_kernel(name: str = "step") -> Callable:
+    """:func:`step_kernel` (or ``"floor"``: :func:`floor_kernel`) compiled by numba, once.
+
+    The floor is one self-contained function (no calls), compiled here.
+    """
+    if name == "step":
+        import numba  # noqa: F401 - raises ImportError here when numba is missing
+
+        return step_kernel
+    if name not in _COMPILED:
+        import numba
+
+        fn = {"floor": floor_kernel}[name]
+        _COMPILED[name] = numba.njit(cache=True, nogil=True, error_model="numpy")(fn)
+    return _COMPILED[name]
+
+
+def compiled_step(ctrl: Workspace, jvja: int) -> Callable[..., np.ndarray]:
+    """The LNVA (``jvja=0``) or single-joint JVJA (``jvja=1``) step of ``ctrl``, numba-compiled.
+
+    Compiles :func:`step_kernel` on first use (here, not in the loop) and runs it once.
+    """
+    model, data, fid, rows = ctrl.model, ctrl.data, ctrl.frame_id, ctrl._rows
+    n, m = ctrl.n, ctrl.m
+    kernel = compiled_kernel()
+    cfj, empty, ndarray = pin.computeFrameJacobian, np.empty, np.ndarray
+    ws, (_, _, _, B, c) = workspace(ctrl)
+    tolerate = ctrl.tolerate
+    shape_n, shape_m = (n,), (m,)
+    fallback, bad_call = ctrl._fallback, ctrl._bad_call
+    check_tolerable = ctrl.scenarios.check_tolerable
+    name = "jvja" if jvja else "lnva"
+    if jvja:  # N = I - YᵀY with Y = L⁻¹J in B, for the bounded step's box check (boxstep)
+        ctrl._jvja_ws[0], ctrl._jvja_ws[1], ctrl._jvja_ws[2] = B, B, c
+    # Compile for this arm's Jacobian layout (here, not in the loop), then freeze the dispatcher:
+    # an argument of another type or layout raises TypeError (then `slow`) instead of compiling,
+    # so the step needs no type checks of its own.
+    J0 = cfj(model, data, pin.neutral(model), fid, _LWA)[rows]
+    kernel.disable_compile(False)
+    kernel(J0, np.zeros(m), np.zeros(n), np.zeros(len(ws)), jvja)
+    kernel.disable_compile(True)
+
+    def slow(q, xdot, out, err: Exception) -> np.ndarray:
+        """A call the compiled kernel refused (types, shapes): convert ``xdot`` once, or say why."""
+        if type(out) is ndarray and out.shape == shape_n and out.dtype == F64:
+            if out.flags.c_contiguous and not (
+                type(xdot) is ndarray and xdot.dtype == F64 and xdot.flags.c_contiguous
+            ):
+                x2 = np.ascontiguousarray(xdot, dtype=float)
+                if x2.shape == shape_m:
+                    return step(q, x2, out)
+        raise bad_call(err, q, xdot, out) from err
+
+    def step(q: np.ndarray, xdot: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+        if out is None:
+            out = empty(n)
+        try:  # the kernel checks the sizes (status 3); numba the types and layouts (TypeError)
+            status = kernel(cfj(model, data, q, fid, _LWA)[rows], xdot, out, ws, jvja)
+        except FaultToleranceError:
+            raise
+        except _STEP_ERRORS as err:
+            return slow(q, xdot, out, err)
+        if status:
+            if status == 3:
+                return slow(q, xdot, out, ValueError("shape"))
+            J = cfj(model, data, q, fid, _LWA)[rows]
+            if status == 2 and not tolerate:
+                check_tolerable(projection(J).N)  # raises IntolerableFailure naming the joint
+            return fallback(name, J, xdot, out)
+        return out
+
+    step.__name__ = name
+    step.__doc__ = (
+        "JVJA, minimum square-sum jump rates, eq. (5) in closed form (G2); compiled."
+        if jvja
+        else "LNVA, least-norm rates ``q̇ = J⁺ẋ``; compiled."
+    )
+    return step
