@@ -17,6 +17,8 @@ from collections.abc import Callable
 import numpy as np
 import pinocchio as pin
 
+from .single_kernel import _factor, _forward, _trace_inverse
+
 try:
     import numba
 
@@ -70,22 +72,9 @@ def multi_kernel(J, xdot, out, ws, sets, wrel, params) -> int:  # pragma: no cov
     A = ws[o + n : o + n + smax * smax].reshape((smax, smax))
     L = ws[o + n + smax * smax : o + n + 2 * smax * smax].reshape((smax, smax))
     x = ws[o + n + 2 * smax * smax : o + n + 2 * smax * smax + smax]
-    for i in range(m):
-        for j in range(i + 1):
-            t = 0.0
-            for k in range(n):
-                t += J[i, k] * J[j, k]
-            G[i, j] = t
-    if not _chol(G, G, m, 0.0):
+    if not _factor(J, G):
         return 1
-    tr = 0.0  # trace(G⁻¹) = ‖L⁻¹‖_F², the certificate (c as scratch)
-    for j in range(m):
-        for i in range(j, m):
-            t = 1.0 if i == j else 0.0
-            for k in range(j, i):
-                t -= G[i, k] * c[k]
-            c[i] = t / G[i, i]
-            tr += c[i] * c[i]
+    tr = _trace_inverse(G, c, m)  # trace(G⁻¹) = ‖L⁻¹‖_F², the certificate (c as scratch)
     if not tr <= params[0]:
         return 1
     if params[2] > 0.0:
@@ -95,51 +84,70 @@ def multi_kernel(J, xdot, out, ws, sets, wrel, params) -> int:  # pragma: no cov
                 t += J[i, k] * J[i, k]
         if not params[2] * t * tr < 1.0:
             return 1
-    for col in range(n):  # Y = L⁻¹ J
+    _least_norm(J, xdot, G, Y, c, out)
+    for i in range(n):
+        c[i] = 0.0
+    for k in range(sets.shape[0]):
+        if not _scenario_shift(Y, out, sets[k], wrel[k], params[1], A, L, x, c):
+            return 2
+    return _minus_null(Y, G, c, out)
+
+
+@_njit
+def _least_norm(J, xdot, G, Y, z, out) -> None:  # pragma: no cover - numba
+    """``Y = L⁻¹ J``, ``z = L⁻¹ ẋ``, ``out = a = Yᵀ z`` (``G = L Lᵀ`` factored in ``G``)."""
+    m, n = J.shape
+    for col in range(n):
         for i in range(m):
             t = J[i, col]
             for k in range(i):
                 t -= G[i, k] * Y[k, col]
             Y[i, col] = t / G[i, i]
-    for i in range(m):  # z = L⁻¹ ẋ (in c), a = Yᵀ z (in out)
-        t = xdot[i]
-        for k in range(i):
-            t -= G[i, k] * c[k]
-        c[i] = t / G[i, i]
+    _forward(G, xdot, z, m)
     for col in range(n):
         t = 0.0
         for i in range(m):
-            t += Y[i, col] * c[i]
+            t += Y[i, col] * z[i]
         out[col] = t
-    for i in range(n):
-        c[i] = 0.0
-    for k in range(sets.shape[0]):
-        s = 0
-        while s < smax and sets[k, s] >= 0:
-            s += 1
-        for p in range(s):  # N[S, S] = I - Y_Sᵀ Y_S
-            for q in range(p + 1):
-                t = 1.0 if p == q else 0.0
-                for r in range(m):
-                    t -= Y[r, sets[k, p]] * Y[r, sets[k, q]]
-                A[p, q] = t
-                A[q, p] = t
-        if not _chol(A, L, s, params[1]):
-            return 2
-        _chol(A, L, s, 0.0)
-        for p in range(s):  # x = N[S, S]⁻¹ a_S
-            t = out[sets[k, p]]
-            for q in range(p):
-                t -= L[p, q] * x[q]
-            x[p] = t / L[p, p]
-        for p in range(s - 1, -1, -1):
-            t = x[p]
-            for q in range(p + 1, s):
-                t -= L[q, p] * x[q]
-            x[p] = t / L[p, p]
-        for p in range(s):
-            c[sets[k, p]] += wrel[k] * x[p]
-    for r in range(m):  # out = a - N c = a - c + Yᵀ (Y c); G's first column as scratch
+
+
+@_njit
+def _scenario_shift(Y, a, S, w, threshold, A, L, x, c) -> bool:  # pragma: no cover - numba
+    """``c += w E_S N[S, S]⁻¹ a_S`` (G1) for one scenario ``S`` (-1 pads); False below threshold."""
+    m, smax = Y.shape[0], S.shape[0]
+    s = 0
+    while s < smax and S[s] >= 0:
+        s += 1
+    for p in range(s):  # N[S, S] = I - Y_Sᵀ Y_S
+        for q in range(p + 1):
+            t = 1.0 if p == q else 0.0
+            for r in range(m):
+                t -= Y[r, S[p]] * Y[r, S[q]]
+            A[p, q] = t
+            A[q, p] = t
+    if not _chol(A, L, s, threshold):
+        return False
+    _chol(A, L, s, 0.0)
+    for p in range(s):  # x = N[S, S]⁻¹ a_S
+        t = a[S[p]]
+        for q in range(p):
+            t -= L[p, q] * x[q]
+        x[p] = t / L[p, p]
+    for p in range(s - 1, -1, -1):
+        t = x[p]
+        for q in range(p + 1, s):
+            t -= L[q, p] * x[q]
+        x[p] = t / L[p, p]
+    for p in range(s):
+        c[S[p]] += w * x[p]
+    return True
+
+
+@_njit
+def _minus_null(Y, G, c, out) -> int:  # pragma: no cover - numba
+    """``out = a - N c = a - c + Yᵀ (Y c)`` (G's first column as scratch); status 0, or 1."""
+    m, n = Y.shape
+    for r in range(m):
         t = 0.0
         for i in range(n):
             t += Y[r, i] * c[i]
@@ -151,9 +159,7 @@ def multi_kernel(J, xdot, out, ws, sets, wrel, params) -> int:  # pragma: no cov
             t -= Y[r, i] * G[r, 0]
         out[i] -= t
         total += out[i] * out[i]
-    if not total < math.inf:
-        return 1
-    return 0
+    return 0 if total < math.inf else 1
 
 
 def compiled_multi_step(ctrl) -> Callable[..., np.ndarray]:

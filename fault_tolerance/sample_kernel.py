@@ -22,7 +22,7 @@ the rate box (L1) at ``q`` is built and the rates checked against it by
 (the targets of the bounded resolvers and of the jump under limits, (L4)-(L5)); inside the box
 the bounded resolvers return these very rates (clipped into the box within ``BOX_TOL``, as
 :mod:`fault_tolerance.bounded` does), and the servo's rates are clipped at the position limits
-as ``simulation._clip_to_limits``.
+as ``reference_step._clip_to_limits``.
 
 It returns :data:`REFERENCE` (-1) when the sample needs the reference code instead: no
 certificate that ``σ_min ≥ SIGMA_EPS`` (the reference damps there), a pivot ``N_ii`` below
@@ -39,6 +39,7 @@ from collections.abc import Callable
 import numpy as np
 
 from .boxqp import BOX_TOL
+from .sample_limits import _in_box, _servo_clip
 from .sample_linalg import (  # noqa: F401 - P_* and N_PARAMS are this kernel's interface
     N_PARAMS,
     P_ACCEL,
@@ -63,13 +64,6 @@ from .sample_linalg import (  # noqa: F401 - P_* and N_PARAMS are this kernel's 
     njit,
 )
 
-try:  # the rate box check of the Controller's bounded step, compiled
-    from .boxstep import compiled_box_status
-
-    _box_status = compiled_box_status()
-except ImportError:  # pragma: no cover - numba is a core dependency
-    from .boxstep import box_status as _box_status
-
 #: ``method`` codes of :func:`sample_kernel`.
 LNVA, JVJA, MDA, GIVEN, LOCKED = 0, 1, 2, 3, 4
 #: What :func:`sample_kernel` returns instead of the flags: do the sample the reference way, or
@@ -80,7 +74,7 @@ COLUMNS = ("q", "qd", "qd_cmd", "x", "x_des", "error", "jvj", "jvj_parts", "rcn"
            "sigma_min", "flags")  # fmt: skip
 O_Q, O_QD, O_QCMD, O_X, O_XDES, O_ERROR, O_JVJ, O_PARTS, O_RCN, O_K, O_SIGMA, O_FLAGS = range(12)
 
-_FLAG_LOCKED, _FLAG_STEP_LIMITED, _FLAG_OVER_SPEED, _FLAG_SERVO_CLIPPED = 4, 8, 16, 256
+_FLAG_LOCKED, _FLAG_STEP_LIMITED, _FLAG_OVER_SPEED = 4, 8, 16
 
 
 @njit
@@ -174,27 +168,6 @@ def _locked(J, xd, G, params, Wm, L, y, z, qd) -> bool:  # pragma: no cover - nu
 
 
 @njit
-def _in_box(q, lim, prm, buf, qd, J, B, v, cols, locked) -> bool:  # pragma: no cover - numba
-    """Box (L1) at ``q`` into ``buf[0], buf[1]`` (``box_status``); whether ``qd`` is inside it.
-
-    Inside, ``qd`` is clipped into the box (``bounded.resolve_bounded`` does so). After a lock the
-    locked joint (rate 0) is not checked: the reduced robot's box has no such joint.
-    """
-    n = qd.shape[0]
-    lock = int(prm[2]) if locked else -1
-    if _box_status(q, lim, prm, buf, qd, J, B, v, cols, False) != 0:
-        if lock < 0:
-            return False
-        for c in range(n):  # the locked joint's own bound does not count
-            if c != lock and (qd[c] < buf[0, c] - BOX_TOL or qd[c] > buf[1, c] + BOX_TOL):
-                return False
-    for c in range(n):
-        if c != lock:
-            qd[c] = min(max(qd[c], buf[0, c]), buf[1, c])
-    return True
-
-
-@njit
 def _follow(qd_cmd, qd_prev, params, k, locked, out) -> None:  # pragma: no cover - numba
     """Actual rates one step later, as ``simulation.ServoModel.follow`` (a locked joint stops)."""
     decay, step = params[P_DECAY], params[P_ACCEL]
@@ -208,21 +181,6 @@ def _follow(qd_cmd, qd_prev, params, k, locked, out) -> None:  # pragma: no cove
         out[c] = t
     if locked:
         out[int(params[P_LOCK])] = 0.0
-
-
-@njit
-def _servo_clip(q, lim, dt, qd) -> int:  # pragma: no cover - numba
-    """``simulation._clip_to_limits``: the executed rates kept inside the limits over ``dt``."""
-    flag = 0
-    for c in range(qd.shape[0]):
-        v = lim[2, c]
-        lo = max((lim[0, c] - q[c]) / dt, -v)
-        hi = min((lim[1, c] - q[c]) / dt, v)
-        t = min(max(qd[c], lo), hi)
-        if abs(t - qd[c]) > 1e-12:
-            flag = _FLAG_SERVO_CLIPPED
-        qd[c] = t
-    return flag
 
 
 @njit

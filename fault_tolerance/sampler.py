@@ -170,7 +170,7 @@ class Sampler:
         (:func:`fault_tolerance.bounded.resolve_bounded` where a bound is met); the jump against
         the reduced robots' rates under the box (:func:`~fault_tolerance.limits.post_failure_under_limits`,
         L4-L5); the rest (indices, servo, record) by :func:`~fault_tolerance.sample_kernel.finish_kernel`.
-        The numbers are those of ``simulation._step`` under limits.
+        The numbers are those of ``reference_step._step`` under limits.
         """
         from .bounded import SCALE_TOL
         from .run import FLAG_BOUND_ACTIVE, FLAG_INTOLERABLE_UNDER_LIMITS, FLAG_STEP_LIMITED
@@ -205,7 +205,7 @@ class Sampler:
         """After the lock, a sample that meets a bound: the reduced robot's bounded rates.
 
         Its bounded least-norm rates (L4, :func:`~fault_tolerance.bounded.bounded_least_norm`),
-        as ``simulation._step``.
+        as ``reference_step._step``.
         """
         from .bounded import SCALE_TOL, bounded_least_norm
         from .run import FLAG_BOUND_ACTIVE, FLAG_LOCKED
