@@ -33,8 +33,9 @@ FD_STEP = 1e-6
 #: Slack kept from the limits in the QP (position [rad], velocity as a fraction of the limit).
 POS_MARGIN = 2e-3
 VEL_MARGIN = 1e-3
-#: Seconds OSQP may take on one QP with active limits (the step is then shortened instead).
-OSQP_TIME_LIMIT = 1.5
+#: Iterations OSQP may take on one QP with active limits (the step is then shortened instead).
+#: A count, not a time: a wall-clock limit made the plan depend on the machine's load.
+OSQP_MAX_ITER = 4000
 #: SCP stops when an accepted step improves the objective by less than this (relative).
 SCP_RTOL = 1e-4
 #: SCP stops after this many rejected steps in a row (each one shortens the step tenfold).
@@ -270,8 +271,7 @@ def solve_qp(qp: QP, rounds: int = 6) -> np.ndarray | None:
         verbose=False,
         eps_abs=1e-5,
         eps_rel=1e-5,
-        max_iter=4000,
-        time_limit=OSQP_TIME_LIMIT,
+        max_iter=OSQP_MAX_ITER,
         polishing=True,
     )
     if np.all(np.isfinite(x)):
