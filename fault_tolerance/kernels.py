@@ -24,7 +24,7 @@ import numpy as np
 import pinocchio as pin
 
 from .errors import FaultToleranceError
-from .linalg import SIGMA_EPS, projection
+from .linalg import RANK_RTOL, SIGMA_EPS, projection
 
 __all__ = [
     "TRACE_MAX",
@@ -82,6 +82,45 @@ class Workspace(Protocol):
     def rcn_gradient(self, J: np.ndarray, dJ: np.ndarray) -> np.ndarray:
         """Gradient of the square-sum RCN ``K``, shape (n,)."""
         ...
+
+
+# -- the step's certificate: what the arm lets it skip ------------------------------------------
+
+
+def _jacobian_norm2_bound(arm) -> float:
+    """An upper bound of ``‖J‖_F²`` over all configurations, or inf when none is known.
+
+    A revolute column has a unit angular part and a linear part no longer than the distance from
+    its axis to the tip, itself below the sum of the joint and tip offsets.
+    """
+    model = arm.model
+    kinds = [model.joints[j].shortname() for j in range(1, model.njoints)]
+    if not all(k.startswith("JointModelR") for k in kinds):
+        return _INF
+    reach = sum(
+        float(np.linalg.norm(model.jointPlacements[j].translation)) for j in range(1, model.njoints)
+    )
+    reach += float(np.linalg.norm(model.frames[arm.frame_id].placement.translation))
+    return arm.n * (1.0 + reach**2)
+
+
+def row_selector(arm) -> slice | np.ndarray:
+    """Row selector of the 6-row frame Jacobian: a slice (a view, no copy) when it can be."""
+    rows = np.asarray(arm.rows)
+    if bool(np.all(np.diff(rows) == 1)):
+        return slice(int(rows[0]), int(rows[0]) + len(rows))
+    return rows
+
+
+def rank_coefficient(arm) -> float:
+    """Coefficient of the per-step rank test (0: not needed for this arm).
+
+    With σ_min ≥ SIGMA_EPS certified, the rank test of linalg.projection (σ > RANK_RTOL σ_max) can
+    fail only if ‖J‖_F² > SIGMA_EPS² / RANK_RTOL² (= 1e12): arms whose Jacobian is bounded far
+    below that skip the per-step test.
+    """
+    bounded = _jacobian_norm2_bound(arm) * RANK_RTOL**2 * TRACE_MAX < 0.5
+    return 0.0 if bounded else RANK_RTOL**2
 
 
 # -- linear algebra backends -----------------------------------------------------------------

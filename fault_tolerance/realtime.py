@@ -61,7 +61,7 @@ from .arm import Arm
 from .errors import InvalidInput
 from .failures import Scenarios, scenarios
 from .kernels import TRACE_MAX
-from .linalg import PIVOT_EPS, PIVOT_TOL, RANK_RTOL
+from .linalg import PIVOT_EPS, PIVOT_TOL
 from .realtime_indices import ControllerIndices
 
 __all__ = ["BACKENDS", "Controller", "METHODS", "TRACE_MAX", "available_backends"]
@@ -102,42 +102,6 @@ def _backend(backend: str) -> str:
             f"available here: {available}"
         )
     return backend
-
-
-def _jacobian_norm2_bound(arm: Arm) -> float:
-    """An upper bound of ``‖J‖_F²`` over all configurations, or inf when none is known.
-
-    A revolute column has a unit angular part and a linear part no longer than the distance from
-    its axis to the tip, itself below the sum of the joint and tip offsets.
-    """
-    model = arm.model
-    kinds = [model.joints[j].shortname() for j in range(1, model.njoints)]
-    if not all(k.startswith("JointModelR") for k in kinds):
-        return _INF
-    reach = sum(
-        float(np.linalg.norm(model.jointPlacements[j].translation)) for j in range(1, model.njoints)
-    )
-    reach += float(np.linalg.norm(model.frames[arm.frame_id].placement.translation))
-    return arm.n * (1.0 + reach**2)
-
-
-def _row_selector(arm: Arm) -> slice | np.ndarray:
-    """Row selector of the 6-row frame Jacobian: a slice (a view, no copy) when it can be."""
-    rows = np.asarray(arm.rows)
-    if bool(np.all(np.diff(rows) == 1)):
-        return slice(int(rows[0]), int(rows[0]) + len(rows))
-    return rows
-
-
-def _rank_coefficient(arm: Arm) -> float:
-    """Coefficient of the per-step rank test (0: not needed for this arm).
-
-    With σ_min ≥ SIGMA_EPS certified, the rank test of linalg.projection (σ > RANK_RTOL σ_max) can
-    fail only if ‖J‖_F² > SIGMA_EPS² / RANK_RTOL² (= 1e12): arms whose Jacobian is bounded far
-    below that skip the per-step test.
-    """
-    bounded = _jacobian_norm2_bound(arm) * RANK_RTOL**2 * TRACE_MAX < 0.5
-    return 0.0 if bounded else RANK_RTOL**2
 
 
 class Controller(ControllerIndices):
@@ -235,7 +199,7 @@ class Controller(ControllerIndices):
         self._pivot_threshold = PIVOT_EPS if self.tolerate else PIVOT_TOL
         self.backend = backend
         self.fallbacks = 0
-        self._rows, self._rank_coef = _row_selector(arm), _rank_coefficient(arm)
+        self._rows, self._rank_coef = kernels.row_selector(arm), kernels.rank_coefficient(arm)
         # The steps are closures over this workspace, built by the backend's kernels.
         self._la = (
             kernels.numpy_linalg() if backend == "numpy" else kernels.lapack_linalg_or_numpy()

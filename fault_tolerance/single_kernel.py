@@ -5,8 +5,8 @@
 LNVA ``a = Jᵀ G⁻¹ ẋ``, or JVJA in closed form (G2) with ``Y = L⁻¹J``: ``a = Yᵀ(L⁻¹ẋ)``,
 ``N_ii = 1 − ‖Y_i‖²``, ``N c = c − Yᵀ(Y c)``, N never formed (O(m² n), linear in n).
 :func:`compiled_step` builds a :class:`~fault_tolerance.realtime.Controller`'s step around it,
-with all of its tables in one float workspace (one argument per call: the fixed cost of a call
-is the Jacobian, the kernel and the dispatch of five arguments). :func:`floor_kernel` is the
+with all of its tables in one float workspace (:func:`packed_step_kernel`: the fixed cost of a
+call is the Jacobian, the kernel and the dispatch of five arguments). :func:`floor_kernel` is the
 benchmark's floor: least-norm rates by Cholesky and nothing else.
 
 Plain Python without numba (valid, and tested so: ``step_kernel.py_func``).
@@ -157,21 +157,20 @@ def _jvja(J, xdot, out, G, B, c, fw, params, tr) -> int:  # pragma: no cover - n
 
 
 @_njit
-def step_kernel(J, xdot, out, ws, jvja):  # pragma: no cover - numba
+def step_kernel(J, xdot, out, G, B, c, fw, params, jvja):  # pragma: no cover - numba
     """LNVA (``jvja=0``) or single-joint JVJA (``jvja=1``) rates into ``out``; returns a status.
 
-    ``ws`` is the step's workspace (:func:`workspace`): ``params = [TRACE_MAX, pivot threshold,
-    rank coefficient, alpha]``; ``fw[0]`` is 0 on lockable columns and +inf elsewhere, ``fw[1]``
-    the weight ``w_i/W`` (or 1 with uniform weights, then ``alpha = -1/f``); scratch ``G``, ``B``,
-    ``c``. Status 0: done; 1: no certificate of ``σ_min ≥ SIGMA_EPS`` (or non-finite numbers),
-    the caller falls back to the planner; 2: a pivot ``N_ii`` is below the threshold
-    (``PIVOT_TOL``: intolerable; ``PIVOT_EPS`` with ``tolerate``: to be damped by the planner).
-    Status 3: ``xdot``, ``out`` or ``ws`` has the wrong size (nothing written).
+    ``params = [TRACE_MAX, pivot threshold, rank coefficient, alpha]``; ``fw[0]`` is 0 on
+    lockable columns and +inf elsewhere, ``fw[1]`` the weight ``w_i/W`` (or 1 with uniform
+    weights, then ``alpha = -1/f``); ``G`` (m, m), ``B`` (m, n), ``c`` (n) scratch. Status 0:
+    done; 1: no certificate of ``σ_min ≥ SIGMA_EPS`` (or non-finite numbers), the caller falls
+    back to the planner; 2: a pivot ``N_ii`` is below the threshold (``PIVOT_TOL``: intolerable;
+    ``PIVOT_EPS`` with ``tolerate``: to be damped by the planner). Status 3: ``xdot`` or ``out``
+    has the wrong size (nothing written).
     """
     m, n = J.shape
-    if xdot.shape[0] != m or out.shape[0] != n or ws.shape[0] != workspace_size(m, n):
+    if xdot.shape[0] != m or out.shape[0] != n:
         return 3
-    params, fw, G, B, c = _views(ws, m, n)
     if not _factor(J, G):
         return 1
     tr = _trace_inverse(G, c, m)
@@ -183,8 +182,21 @@ def step_kernel(J, xdot, out, ws, jvja):  # pragma: no cover - numba
 
 
 @_njit
+def packed_step_kernel(J, xdot, out, ws, jvja):  # pragma: no cover - numba
+    """:func:`step_kernel` with its tables in one workspace ``ws`` (:func:`workspace`).
+
+    Five arguments per call (the Controller's step); status 3 also when ``ws`` has the wrong size.
+    """
+    m, n = J.shape
+    if ws.shape[0] != workspace_size(m, n):
+        return 3
+    params, fw, G, B, c = _views(ws, m, n)
+    return step_kernel(J, xdot, out, G, B, c, fw, params, jvja)
+
+
+@_njit
 def workspace_size(m, n) -> int:  # pragma: no cover - numba
-    """Length of the workspace of :func:`step_kernel`."""
+    """Length of the workspace of :func:`packed_step_kernel`."""
     return N_PARAMS + 2 * n + m * m + m * n + n
 
 
@@ -202,7 +214,10 @@ def _views(ws, m, n):  # pragma: no cover - numba
 
 
 def workspace(ctrl: Workspace) -> tuple[np.ndarray, tuple]:
-    """The workspace of ``ctrl``'s compiled step and its views ``(params, fw, G, B, c)``."""
+    """The workspace of ``ctrl``'s compiled step and its views ``(params, fw, G, B, c)``.
+
+    Laid out as :func:`packed_step_kernel` reads it.
+    """
     m, n = ctrl.m, ctrl.n
     ws = np.zeros(workspace_size(m, n))
     views = _views.py_func(ws, m, n)
@@ -253,14 +268,16 @@ _COMPILED: dict[str, Callable] = {}
 
 
 def compiled_kernel(name: str = "step") -> Callable:
-    """:func:`step_kernel` (or ``"floor"``: :func:`floor_kernel`) compiled by numba, once.
+    """:func:`step_kernel` compiled by numba, once (also ``"packed"`` and ``"floor"``).
+
+    ``"packed"``: :func:`packed_step_kernel`; ``"floor"``: :func:`floor_kernel`.
 
     The floor is one self-contained function (no calls), compiled here.
     """
-    if name == "step":
+    if name in ("step", "packed"):
         import numba  # noqa: F401 - raises ImportError here when numba is missing
 
-        return step_kernel
+        return step_kernel if name == "step" else packed_step_kernel
     if name not in _COMPILED:
         import numba
 
@@ -276,7 +293,7 @@ def compiled_step(ctrl: Workspace, jvja: int) -> Callable[..., np.ndarray]:
     """
     model, data, fid, rows = ctrl.model, ctrl.data, ctrl.frame_id, ctrl._rows
     n, m = ctrl.n, ctrl.m
-    kernel = compiled_kernel()
+    kernel = compiled_kernel("packed")
     cfj, empty, ndarray = pin.computeFrameJacobian, np.empty, np.ndarray
     ws, (_, _, _, B, c) = workspace(ctrl)
     tolerate = ctrl.tolerate

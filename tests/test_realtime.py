@@ -169,7 +169,7 @@ def test_kernel_as_plain_python(robot, draw_q, draw_xdot, rng):
     n = robot.n
     ws, (params, *_) = single_kernel.workspace(ctrl)
     params[1] = PIVOT_TOL
-    kernel = single_kernel.step_kernel.py_func
+    kernel = single_kernel.packed_step_kernel.py_func
     for q, xd in _samples(robot, draw_q, draw_xdot, rng, k=3):
         J = robot.arm.jacobian(q)
         out = np.empty(n)
