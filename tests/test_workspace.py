@@ -3,6 +3,7 @@
 import os
 import re
 
+import dask
 import numpy as np
 import pytest
 from conftest import ROOT
@@ -170,6 +171,8 @@ def test_local_cluster_listens_on_loopback_only():
                  "MKL_NUM_THREADS", "NUMBA_NUM_THREADS")  # fmt: skip
         env = client.run(lambda: [os.environ.get(n) for n in names])
         assert list(env.values()) == [[None, "1", "1", "1", "1"]] * 2, env
+        profile = client.run(lambda: dask.config.get("distributed.worker.profile.enabled"))
+        assert list(profile.values()) == [False, False]  # no 10 ms stack sampling of the task
     finally:
         cluster = client.cluster
         client.close()
