@@ -63,7 +63,7 @@ def compiled_bounded_step(ctrl, name: str, inner: Callable, reference: Callable,
     n, m = ctrl.n, ctrl.m
     model, data, fid, rows = ctrl.model, ctrl.data, ctrl.frame_id, ctrl._rows
     cfj, empty, ndarray = pin.computeFrameJacobian, np.empty, np.ndarray
-    slow = reference.slow
+    slow, finish = reference.slow, reference.finish
     J0 = cfj(model, data, pin.neutral(model), fid, _LWA)[rows]  # the type of the steps' J
     bounded_kernel(J0, np.zeros(n + 1), np.zeros(m), np.zeros(n), F, Iw)  # compile (refused: sizes)
 
@@ -82,8 +82,8 @@ def compiled_bounded_step(ctrl, name: str, inner: Callable, reference: Callable,
         def step(q: np.ndarray, xdot: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
             before = ctrl.fallbacks
             out = inner(q, xdot, out)
-            if ctrl.fallbacks != before or bad(q, xdot, out):
-                return slow(q, xdot, out)
+            if ctrl.fallbacks != before or bad(q, xdot, out):  # the planner's rates, or other types
+                return finish(q, np.asarray(xdot, dtype=float), out)
             status = bounded_kernel(ctrl.jacobian(q), q, xdot, out, F, Iw)
             if status == 1:
                 ctrl.bounded_steps += 1

@@ -91,7 +91,16 @@ def _reference_step(ctrl, name: str, inner: Callable, lim, prm) -> Callable:
         state[2:] = 0.0
         return out
 
-    step.slow = slow
+    def finish(q, xdot, out):
+        """The box check and, when a bound is met, :func:`resolve_bounded`, for given rates."""
+        if box_status_numpy(q, lim, prm, buf, out, *dummy, cols, False):
+            return slow(q, xdot, out)
+        state = ctrl._box_state
+        state[0], state[1] = 1.0, 0.0
+        state[2:] = 0.0
+        return out
+
+    step.slow, step.finish = slow, finish
     step.__name__ = name
     step.__doc__ = f"{name} inside the rate box of the joint limits (reference route)."
     return step
