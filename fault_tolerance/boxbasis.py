@@ -80,6 +80,21 @@ def reduced_rates(Z, r, a, S, k, post, NSS, ys, thr, zr):  # pragma: no cover - 
     ``zr`` (r,) is scratch.
     """
     n = a.shape[0]
+    if k == 1:  # one joint: N_ii = ‖Z_i‖², post = a − (a_i / N_ii) Z Z_iᵀ
+        i = S[0]
+        piv = _dot_rows(Z, r, i, i)
+        if not piv - thr > 0.0:
+            return -1.0
+        ratio = a[i] / piv
+        for c in range(r):
+            zr[c] = Z[i, c] * ratio
+        for j in range(n):
+            v = a[j]
+            for c in range(r):
+                v -= Z[j, c] * zr[c]
+            post[j] = v
+        post[i] = 0.0
+        return 1.0 / piv
     for t in range(k):
         for u in range(t + 1):
             NSS[t, u] = _dot_rows(Z, r, S[t], S[u]) - (thr if t == u else 0.0)
@@ -209,9 +224,11 @@ def undamped(J, S, k, bound, params, Gs) -> float:  # pragma: no cover - numba
     TRACE_MAX`` (0); else the eigenvalues of ``J_S J_Sᵀ``: ``λ_min`` clear of ``SIGMA_EPS²`` by a
     relative margin of 1e-8 either way, so rounding cannot flip the reference's choice (0, or its
     ``μ² = DAMPING² (1 − λ_min/SIGMA_EPS²)``), and clear of its rank threshold; −1 otherwise.
-    ``Gs`` (m, m) gets ``J_S J_Sᵀ``.
+    ``Gs`` (m, m) gets ``J_S J_Sᵀ`` unless the certificate needs no rank test (``params[2] = 0``).
     """
     m, n = J.shape
+    if bound <= params[0] and params[2] == 0.0:  # the common case: certified, no rank test
+        return 0.0
     fro = 0.0
     for i in range(m):
         for j in range(i + 1):

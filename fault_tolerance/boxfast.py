@@ -64,8 +64,16 @@ def compiled_bounded_step(ctrl, name: str, inner: Callable, reference: Callable,
     model, data, fid, rows = ctrl.model, ctrl.data, ctrl.frame_id, ctrl._rows
     cfj, empty, ndarray = pin.computeFrameJacobian, np.empty, np.ndarray
     slow, finish = reference.slow, reference.finish
-    J0 = cfj(model, data, pin.neutral(model), fid, _LWA)[rows]  # the type of the steps' J
-    bounded_kernel(J0, np.zeros(n + 1), np.zeros(m), np.zeros(n), F, Iw)  # compile (refused: sizes)
+    # Compile for this arm's Jacobian layout (here, not in the loop), then freeze the dispatcher
+    # (as the unbounded step does): an argument of another type or layout raises TypeError (then
+    # the reference route) instead of compiling, so the step needs no type checks of its own.
+    J0 = cfj(model, data, pin.neutral(model), fid, _LWA)[rows]
+    bounded_kernel.disable_compile(False)
+    bounded_kernel(J0, np.zeros(n + 1), np.zeros(m), np.zeros(n), F, Iw)  # refused: sizes
+    bounded_kernel(
+        ctrl.jacobian(pin.neutral(model)), np.zeros(n + 1), np.zeros(m), np.zeros(n), F, Iw
+    )
+    bounded_kernel.disable_compile(True)
 
     def bad(q, xdot, out) -> bool:
         return (
@@ -76,6 +84,17 @@ def compiled_bounded_step(ctrl, name: str, inner: Callable, reference: Callable,
             or xdot.dtype is not _F64
             or q.dtype is not _F64
         )
+
+    def retry(q, xdot, out):
+        """Other types or layouts: contiguous float64 copies once, else the reference route."""
+        try:
+            q2, x2 = np.ascontiguousarray(q, dtype=float), np.ascontiguousarray(xdot, dtype=float)
+            if type(out) is ndarray and out.dtype == _F64 and out.flags.c_contiguous:
+                if q2.shape == (n,) and x2.shape == (m,) and (q2 is not q or x2 is not xdot):
+                    return step(q2, x2, out)
+        except (TypeError, ValueError):
+            pass
+        return reference(q, xdot, out)  # converts, or says what is wrong
 
     if name == "mda":
 
@@ -96,21 +115,12 @@ def compiled_bounded_step(ctrl, name: str, inner: Callable, reference: Callable,
         def step(q: np.ndarray, xdot: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
             if out is None:
                 out = empty(n)
-            if (
-                type(out) is not ndarray
-                or type(xdot) is not ndarray
-                or type(q) is not ndarray
-                or out.dtype is not _F64
-                or xdot.dtype is not _F64
-                or q.dtype is not _F64
-            ):
-                return reference(q, xdot, out)  # converts, or says what is wrong
-            try:
+            try:  # the kernel checks the sizes (status 2), numba the types and layouts (TypeError)
                 status = bounded_kernel(cfj(model, data, q, fid, _LWA)[rows], q, xdot, out, F, Iw)
             except FaultToleranceError:
                 raise
             except _ERRORS:
-                return reference(q, xdot, out)
+                return retry(q, xdot, out)
             if status == 1:
                 ctrl.bounded_steps += 1
             elif status:
