@@ -63,27 +63,13 @@ def compiled_bounded_step(ctrl, name: str, inner: Callable, reference: Callable,
     n, m = ctrl.n, ctrl.m
     model, data, fid, rows = ctrl.model, ctrl.data, ctrl.frame_id, ctrl._rows
     cfj, empty, ndarray = pin.computeFrameJacobian, np.empty, np.ndarray
-    slow, finish = reference.slow, reference.finish
     # Compile for this arm's Jacobian layout (here, not in the loop), then freeze the dispatcher
     # (as the unbounded step does): an argument of another type or layout raises TypeError (then
     # the reference route) instead of compiling, so the step needs no type checks of its own.
     J0 = cfj(model, data, pin.neutral(model), fid, _LWA)[rows]
     bounded_kernel.disable_compile(False)
     bounded_kernel(J0, np.zeros(n + 1), np.zeros(m), np.zeros(n), F, Iw)  # refused: sizes
-    bounded_kernel(
-        ctrl.jacobian(pin.neutral(model)), np.zeros(n + 1), np.zeros(m), np.zeros(n), F, Iw
-    )
     bounded_kernel.disable_compile(True)
-
-    def bad(q, xdot, out) -> bool:
-        return (
-            type(out) is not ndarray
-            or type(xdot) is not ndarray
-            or type(q) is not ndarray
-            or out.dtype is not _F64
-            or xdot.dtype is not _F64
-            or q.dtype is not _F64
-        )
 
     def retry(q, xdot, out):
         """Other types or layouts: contiguous float64 copies once, else the reference route."""
@@ -97,36 +83,48 @@ def compiled_bounded_step(ctrl, name: str, inner: Callable, reference: Callable,
         return reference(q, xdot, out)  # converts, or says what is wrong
 
     if name == "mda":
+        return _mda_step(ctrl, inner, reference, F, Iw)
 
-        def step(q: np.ndarray, xdot: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
-            before = ctrl.fallbacks
-            out = inner(q, xdot, out)
-            if ctrl.fallbacks != before or bad(q, xdot, out):  # the planner's rates, or other types
-                return finish(q, np.asarray(xdot, dtype=float), out)
-            status = bounded_kernel(ctrl.jacobian(q), q, xdot, out, F, Iw)
-            if status == 1:
-                ctrl.bounded_steps += 1
-            elif status:
-                return slow(q, xdot, out)  # out still holds the unbounded rates
-            return out
-
-    else:
-
-        def step(q: np.ndarray, xdot: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
-            if out is None:
-                out = empty(n)
-            try:  # the kernel checks the sizes (status 2), numba the types and layouts (TypeError)
-                status = bounded_kernel(cfj(model, data, q, fid, _LWA)[rows], q, xdot, out, F, Iw)
-            except FaultToleranceError:
-                raise
-            except _ERRORS:
-                return retry(q, xdot, out)
-            if status == 1:
-                ctrl.bounded_steps += 1
-            elif status:
-                return reference(q, xdot, out)
-            return out
+    def step(q: np.ndarray, xdot: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+        if out is None:
+            out = empty(n)
+        try:  # the kernel checks the sizes (status 2), numba the types and layouts (TypeError)
+            status = bounded_kernel(cfj(model, data, q, fid, _LWA)[rows], q, xdot, out, F, Iw)
+        except FaultToleranceError:
+            raise
+        except _ERRORS:
+            return retry(q, xdot, out)
+        if status == 1:
+            ctrl.bounded_steps += 1
+        elif status:
+            return reference(q, xdot, out)
+        return out
 
     step.__name__ = name
     step.__doc__ = f"{name} inside the rate box of the joint limits; compiled."
     return step
+
+
+def _mda_step(ctrl, inner: Callable, reference: Callable, F, Iw) -> Callable:
+    """MDA: its unbounded rates by ``inner`` (LAPACK), then the compiled box check and solve."""
+    from .boxsolve import bounded_kernel
+
+    slow, finish = reference.slow, reference.finish
+
+    def mda(q: np.ndarray, xdot: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+        before = ctrl.fallbacks
+        out = inner(q, xdot, out)
+        if ctrl.fallbacks != before:  # the planner's damped rates: the reference route
+            return finish(q, np.asarray(xdot, dtype=float), out)
+        try:
+            status = bounded_kernel(ctrl.jacobian(q), q, xdot, out, F, Iw)
+        except _ERRORS:  # other types or layouts
+            return finish(q, np.asarray(xdot, dtype=float), out)
+        if status == 1:
+            ctrl.bounded_steps += 1
+        elif status:
+            return slow(q, xdot, out)  # out still holds the unbounded rates
+        return out
+
+    mda.__doc__ = "mda inside the rate box of the joint limits; compiled."
+    return mda
