@@ -15,6 +15,7 @@ import math
 import numpy as np
 
 from .boxkernel import _chol_solve, _cholesky, _dot_rows, _njit
+from .compiled_linalg import gram_factor, trace_inverse
 from .linalg import DAMPING, RANK_RTOL
 
 
@@ -26,24 +27,9 @@ def factor(J, xdot, L, Y, z, a, params):  # pragma: no cover - numba
     (``trace(G⁻¹) = ‖L⁻¹‖_F² ≤ params[0]``, and the rank test when ``params[2] > 0``).
     """
     m, n = J.shape
-    for i in range(m):
-        for j in range(i + 1):
-            s = 0.0
-            for k in range(n):
-                s += J[i, k] * J[j, k]
-            L[i, j] = s
-    if not _cholesky(L, m):
+    if not gram_factor(J, L):
         return 1, math.inf
-    tr = 0.0
-    for j in range(m):  # column j of L⁻¹ into z (scratch)
-        for i in range(m):
-            z[i] = 0.0
-        for i in range(j, m):
-            t = 1.0 if i == j else 0.0
-            for k in range(j, i):
-                t -= L[i, k] * z[k]
-            z[i] = t / L[i, i]
-            tr += z[i] * z[i]
+    tr = trace_inverse(L, z, m)
     if not tr <= params[0]:
         return 1, tr
     if params[2] > 0.0:

@@ -20,6 +20,7 @@ from __future__ import annotations
 import math
 
 from .boxqp import BOX_TOL, MAX_SCALE_ROUNDS, ROW_EPS
+from .compiled_linalg import chol_solve, cholesky
 
 try:
     import numba
@@ -44,38 +45,8 @@ def _slack(k, n, ws, lo, hi):  # pragma: no cover - numba
     return (ws[_X, j] + ws[_DELTA, j]) - lo[j]
 
 
-@_njit
-def _cholesky(A, k) -> bool:  # pragma: no cover - numba
-    """Lower Cholesky factor of ``A[:k, :k]`` in place; False when not positive definite."""
-    for j in range(k):
-        s = A[j, j]
-        for t in range(j):
-            s -= A[j, t] * A[j, t]
-        if not s > 0.0:
-            return False
-        s = math.sqrt(s)
-        A[j, j] = s
-        for i in range(j + 1, k):
-            t2 = A[i, j]
-            for t in range(j):
-                t2 -= A[i, t] * A[j, t]
-            A[i, j] = t2 / s
-    return True
-
-
-@_njit
-def _chol_solve(L, k, b) -> None:  # pragma: no cover - numba
-    """``b ← (L Lᵀ)⁻¹ b`` for the factor of :func:`_cholesky`."""
-    for i in range(k):
-        t = b[i]
-        for j in range(i):
-            t -= L[i, j] * b[j]
-        b[i] = t / L[i, i]
-    for i in range(k - 1, -1, -1):
-        t = b[i]
-        for j in range(i + 1, k):
-            t -= L[j, i] * b[j]
-        b[i] = t / L[i, i]
+_cholesky = cholesky  # in place (compiled_linalg)
+_chol_solve = chol_solve
 
 
 @_njit

@@ -20,6 +20,7 @@ from collections.abc import Callable
 import numpy as np
 import pinocchio as pin
 
+from .compiled_linalg import gram_factor, trace_inverse
 from .errors import FaultToleranceError
 from .kernels import _LWA, _STEP_ERRORS, F64, TRACE_MAX, Workspace
 from .linalg import projection
@@ -40,44 +41,8 @@ _INF = math.inf
 N_PARAMS = 4
 
 
-@_njit
-def _factor(J, G) -> bool:  # pragma: no cover - numba
-    """``G = J Jᵀ`` (lower triangle) and its Cholesky factor ``L``, in place; False unless PD."""
-    m, n = J.shape
-    for i in range(m):
-        for j in range(i + 1):
-            s = 0.0
-            for k in range(n):
-                s += J[i, k] * J[j, k]
-            G[i, j] = s
-    for j in range(m):
-        s = G[j, j]
-        for k in range(j):
-            s -= G[j, k] * G[j, k]
-        if not s > 0.0:
-            return False
-        s = math.sqrt(s)
-        G[j, j] = s
-        for i in range(j + 1, m):
-            t = G[i, j]
-            for k in range(j):
-                t -= G[i, k] * G[j, k]
-            G[i, j] = t / s
-    return True
-
-
-@_njit
-def _trace_inverse(G, c, m) -> float:  # pragma: no cover - numba
-    """``trace(G⁻¹) = ‖L⁻¹‖_F²``, column by column of ``L⁻¹`` (``c`` as scratch): the certificate."""
-    tr = 0.0
-    for j in range(m):
-        for i in range(j, m):
-            t = 1.0 if i == j else 0.0
-            for k in range(j, i):
-                t -= G[i, k] * c[k]
-            c[i] = t / G[i, i]
-            tr += c[i] * c[i]
-    return tr
+_factor = gram_factor  # G = J Jᵀ and its Cholesky factor in place (compiled_linalg)
+_trace_inverse = trace_inverse  # the certificate trace(G⁻¹)
 
 
 @_njit

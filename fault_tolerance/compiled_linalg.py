@@ -1,0 +1,80 @@
+"""The small dense factorisations the compiled kernels share (numba, scalar loops).
+
+One copy of each: the Controller's step (:mod:`.single_kernel`), the compiled bounded step
+(:mod:`.boxkernel`, :mod:`.boxbasis`) call these. ``G = J Jᵀ = L Lᵀ`` is kept in the lower triangle,
+the factor overwrites it in place.
+"""
+
+from __future__ import annotations
+
+import math
+
+try:  # compiled when numba is there (lazily, on first call; cached on disk)
+    import numba
+
+    njit = numba.njit(cache=True, nogil=True, error_model="numpy")
+except ImportError:  # pragma: no cover - numba is a core dependency
+
+    def njit(fn):
+        return fn
+
+
+@njit
+def cholesky(A, k) -> bool:  # pragma: no cover - numba
+    """Lower Cholesky factor of ``A[:k, :k]`` (its lower triangle) in place; False unless PD."""
+    for j in range(k):
+        s = A[j, j]
+        for t in range(j):
+            s -= A[j, t] * A[j, t]
+        if not s > 0.0:
+            return False
+        s = math.sqrt(s)
+        A[j, j] = s
+        for i in range(j + 1, k):
+            u = A[i, j]
+            for t in range(j):
+                u -= A[i, t] * A[j, t]
+            A[i, j] = u / s
+    return True
+
+
+@njit
+def gram_factor(J, G) -> bool:  # pragma: no cover - numba
+    """``G = J Jᵀ`` (lower triangle) and its Cholesky factor ``L``, in place; False unless PD."""
+    m, n = J.shape
+    for i in range(m):
+        for j in range(i + 1):
+            s = 0.0
+            for k in range(n):
+                s += J[i, k] * J[j, k]
+            G[i, j] = s
+    return cholesky(G, m)
+
+
+@njit
+def trace_inverse(L, z, m) -> float:  # pragma: no cover - numba
+    """``trace(G⁻¹) = ‖L⁻¹‖_F²``, column by column of ``L⁻¹`` (``z`` as scratch)."""
+    tr = 0.0
+    for j in range(m):
+        for i in range(j, m):
+            t = 1.0 if i == j else 0.0
+            for k in range(j, i):
+                t -= L[i, k] * z[k]
+            z[i] = t / L[i, i]
+            tr += z[i] * z[i]
+    return tr
+
+
+@njit
+def chol_solve(L, k, b) -> None:  # pragma: no cover - numba
+    """``b ← (L Lᵀ)⁻¹ b`` for the factor of :func:`cholesky`."""
+    for i in range(k):
+        t = b[i]
+        for j in range(i):
+            t -= L[i, j] * b[j]
+        b[i] = t / L[i, i]
+    for i in range(k - 1, -1, -1):
+        t = b[i]
+        for j in range(i + 1, k):
+            t -= L[j, i] * b[j]
+        b[i] = t / L[i, i]
