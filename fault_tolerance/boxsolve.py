@@ -284,6 +284,74 @@ def bounded_kernel(J, q, xdot, out, F, Iw):  # pragma: no cover - numba
     return 1 if state[1] != 0.0 else 0
 
 
+# Eqn. (L4) for chosen reduced robots (the simulated sample's jump under the box).
+@_njit
+def reduced_solve(J, xdot, target, todo, post, scales, codes, F, Iw):  # pragma: no cover - numba
+    """Bounded rates (L4) of the reduced robots ``todo`` into ``post`` (rows), scalings into ``scales``.
+
+    As :func:`fault_tolerance.bounded.reduced_bounded` without a guess: ``min ‖q̇ − c‖²`` s.t.
+    ``J_S q̇ = s ẋ`` in the box ``buf[0], buf[1]`` of the workspace, ``c = target`` (zeros: the
+    least-norm rates; the reference damps ``J_S`` near its singularity and so does this).
+    ``codes[i]`` gets 0 (solved) or the module doc's code for scenario ``todo[i]`` (left to the
+    reference). Returns 1 when ``J`` has no certificate (nothing solved), else 0.
+    """
+    n, m, f, s = Iw[0], Iw[1], Iw[2], Iw[3]
+    buf, state = _fm(F, Iw, _BUF, 4, n), _fv(F, Iw, _STATE, n + 2)
+    lo, hi = buf[0], buf[1]
+    Z, V, p3 = _fm(F, Iw, _ZM, n, n), _fm(F, Iw, _V, 7, n), _fv(F, Iw, _P3, 3)
+    a, d, p0, qd, act, zr = V[0], V[1], V[3], V[4], V[5], V[6]
+    Gs = _fm(F, Iw, _LM, m, m)
+    st, tr = factor(J, xdot, Gs, _fm(F, Iw, _Y, m, n), _fv(F, Iw, _Z, m), a, p3)
+    if st:
+        return 1
+    r = null_basis(J, Z, _fm(F, Iw, _QA, n, m), _fv(F, Iw, _HB, m))
+    mask, ws, wsi = _iv(F, Iw, _MASK, n), _fm(F, Iw, _WSF, 8, n + 1), _im(F, Iw, _WSI, 2, n + 1)
+    gram, Zs = _fm(F, Iw, _GRAM, n + 1, n + 1), _fm(F, Iw, _ZS, n, n)
+    NSS, ys, sets = _fm(F, Iw, _NSS, s, s), _fv(F, Iw, _YS, s), _im(F, Iw, _SETS, f, s)
+    res = state[:2]
+    for i in range(todo.shape[0]):
+        S = sets[todo[i]]
+        k = 0
+        while k < s and S[k] >= 0:
+            k += 1
+        trinv = reduced_rates(Z, r, a, S, k, d, NSS, ys, p3[1], zr)  # (G1): J_S⁺ẋ
+        if trinv < 0.0:
+            codes[i] = 2
+            continue
+        mu2 = undamped(J, S, k, tr * trinv, p3, Gs)
+        if mu2 < 0.0 or (mu2 > 0.0 and not damped_rates(J, xdot, S, k, Gs, mu2, d, zr)):
+            codes[i] = 3
+            continue
+        rs = reduced_basis(Z, r, S, k, Zs, zr)
+        if rs < 0:
+            codes[i] = 3
+            continue
+        for c in range(rs):  # p₀ = N_S c = Z_S (Z_Sᵀ c)
+            t = 0.0
+            for j in range(n):
+                t += Zs[j, c] * target[j]
+            zr[c] = t
+        for j in range(n):
+            t = 0.0
+            for c in range(rs):
+                t += Zs[j, c] * zr[c]
+            p0[j] = t
+            mask[j] = 1
+        for t in range(k):
+            mask[S[t]] = 0
+            p0[S[t]] = 0.0
+        st = solve_box_rates(p0, d, Zs, rs, lo, hi, mask, qd, act, ws, wsi, gram, res)
+        codes[i] = st
+        if st:
+            continue
+        for t in range(k):
+            qd[S[t]] = 0.0
+        for j in range(n):
+            post[i, j] = qd[j]
+        scales[i] = res[0]
+    return 0
+
+
 #: Modes of :func:`bounded_solve` by resolver name.
 SOLVE_MODES = {"lnva": 0, "jvja": 1, "mda": 2}
 

@@ -113,9 +113,14 @@ class Sampler:
         self.a_ws, self.qd_ws = self.ws[o : o + n], self.ws[o + 4 * n : o + 5 * n]
         self.finish = sk.finish_kernel
         self.boxed = None  # the Controller's bounded step, built at the first sample that needs it
+        self.reduced_ws = None  # the compiled reduced robots' workspace (boxsolve), built likewise
         #: Samples handed to the reference code (not certified, the lock, a bound met after it),
         #: and samples that met a bound, solved by the bounded resolvers here.
         self.reference_samples, self.bounded_samples = 0, 0
+        #: Reduced robots under the box (L4) solved by the compiled code
+        #: (:func:`fault_tolerance.boxsolve.reduced_solve`) and by the reference's
+        #: :func:`~fault_tolerance.bounded.reduced_bounded` where the compiled code refuses.
+        self.reduced_compiled, self.reduced_reference = 0, 0
 
     def _jacobian(self, q: np.ndarray):
         """``(J, ∇K or zeros)``; the tip placement is then in ``data.oMf[fid]``."""
@@ -246,11 +251,41 @@ class Sampler:
         scales = np.ones(f)
         inside = ((post >= lo - BOX_TOL) & (post <= hi + BOX_TOL)).all(axis=1)
         np.clip(post, lo, hi, out=post)
+        todo = np.flatnonzero(~inside)
+        if len(todo) == 0:
+            return post, scales
         target = qd_cmd if self.continuation else None
-        for t in np.flatnonzero(~inside):
+        codes = self._reduced(J, xd_cmd, target, todo, lo, hi, post, scales)
+        for t in todo[codes != 0]:  # refused by the compiled code: the reference's solve
             sol = reduced_bounded(J, xd_cmd, (int(cols[t]),), lo, hi, target=target)
             post[t], scales[t] = sol.qd, sol.scale
+        self.reduced_reference += int(np.count_nonzero(codes))
+        self.reduced_compiled += len(todo) - int(np.count_nonzero(codes))
         return post, scales
+
+    def _reduced(self, J, xd_cmd, target, todo, lo, hi, post, scales) -> np.ndarray:
+        """The reduced robots ``todo`` under the box, compiled (rows of ``post``, ``scales``); codes."""
+        from .boxsolve import reduced_solve, workspace
+
+        if self.reduced_ws is None:
+            m, n = J.shape
+            sets = self.cols.reshape(-1, 1).copy()
+            F, Iw, views = workspace(n, m, sets, self.cols, 1)
+            views["p3"][:] = TRACE_MAX, self.ctrl._pivot_threshold, self.ctrl._rank_coef
+            self.reduced_ws = (F, Iw, views, np.zeros((len(sets), n)), np.zeros(len(sets)))
+        F, Iw, views, rpost, rscale = self.reduced_ws
+        views["buf"][0], views["buf"][1] = lo, hi
+        c = self.zeros if target is None else np.ascontiguousarray(target, dtype=float)
+        codes = np.zeros(len(todo), dtype=np.int64)
+        J = np.ascontiguousarray(J, dtype=float)
+        if reduced_solve(J, np.ascontiguousarray(xd_cmd, dtype=float), c, todo, rpost, rscale,
+                         codes, F, Iw):  # fmt: skip
+            codes[:] = 1  # no certificate of J: all to the reference
+            return codes
+        ok = codes == 0
+        post[todo[ok]] = rpost[: len(todo)][ok]
+        scales[todo[ok]] = rscale[: len(todo)][ok]
+        return codes
 
     def _boxed(self):
         """The Controller whose bounded step solves the samples that meet a bound."""
