@@ -288,14 +288,18 @@ class Sampler:
         return codes
 
     def _boxed(self):
-        """The Controller whose bounded step solves the samples that meet a bound."""
+        """The Controller whose bounded step solves the samples that meet a bound.
+
+        Its fastest backend: with numba, the compiled bounded step of :mod:`fault_tolerance.boxfast`
+        (which leaves what it refuses to the reference route, ``bounded_reference_steps``).
+        """
         if self.boxed is None:
             from .realtime import Controller
 
             s = self.s
             self.boxed = Controller(
                 s.arm, s.sc, method=s.algorithm, gain=s.gain, max_step=s.max_step,
-                tolerate=True, backend=self.ctrl.backend, limits=True, horizon=s.horizon,
+                tolerate=True, backend=_backends()[0], limits=True, horizon=s.horizon,
             )  # fmt: skip
         return self.boxed
 
