@@ -56,3 +56,29 @@ def _servo_clip(q, lim, dt, qd) -> int:  # pragma: no cover - numba
             flag = _FLAG_SERVO_CLIPPED
         qd[c] = t
     return flag
+
+
+# Eqn. (G1) / (G3) of every reduced robot from the kernel's factors, checked against the box.
+@njit
+def g1_posts(J, B, base, piv, cols, lo, hi, post, inside) -> int:  # pragma: no cover - numba
+    """``post[t] = base − (base_c / N_cc) N[c, :]`` (``c = cols[t]``, ``N = I − JᵀB``), clipped.
+
+    ``inside[t]`` gets 1 when row ``t`` was inside the box ``[lo, hi]`` (to ``BOX_TOL``) before
+    the clip, else 0; returns how many were not (they need the bounded solve (L4)).
+    """
+    m, n = J.shape
+    out = 0
+    for t in range(cols.shape[0]):
+        c = cols[t]
+        ratio = base[c] / piv[t]
+        ok = True
+        for j in range(n):
+            s = 0.0
+            for i in range(m):
+                s += B[i, c] * J[i, j]
+            v = 0.0 if j == c else base[j] - ratio * (-s)
+            ok = ok and lo[j] - BOX_TOL <= v <= hi[j] + BOX_TOL
+            post[t, j] = min(max(v, lo[j]), hi[j])
+        inside[t] = 1 if ok else 0
+        out += 0 if ok else 1
+    return out

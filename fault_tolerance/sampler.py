@@ -236,7 +236,7 @@ class Sampler:
         (:func:`~fault_tolerance.bounded.reduced_bounded`) for those that are not.
         """
         from .bounded import reduced_bounded
-        from .boxqp import BOX_TOL
+        from .sample_limits import g1_posts
 
         m, n = J.shape
         cols, f = self.cols, len(self.cols)
@@ -244,16 +244,10 @@ class Sampler:
         B = self.ws[o : o + m * n].reshape(m, n)
         piv = self.ws[o + m * n + 3 * n : o + m * n + 3 * n + f]
         base = qd_cmd if self.continuation else self.a_ws
-        Ncols = -(B[:, cols].T @ J)  # row t: N[cols[t], :] = N[:, cols[t]] (N = I - JᵀB)
-        Ncols[np.arange(f), cols] += 1.0
-        post = base - (base[cols] / piv)[:, None] * Ncols  # (G1) / (G3)
-        post[np.arange(f), cols] = 0.0
-        scales = np.ones(f)
-        inside = ((post >= lo - BOX_TOL) & (post <= hi + BOX_TOL)).all(axis=1)
-        np.clip(post, lo, hi, out=post)
-        todo = np.flatnonzero(~inside)
-        if len(todo) == 0:
+        post, inside, scales = np.empty((f, n)), np.empty(f, dtype=np.int64), np.ones(f)
+        if g1_posts(J, B, base, piv, cols, lo, hi, post, inside) == 0:  # (G1) / (G3), clipped
             return post, scales
+        todo = np.flatnonzero(inside == 0)
         target = qd_cmd if self.continuation else None
         codes = self._reduced(J, xd_cmd, target, todo, lo, hi, post, scales)
         for t in todo[codes != 0]:  # refused by the compiled code: the reference's solve

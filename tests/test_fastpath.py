@@ -8,6 +8,7 @@ import pytest
 import fault_tolerance as ft
 from fault_tolerance import sample_kernel as sk
 from fault_tolerance.run import ARRAYS
+from fault_tolerance.sampler import Sampler
 from fault_tolerance.simulation import ServoModel, simulate
 from fault_tolerance.trajectories import CirclePath, FunctionPath
 
@@ -173,6 +174,68 @@ def test_bounded_planned_rates_and_scaled_task_agree(alg, samplers):
                               lock_joint="joint2", lock_time=0.12)  # fmt: skip
     assert _count(ref, FLAG_BOUND_ACTIVE) > 0 and _count(ref, FLAG_TASK_SCALED) > 0
     assert samplers[0].boxed is not None and samplers[0].boxed.bounded_steps > 0  # the Controller's
+
+
+@pytest.mark.parametrize("key", ["panda_pose", "chain_7"])
+def test_reduced_robots_at_bounds_are_solved_compiled(key, samplers):
+    """From the benchmark pool's first posture most samples have a reduced robot whose (G1) rates
+    leave the box: the compiled code solves those reduced robots (L4) and the bounded step, and
+    the run equals the reference's (limits on: the default)."""
+    from fault_tolerance.bench.cases import make_case
+
+    case = make_case(key)
+    arm, q0 = case.arm, case.qs[0]
+    path = CirclePath(arm.fk(q0)[: arm.m], 0.01, 2 * np.pi, 0.25, rows=(0, 1))
+    fast, ref = _bounded_pair(arm, path, "jvja", q0=q0, lockable="all", dt=1e-3)
+    (smp,) = samplers
+    samples = len(fast.t)
+    assert smp.bounded_samples > samples // 2  # most samples meet a bound (a reduced robot's)
+    assert smp.reduced_compiled >= smp.bounded_samples  # at least one reduced robot each
+    assert smp.reduced_reference == 0  # none left to bounded.reduced_bounded
+    assert smp.boxed.bounded_reference_steps == 0  # the bounded step compiled too
+    assert smp.reference_samples == 0
+
+
+@pytest.mark.parametrize("target", [False, True])
+def test_compiled_reduced_solve_equals_reduced_bounded(target):
+    """boxsolve.reduced_solve against bounded.reduced_bounded: rates and task scale (L4)."""
+    from fault_tolerance.bounded import reduced_bounded
+    from fault_tolerance.boxsolve import reduced_solve, workspace
+    from fault_tolerance.kernels import TRACE_MAX
+    from fault_tolerance.linalg import PIVOT_EPS
+
+    rng = np.random.default_rng(3)
+    m, n, solved, scaled = 4, 7, 0, 0
+    for _ in range(40):
+        J, xd = rng.normal(size=(m, n)), rng.normal(size=m)
+        lo, hi = -rng.uniform(0.05, 1.0, n), rng.uniform(0.05, 1.0, n)
+        c = rng.normal(size=n) if target else np.zeros(n)
+        cols = np.arange(n, dtype=np.int64)
+        F, Iw, views = workspace(n, m, cols.reshape(-1, 1).copy(), cols, 1)
+        views["p3"][:] = TRACE_MAX, PIVOT_EPS, 0.0
+        views["buf"][0], views["buf"][1] = lo, hi
+        post, scales, codes = np.zeros((n, n)), np.zeros(n), np.zeros(n, dtype=np.int64)
+        assert reduced_solve(J, xd, c, cols, post, scales, codes, F, Iw) == 0
+        for t in np.flatnonzero(codes == 0):
+            ref = reduced_bounded(J, xd, (t,), lo, hi, target=c if target else None)
+            np.testing.assert_allclose(post[t], ref.qd, atol=1e-9)
+            assert scales[t] == pytest.approx(ref.scale, abs=1e-9)
+            solved, scaled = solved + 1, scaled + (ref.scale < 1 - 1e-9)
+    assert solved > 200 and scaled > 20  # the solves ran, and many needed a scaled task
+
+
+def test_reduced_robots_refused_by_the_compiled_code_take_reduced_bounded(samplers, monkeypatch):
+    """Where the compiled code refuses a reduced robot, bounded.reduced_bounded solves it (counted)."""
+    def refuse(self, J, xd_cmd, target, todo, lo, hi, post, scales):
+        return np.full(len(todo), 3, dtype=np.int64)
+
+    monkeypatch.setattr(Sampler, "_reduced", refuse)  # the class itself (the fixture wraps it)
+    arm = ft.load_arm("planar_3r")
+    q0 = np.array([2.9, -2.5, 1.2])
+    path = CirclePath(x0=arm.fk(q0), radius=0.1, omega=2 * np.pi, duration=0.2, rows=(0, 1))
+    _bounded_pair(arm, path, "jvja", q0=q0, lockable="all", feedback_gain=10.0)
+    (smp,) = samplers
+    assert smp.reduced_reference > 0 and smp.reduced_compiled == 0
 
 
 def test_auto_engine_takes_the_compiled_sample_under_limits(samplers):
