@@ -20,6 +20,7 @@ import numpy as np
 import pinocchio as pin
 
 from . import sample_kernel as sk
+from .bounded import SCALE_TOL, bounded_least_norm, reduced_bounded
 from .indices import RCN_MAX
 from .kernels import TRACE_MAX
 from .linalg import PIVOT_EPS
@@ -67,7 +68,9 @@ class Sampler:
     """
 
     def __init__(self, s, rec: dict) -> None:
+        from . import run
         from .realtime import Controller
+        from .sample_limits import g1_posts
 
         arm, sc = s.arm, s.sc
         self.ctrl = Controller(
@@ -121,6 +124,9 @@ class Sampler:
         #: (:func:`fault_tolerance.boxsolve.reduced_solve`) and by the reference's
         #: :func:`~fault_tolerance.bounded.reduced_bounded` where the compiled code refuses.
         self.reduced_compiled, self.reduced_reference = 0, 0
+        self.run_flags = (run.FLAG_BOUND_ACTIVE, run.FLAG_INTOLERABLE_UNDER_LIMITS,
+                          run.FLAG_STEP_LIMITED, run.FLAG_LOCKED)  # fmt: skip
+        self.g1_posts = g1_posts
 
     def _jacobian(self, q: np.ndarray):
         """``(J, ∇K or zeros)``; the tip placement is then in ``data.oMf[fid]``."""
@@ -177,9 +183,7 @@ class Sampler:
         L4-L5); the rest (indices, servo, record) by :func:`~fault_tolerance.sample_kernel.finish_kernel`.
         The numbers are those of ``reference_step._step`` under limits.
         """
-        from .bounded import SCALE_TOL
-        from .run import FLAG_BOUND_ACTIVE, FLAG_INTOLERABLE_UNDER_LIMITS, FLAG_STEP_LIMITED
-
+        FLAG_BOUND_ACTIVE, FLAG_INTOLERABLE_UNDER_LIMITS, FLAG_STEP_LIMITED, _ = self.run_flags
         s, ws, sc = self.s, self.ws, self.s.sc
         self.bounded_samples += 1
         lo, hi = self.buf[0].copy(), self.buf[1].copy()
@@ -212,9 +216,7 @@ class Sampler:
         Its bounded least-norm rates (L4, :func:`~fault_tolerance.bounded.bounded_least_norm`),
         as ``reference_step._step``.
         """
-        from .bounded import SCALE_TOL, bounded_least_norm
-        from .run import FLAG_BOUND_ACTIVE, FLAG_LOCKED
-
+        FLAG_BOUND_ACTIVE, _, _, FLAG_LOCKED = self.run_flags
         keep = state.keep
         sol = bounded_least_norm(J[:, keep], xd_cmd, lo[keep], hi[keep])
         qd_cmd = np.zeros(len(lo))
@@ -235,9 +237,6 @@ class Sampler:
         from the kernel's factors where they are inside the box, the bounded solve
         (:func:`~fault_tolerance.bounded.reduced_bounded`) for those that are not.
         """
-        from .bounded import reduced_bounded
-        from .sample_limits import g1_posts
-
         m, n = J.shape
         cols, f = self.cols, len(self.cols)
         o = 3 * m * m
@@ -245,7 +244,7 @@ class Sampler:
         piv = self.ws[o + m * n + 3 * n : o + m * n + 3 * n + f]
         base = qd_cmd if self.continuation else self.a_ws
         post, inside, scales = np.empty((f, n)), np.empty(f, dtype=np.int64), np.ones(f)
-        if g1_posts(J, B, base, piv, cols, lo, hi, post, inside) == 0:  # (G1) / (G3), clipped
+        if self.g1_posts(J, B, base, piv, cols, lo, hi, post, inside) == 0:  # (G1) / (G3), clipped
             return post, scales
         todo = np.flatnonzero(inside == 0)
         target = qd_cmd if self.continuation else None
@@ -259,21 +258,21 @@ class Sampler:
 
     def _reduced(self, J, xd_cmd, target, todo, lo, hi, post, scales) -> np.ndarray:
         """The reduced robots ``todo`` under the box, compiled (rows of ``post``, ``scales``); codes."""
-        from .boxsolve import reduced_solve, workspace
-
         if self.reduced_ws is None:
+            from .boxsolve import reduced_solve, workspace
+
             m, n = J.shape
             sets = self.cols.reshape(-1, 1).copy()
             F, Iw, views = workspace(n, m, sets, self.cols, 1)
             views["p3"][:] = TRACE_MAX, self.ctrl._pivot_threshold, self.ctrl._rank_coef
-            self.reduced_ws = (F, Iw, views, np.zeros((len(sets), n)), np.zeros(len(sets)))
-        F, Iw, views, rpost, rscale = self.reduced_ws
-        views["buf"][0], views["buf"][1] = lo, hi
+            self.reduced_ws = (F, Iw, views["buf"], np.zeros((len(sets), n)), np.zeros(len(sets)),
+                               reduced_solve)  # fmt: skip
+        F, Iw, buf, rpost, rscale, solve = self.reduced_ws
+        buf[0], buf[1] = lo, hi
         c = self.zeros if target is None else np.ascontiguousarray(target, dtype=float)
         codes = np.zeros(len(todo), dtype=np.int64)
-        J = np.ascontiguousarray(J, dtype=float)
-        if reduced_solve(J, np.ascontiguousarray(xd_cmd, dtype=float), c, todo, rpost, rscale,
-                         codes, F, Iw):  # fmt: skip
+        if solve(np.ascontiguousarray(J), np.ascontiguousarray(xd_cmd, dtype=float), c, todo, rpost,
+                 rscale, codes, F, Iw):  # fmt: skip
             codes[:] = 1  # no certificate of J: all to the reference
             return codes
         ok = codes == 0
