@@ -58,12 +58,24 @@ def _dot_rows(Z, r, i, j) -> float:  # pragma: no cover - numba
 
 
 @_njit
+def _subtract_span(Z, r, rows, nA, ws, coefs, n) -> None:  # pragma: no cover - numba
+    """``z ← z − N_A coefs`` (``z = ws[1]``; row ``k`` of ``N_A`` is ``ρ Z_j`` as below)."""
+    for a in range(nA):
+        ka = rows[a]
+        coef = coefs[a] * (-1.0 if ka < n else 1.0)
+        ja = ka if ka < n else ka - n
+        for c in range(r):
+            ws[_ZV, c] -= coef * Z[ja, c]
+
+
+@_njit
 def _step_dir(Z, r, rows, nA, p, ws, gram, n) -> float:  # pragma: no cover - numba
     """``rr = (N_AᵀN_A)⁻¹N_Aᵀn_p``, ``z = n_p − N_A rr`` into ``ws``; returns ``‖z‖²``.
 
     Row ``k`` is ``ρ Z_j`` (``k < n``: upper bound of joint ``j = k``, ``ρ = −1``; else the lower
     bound of ``j = k − n``, ``ρ = 1``). −1 when the active rows' Gram matrix is not positive
-    definite (rounding).
+    definite (rounding). With ``nA = r`` active rows ``z = 0`` exactly (rounding of the Gram
+    solve would otherwise leave a tiny ``z`` and a huge, meaningless step).
     """
     jp = p if p < n else p - n
     rp = -1.0 if p < n else 1.0
@@ -81,14 +93,26 @@ def _step_dir(Z, r, rows, nA, p, ws, gram, n) -> float:  # pragma: no cover - nu
     if nA and not _cholesky(gram, nA):
         return -1.0
     _chol_solve(gram, nA, rr)
+    if nA >= r:  # r independent active rows span R^r: n_p is in their span, z = 0 exactly
+        for c in range(r):
+            ws[_ZV, c] = 0.0
+        return 0.0
     for c in range(r):
         ws[_ZV, c] = rp * Z[jp, c]
-    for a in range(nA):
-        ka = rows[a]
-        coef = rr[a] * (-1.0 if ka < n else 1.0)
-        ja = ka if ka < n else ka - n
-        for c in range(r):
-            ws[_ZV, c] -= coef * Z[ja, c]
+    _subtract_span(Z, r, rows, nA, ws, rr, n)
+    if nA:  # once more on the residual: the Gram solve's error is refined away (twice is enough)
+        cc = ws[_CC]
+        for a in range(nA):
+            ka = rows[a]
+            ja = ka if ka < n else ka - n
+            t = 0.0
+            for c in range(r):
+                t += Z[ja, c] * ws[_ZV, c]
+            cc[a] = (-1.0 if ka < n else 1.0) * t
+        _chol_solve(gram, nA, cc)
+        _subtract_span(Z, r, rows, nA, ws, cc, n)
+        for a in range(nA):
+            rr[a] += cc[a]
     zz = 0.0
     for c in range(r):
         zz += ws[_ZV, c] * ws[_ZV, c]

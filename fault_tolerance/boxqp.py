@@ -60,6 +60,22 @@ def _constraints(M: np.ndarray, blo: np.ndarray, bhi: np.ndarray):
     return Nk, e, joint, side
 
 
+def _step_direction(NA: np.ndarray, npv: np.ndarray):
+    """``rr`` with ``N_A rr`` the part of ``n_p`` in the span of the active rows, ``z = n_p − N_A rr``.
+
+    By a QR factor of ``N_A`` (r, k), not its normal equations: near-dependent active rows (nearly
+    parallel bounds in the null space) keep ``z`` accurate to rounding instead of to the square of
+    their condition number. With ``k = r`` rows ``n_p`` is in their span and ``z = 0`` exactly.
+    """
+    r, k = NA.shape
+    if k == 0:
+        return np.zeros(0), npv
+    Q, R = np.linalg.qr(NA)
+    rr = np.linalg.solve(R, Q.T @ npv)
+    z = np.zeros(r) if k >= r else npv - Q @ (Q.T @ npv)
+    return rr, z
+
+
 # Goldfarb & Idnani (1983), dual active set, with Hessian I: min ½‖u‖² s.t. nₖᵀu ≥ eₖ.
 def nearest_point(Nk: np.ndarray, e: np.ndarray):
     """Point of ``{u : Nk u ≥ e}`` nearest the origin: ``(u, active rows, iterations)``.
@@ -90,13 +106,7 @@ def nearest_point(Nk: np.ndarray, e: np.ndarray):
             if it > limit:  # pragma: no cover - GI terminates; guard against rounding loops
                 raise InfeasibleBounds("the bounded rates did not converge (active-set cycling)")
             npv = Nk[p]
-            if A:
-                NA = Nk[A].T  # (r, k)
-                rr = np.linalg.solve(NA.T @ NA, NA.T @ npv)
-                z = npv - NA @ rr
-            else:
-                rr = np.zeros(0)
-                z = npv
+            rr, z = _step_direction(Nk[A].T, npv)
             pos = rr > 1e-14
             t1, k = np.inf, -1
             if np.any(pos):

@@ -289,3 +289,23 @@ def test_mda_after_a_planner_fallback():
         assert ctrl.last_scale == pytest.approx(ref.scale, rel=REL)
         assert ctrl.fallbacks == k and ctrl.bounded_steps == ctrl.bounded_reference_steps
     assert ctrl.bounded_steps >= 1  # 5 m/s is far out of the box
+
+
+def test_chain_14_full_active_set_compiled():
+    """Issue 12: the chain_14 configuration whose reduced robot of joint 8 returned 4 ("no s ≥ 0")
+    with 0 inside the box: with r active rows the step direction is z = 0 exactly (its Gram solve
+    left a tiny z and a huge step). The compiled step equals the reference, scaled task and all."""
+    if "numba" not in ft.realtime.available_backends():
+        pytest.skip("numba not installed")
+    from test_bounded import CHAIN14_Q, CHAIN14_XD
+
+    from fault_tolerance.bench.chain import synthetic_chain
+
+    arm = synthetic_chain(14)
+    ctrl = Controller(arm, "all", backend="numba")
+    ref = ft.resolve_bounded("jvja", arm.jacobian(CHAIN14_Q), CHAIN14_XD, ctrl.scenarios,
+                             bounds=arm.rate_bounds(CHAIN14_Q, ctrl.horizon))  # fmt: skip
+    qd = ctrl.step(CHAIN14_Q, CHAIN14_XD)
+    assert ctrl.bounded_steps - ctrl.bounded_reference_steps == 1  # the compiled route solved it
+    assert np.allclose(qd, ref.qd, atol=1e-8) and ref.scale < 1.0
+    assert ctrl.last_scale == pytest.approx(ref.scale, rel=1e-9)
