@@ -61,7 +61,7 @@ def _constraints(M: np.ndarray, blo: np.ndarray, bhi: np.ndarray):
 
 
 def _step_direction(NA: np.ndarray, npv: np.ndarray):
-    """``rr`` with ``N_A rr`` the part of ``n_p`` in the span of the active rows, ``z = n_p − N_A rr``.
+    """``rr`` with ``N_A rr`` the part of ``n_p`` in the active rows' span; ``z = n_p − N_A rr``.
 
     By a QR factor of ``N_A`` (r, k), not its normal equations: near-dependent active rows (nearly
     parallel bounds in the null space) keep ``z`` accurate to rounding instead of to the square of

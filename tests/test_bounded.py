@@ -263,16 +263,18 @@ def test_velocity_defaults_where_urdf_has_none():
 
 #: A configuration of the bench's chain_14 pool (inside the limits) whose reduced robot of joint 8
 #: raised InfeasibleBounds (issue 12); its task velocity.
-CHAIN14_Q = np.array([-2.3923756975384443, -3.075698276536998, 1.8522491693721665, 2.674856937765739,
-              -1.8800748833421963, 1.9498193872681737, -2.103904791012074, -2.7374498891695667,
-              -1.1115195167287855, -1.1369592512408544, 1.7428178159548011, -3.085152356888032,
-              -1.8613265982059963, -2.30215240953327])  # fmt: skip
-CHAIN14_XD = np.array([-0.6063841328681505, -0.3732927189455615, 0.659764605007273, 0.139906488448801,
-               -0.18644615194521597, 0.057667168148914136])  # fmt: skip
+CHAIN14_Q = np.array([
+    -2.3923756975384443, -3.075698276536998, 1.8522491693721665, 2.674856937765739,
+    -1.8800748833421963, 1.9498193872681737, -2.103904791012074, -2.7374498891695667,
+    -1.1115195167287855, -1.1369592512408544, 1.7428178159548011, -3.085152356888032,
+    -1.8613265982059963, -2.30215240953327])  # fmt: skip
+CHAIN14_XD = np.array([
+    -0.6063841328681505, -0.3732927189455615, 0.659764605007273, 0.139906488448801,
+    -0.18644615194521597, 0.057667168148914136])  # fmt: skip
 
 
 def max_scale(J, xdot, lo, hi, keep):
-    """The largest s in [0, 1] with J_keep q̇ = s ẋ inside the box (linprog), the reference of (L3)."""
+    """The largest s in [0, 1] with J_keep q̇ = s ẋ inside the box (linprog): (L3)'s reference."""
     k = len(keep)
     res = linprog(np.r_[np.zeros(k), -1.0], A_eq=np.hstack([J[:, keep], -xdot[:, None]]),
                   b_eq=np.zeros(len(xdot)), bounds=[*zip(lo[keep], hi[keep], strict=True), (0, 1)],
@@ -284,7 +286,7 @@ def test_chain_14_near_dependent_bounds_are_not_infeasible():
     """Issue 12, the bench's chain_14 pool: 0 is inside the box, yet the reduced robot of joint 8
     raised InfeasibleBounds ("not even zero"): seven nearly parallel bounds in its null space made
     the active-set step (normal equations, a tiny ``z`` when the active rows spanned R^r) huge and
-    the Farkas certificate meaningless. The rates must be inside the box, J q̇ = s ẋ, s the largest."""
+    the Farkas certificate meaningless. Rates inside the box, J q̇ = s ẋ, s the largest."""
     from fault_tolerance.bench.chain import synthetic_chain
 
     q, xd = CHAIN14_Q, CHAIN14_XD
@@ -297,8 +299,10 @@ def test_chain_14_near_dependent_bounds_are_not_infeasible():
     solved = []
     for k, S in enumerate(sc.sets):  # every reduced robot: its largest s, quadprog's optimum there
         keep = [j for j in range(n) if j not in S]
-        assert 0.0 <= scales[k] <= 1.0 and scales[k] == pytest.approx(max_scale(J, xd, lo, hi, keep), abs=1e-9)
-        assert (post[k] >= lo - 1e-12).all() and (post[k] <= hi + 1e-12).all() and post[k][S[0]] == 0
+        assert 0.0 <= scales[k] <= 1.0
+        assert scales[k] == pytest.approx(max_scale(J, xd, lo, hi, keep), abs=1e-9)
+        assert (post[k] >= lo - 1e-12).all() and (post[k] <= hi + 1e-12).all()
+        assert post[k][S[0]] == 0
         assert np.abs(J @ post[k] - scales[k] * xd).max() < 1e-10
         try:  # at its largest s the set may be a point: quadprog may call it inconsistent
             ref = qp_ref(np.eye(n), np.zeros(n), J, scales[k] * xd, lo, hi, keep)
@@ -308,7 +312,7 @@ def test_chain_14_near_dependent_bounds_are_not_infeasible():
         assert np.abs(post[k] - ref).max() < 1e-6
     assert 7 in solved  # the robot that raised
     s = out.scale
-    assert 0.0 <= s <= 1.0 and s == pytest.approx(max_scale(J, xd, lo, hi, list(range(n))), abs=1e-9)
+    assert 0.0 <= s <= 1.0 and s == pytest.approx(max_scale(J, xd, lo, hi, range(n)), abs=1e-9)
     assert (out.qd >= lo - 1e-12).all() and (out.qd <= hi + 1e-12).all()
     assert np.abs(J @ out.qd - s * xd).max() < 1e-10
     c = sc.weights @ post / sc.weights.sum()
