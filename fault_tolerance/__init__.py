@@ -7,6 +7,10 @@ nor matplotlib.
 
 __version__ = "0.1.0"
 
+from .kernel_cache import refresh as _refresh_kernel_cache  # noqa: E402
+
+_refresh_kernel_cache()  # numba's cache knows a kernel's own file only (kernel_cache.py)
+
 from .api import jvj, resolve  # noqa: E402
 from .arm import Arm, parse_task  # noqa: E402
 from .bounded import BoundedRates, rate_box, resolve_bounded  # noqa: E402
