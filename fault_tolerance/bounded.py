@@ -26,7 +26,6 @@ needs ``s_S < 1`` (:attr:`BoundedRates.reduced_scale`) cannot keep the task insi
 
 from __future__ import annotations
 
-from collections.abc import Sequence
 from typing import NamedTuple
 
 import numpy as np
@@ -34,7 +33,7 @@ import numpy as np
 from .boxqp import BOX_TOL, BoxSolution, solve_box
 from .errors import InvalidInput
 from .failures import Scenarios, scenarios
-from .indices import RESPONSES, square_sum_jump
+from .indices import RESPONSES
 from .linalg import damped_pivots, projection, reduced_rates
 
 #: Horizon h of the rate box (L1) [s]: a joint covers at most its distance to a limit in h.

@@ -16,6 +16,7 @@ try:  # compiled when numba is there (lazily, on first call; cached on disk)
 except ImportError:  # pragma: no cover - numba is a core dependency
 
     def njit(fn):
+        """Without numba the kernels run as plain Python."""
         return fn
 
 

@@ -18,7 +18,7 @@ pattern search around the best (coordinate steps, halved each round). Every roun
 
 Example:
     >>> import fault_tolerance as ft
-    >>> from fault_tolerance.design import design
+    >>> from fault_tolerance.design_search import design
     >>> d = design(ft.load_arm("planar_3r"), objective="ftw-area", candidates=8, rounds=0, grid=31)
     >>> d.record["area_ftw"] > 0
     True
@@ -34,8 +34,7 @@ import pinocchio as pin
 from . import batch
 from .errors import InvalidInput
 from .planar import full_turn, planar_chain, reach_2r, rigid_pair
-from .robot_spec import arm_of, robot_spec
-from .sweep import run
+from .robot_spec import arm_of
 
 OBJECTIVES = ("ftw-area", "jvj", "rcn")
 VARY = ("limits", "links,limits")

@@ -44,7 +44,7 @@ def plot_design(d, path: str | Path) -> Path:
         b.loglog(seen["jvj"][met], seen["rcn"][met], ".", ms=4, label="feasible")
         fr = sorted((p["jvj"], p["rcn"]) for p in rec["pareto"])
         if fr:
-            b.loglog(*zip(*fr), "k-", lw=1, label="Pareto front")
+            b.loglog(*zip(*fr, strict=True), "k-", lw=1, label="Pareto front")
         b.loglog([rec["jvj"]], [rec["rcn"]], "r*", ms=12, label="chosen")
         if "jvj" in rec["baseline"]:
             b.loglog([rec["baseline"]["jvj"]], [rec["baseline"]["rcn"]], "ks", label="no limits")

@@ -47,8 +47,6 @@ def jvja_bounded_qp(J, xdot, sc, lo, hi) -> np.ndarray:
 
 def _pools(case, ctrl):
     """``(q, ẋ)`` with no bound active, and with two joints at a binding bound (``s = 1``)."""
-    import fault_tolerance as ft
-
     arm, sc, h = case.arm, case.sc, ctrl.horizon
     free, two = [], []
     for q, xd in case.qx:
