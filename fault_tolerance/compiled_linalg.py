@@ -1,7 +1,7 @@
 """The small dense factorisations the compiled kernels share (numba, scalar loops).
 
 One copy of each: the Controller's step (:mod:`.single_kernel`), the compiled bounded step
-(:mod:`.boxkernel`, :mod:`.boxbasis`) call these. ``G = J Jᵀ = L Lᵀ`` is kept in the lower triangle,
+(:mod:`.boxkernel`, :mod:`.boxbasis`) and the simulated sample (:mod:`.sample_linalg`) call these. ``G = J Jᵀ = L Lᵀ`` is kept in the lower triangle,
 the factor overwrites it in place.
 """
 
@@ -37,6 +37,15 @@ def cholesky(A, k) -> bool:  # pragma: no cover - numba
                 u -= A[i, t] * A[j, t]
             A[i, j] = u / s
     return True
+
+
+@njit
+def cholesky_into(G, L, m) -> bool:  # pragma: no cover - numba
+    """Lower Cholesky factor of ``G[:m, :m]`` into ``L`` (``G`` kept); False unless PD."""
+    for i in range(m):
+        for j in range(i + 1):
+            L[i, j] = G[i, j]
+    return cholesky(L, m)
 
 
 @njit

@@ -12,6 +12,8 @@ import math
 
 import numpy as np
 
+from .compiled_linalg import cholesky_into, trace_inverse
+
 try:  # compiled when numba is there (lazily, on first call; cached on disk)
     import numba
 
@@ -29,37 +31,8 @@ P_DT, P_DECAY, P_ACCEL, P_BOUNDED = 9, 10, 11, 12
 N_PARAMS = 13
 
 
-@njit
-def _cholesky(G, L, m) -> bool:  # pragma: no cover - numba
-    """Lower Cholesky factor of the leading m x m block of G into L; False unless G is PD."""
-    for j in range(m):
-        s = G[j, j]
-        for k in range(j):
-            s -= L[j, k] * L[j, k]
-        if not s > 0.0:
-            return False
-        s = math.sqrt(s)
-        L[j, j] = s
-        for i in range(j + 1, m):
-            t = G[i, j]
-            for k in range(j):
-                t -= L[i, k] * L[j, k]
-            L[i, j] = t / s
-    return True
-
-
-@njit
-def _trace_inverse(L, z, m) -> float:  # pragma: no cover - numba
-    """``trace(G⁻¹) = ‖L⁻¹‖_F²``, column by column of ``L⁻¹`` (``z`` as scratch)."""
-    tr = 0.0
-    for j in range(m):
-        for i in range(j, m):
-            t = 1.0 if i == j else 0.0
-            for k in range(j, i):
-                t -= L[i, k] * z[k]
-            z[i] = t / L[i, i]
-            tr += z[i] * z[i]
-    return tr
+_cholesky = cholesky_into  # G = L Lᵀ into L, G kept (compiled_linalg)
+_trace_inverse = trace_inverse
 
 
 @njit
