@@ -15,7 +15,7 @@ import math
 import numpy as np
 
 from .boxkernel import _chol_solve, _cholesky, _dot_rows, _njit
-from .compiled_linalg import gram_factor, trace_inverse
+from .compiled_linalg import gram_factor, least_norm, rank_ok, trace_inverse
 from .linalg import DAMPING, RANK_RTOL
 
 
@@ -32,29 +32,9 @@ def factor(J, xdot, L, Y, z, a, params):  # pragma: no cover - numba
     tr = trace_inverse(L, z, m)
     if not tr <= params[0]:
         return 1, tr
-    if params[2] > 0.0:
-        s = 0.0
-        for i in range(m):
-            for k in range(n):
-                s += J[i, k] * J[i, k]
-        if not params[2] * s * tr < 1.0:
-            return 1, tr
-    for col in range(n):
-        for i in range(m):
-            t = J[i, col]
-            for k in range(i):
-                t -= L[i, k] * Y[k, col]
-            Y[i, col] = t / L[i, i]
-    for i in range(m):
-        t = xdot[i]
-        for k in range(i):
-            t -= L[i, k] * z[k]
-        z[i] = t / L[i, i]
-    for col in range(n):
-        t = 0.0
-        for i in range(m):
-            t += Y[i, col] * z[i]
-        a[col] = t
+    if not rank_ok(J, tr, params[2]):
+        return 1, tr
+    least_norm(J, xdot, L, Y, z, a)
     return 0, tr
 
 

@@ -76,6 +76,47 @@ def trace_inverse(L, z, m) -> float:  # pragma: no cover - numba
 
 
 @njit
+def forward(L, b, y, m) -> None:  # pragma: no cover - numba
+    """``y = L⁻¹ b`` (``y`` may be ``b``)."""
+    for i in range(m):
+        t = b[i]
+        for k in range(i):
+            t -= L[i, k] * y[k]
+        y[i] = t / L[i, i]
+
+
+@njit
+def least_norm(J, xdot, L, Y, z, out) -> None:  # pragma: no cover - numba
+    """``Y = L⁻¹ J``, ``z = L⁻¹ ẋ``, ``out = a = Yᵀ z = J⁺ẋ`` (``J Jᵀ = L Lᵀ``)."""
+    m, n = J.shape
+    for col in range(n):
+        for i in range(m):
+            t = J[i, col]
+            for k in range(i):
+                t -= L[i, k] * Y[k, col]
+            Y[i, col] = t / L[i, i]
+    forward(L, xdot, z, m)
+    for col in range(n):
+        t = 0.0
+        for i in range(m):
+            t += Y[i, col] * z[i]
+        out[col] = t
+
+
+@njit
+def rank_ok(J, tr, coef) -> bool:  # pragma: no cover - numba
+    """The rank certificate ``coef ‖J‖_F² trace(G⁻¹) < 1`` (always met when ``coef <= 0``)."""
+    if not coef > 0.0:
+        return True
+    m, n = J.shape
+    s = 0.0
+    for i in range(m):
+        for k in range(n):
+            s += J[i, k] * J[i, k]
+    return coef * s * tr < 1.0
+
+
+@njit
 def chol_solve(L, k, b) -> None:  # pragma: no cover - numba
     """``b ← (L Lᵀ)⁻¹ b`` for the factor of :func:`cholesky`."""
     for i in range(k):

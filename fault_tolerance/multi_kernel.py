@@ -17,7 +17,8 @@ from collections.abc import Callable
 import numpy as np
 import pinocchio as pin
 
-from .single_kernel import _factor, _forward, _trace_inverse
+from .compiled_linalg import least_norm, rank_ok
+from .single_kernel import _factor, _trace_inverse
 
 try:
     import numba
@@ -77,38 +78,15 @@ def multi_kernel(J, xdot, out, ws, sets, wrel, params) -> int:  # pragma: no cov
     tr = _trace_inverse(G, c, m)  # trace(G⁻¹) = ‖L⁻¹‖_F², the certificate (c as scratch)
     if not tr <= params[0]:
         return 1
-    if params[2] > 0.0:
-        t = 0.0
-        for i in range(m):
-            for k in range(n):
-                t += J[i, k] * J[i, k]
-        if not params[2] * t * tr < 1.0:
-            return 1
-    _least_norm(J, xdot, G, Y, c, out)
+    if not rank_ok(J, tr, params[2]):
+        return 1
+    least_norm(J, xdot, G, Y, c, out)
     for i in range(n):
         c[i] = 0.0
     for k in range(sets.shape[0]):
         if not _scenario_shift(Y, out, sets[k], wrel[k], params[1], A, L, x, c):
             return 2
     return _minus_null(Y, G, c, out)
-
-
-@_njit
-def _least_norm(J, xdot, G, Y, z, out) -> None:  # pragma: no cover - numba
-    """``Y = L⁻¹ J``, ``z = L⁻¹ ẋ``, ``out = a = Yᵀ z`` (``G = L Lᵀ`` factored in ``G``)."""
-    m, n = J.shape
-    for col in range(n):
-        for i in range(m):
-            t = J[i, col]
-            for k in range(i):
-                t -= G[i, k] * Y[k, col]
-            Y[i, col] = t / G[i, i]
-    _forward(G, xdot, z, m)
-    for col in range(n):
-        t = 0.0
-        for i in range(m):
-            t += Y[i, col] * z[i]
-        out[col] = t
 
 
 @_njit

@@ -20,7 +20,7 @@ from collections.abc import Callable
 import numpy as np
 import pinocchio as pin
 
-from .compiled_linalg import gram_factor, trace_inverse
+from .compiled_linalg import forward, gram_factor, least_norm, rank_ok, trace_inverse
 from .errors import FaultToleranceError
 from .kernels import _LWA, _STEP_ERRORS, F64, TRACE_MAX, Workspace
 from .linalg import projection
@@ -45,14 +45,7 @@ _factor = gram_factor  # G = J Jᵀ and its Cholesky factor in place (compiled_l
 _trace_inverse = trace_inverse  # the certificate trace(G⁻¹)
 
 
-@_njit
-def _forward(G, b, y, m) -> None:  # pragma: no cover - numba
-    """``y = L⁻¹ b`` (``y`` may be ``b``)."""
-    for i in range(m):
-        t = b[i]
-        for k in range(i):
-            t -= G[i, k] * y[k]
-        y[i] = t / G[i, i]
+_forward = forward  # y = L⁻¹ b (compiled_linalg)
 
 
 @_njit
@@ -79,25 +72,9 @@ def _lnva(J, xdot, out, G, c) -> int:  # pragma: no cover - numba
 def _jvja(J, xdot, out, G, B, c, fw, params, tr) -> int:  # pragma: no cover - numba
     """JVJA (G2): ``out = a + alpha N c``, ``c_i = (w_i/W) a_i / N_ii`` on lockable columns."""
     m, n = J.shape
-    for col in range(n):  # Y = L⁻¹ J (in B) and z = L⁻¹ ẋ (in c): a = Yᵀ z
-        for i in range(m):
-            t = J[i, col]
-            for k in range(i):
-                t -= G[i, k] * B[k, col]
-            B[i, col] = t / G[i, i]
-    _forward(G, xdot, c, m)
-    for col in range(n):
-        s = 0.0
-        for i in range(m):
-            s += B[i, col] * c[i]
-        out[col] = s
-    if params[2] > 0.0:  # rank certificate (linalg.RANK_RTOL) for arms without a static bound
-        s = 0.0
-        for i in range(m):
-            for k in range(n):
-                s += J[i, k] * J[i, k]
-        if not params[2] * s * tr < 1.0:
-            return 1
+    least_norm(J, xdot, G, B, c, out)  # Y = L⁻¹ J (in B) and z = L⁻¹ ẋ (in c): a = Yᵀ z
+    if not rank_ok(J, tr, params[2]):  # rank certificate (linalg.RANK_RTOL), arms without a bound
+        return 1
     for i in range(n):  # fw[0]: 0 on lockable columns, +inf elsewhere (then c_i = 0)
         d = 1.0 + fw[0, i]
         for r in range(m):
