@@ -17,7 +17,7 @@ from collections.abc import Callable
 import numpy as np
 import pinocchio as pin
 
-from .compiled_linalg import least_norm, rank_ok
+from .compiled_linalg import cholesky, least_norm, rank_ok
 from .single_kernel import _factor, _trace_inverse
 
 try:
@@ -37,20 +37,11 @@ _F64 = np.dtype(np.float64)
 @_njit
 def _chol(A, L, s, shift) -> bool:  # pragma: no cover - numba
     """Lower Cholesky factor of ``A[:s, :s] − shift·I`` into ``L``; False unless PD."""
-    for j in range(s):
-        t = A[j, j] - shift
-        for k in range(j):
-            t -= L[j, k] * L[j, k]
-        if not t > 0.0:
-            return False
-        t = math.sqrt(t)
-        L[j, j] = t
-        for i in range(j + 1, s):
-            u = A[i, j]
-            for k in range(j):
-                u -= L[i, k] * L[j, k]
-            L[i, j] = u / t
-    return True
+    for i in range(s):
+        for j in range(i):
+            L[i, j] = A[i, j]
+        L[i, i] = A[i, i] - shift
+    return cholesky(L, s)
 
 
 @_njit
