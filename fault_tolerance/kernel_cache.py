@@ -43,15 +43,18 @@ def refresh(folder: Path | None = None) -> bool:
     cache = folder / "__pycache__"
     try:
         now = stamp(folder)
+    except OSError:  # a kernel source missing: not this package's layout, nothing to do
+        return False
+    try:
         if (cache / STAMP).read_text() == now:
             return False
-    except OSError:
+    except OSError:  # no stamp yet
         pass
     try:
         cache.mkdir(exist_ok=True)
         for f in list(cache.glob("*.nbi")) + list(cache.glob("*.nbc")):
             f.unlink(missing_ok=True)
         (cache / STAMP).write_text(now)
-    except (OSError, UnboundLocalError):  # read-only install, or a source missing
+    except OSError:  # a read-only install
         return False
     return True
