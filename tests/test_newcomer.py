@@ -118,3 +118,25 @@ def test_a_reader_that_leaves_ends_the_command_quietly(capsys):
     args = argparse.Namespace(debug=False, command="robots")
     assert run_command(prints_into_a_closed_pipe, args) == 0
     assert capsys.readouterr().err == ""
+
+
+@pytest.mark.slow
+def test_lockable_none_on_a_real_arm_from_its_default_start(tmp_path):
+    """The UR5e xacro package of tests/data (not ours), default start: `--lockable none` with
+    LNVA gives the run `--lockable elbow_joint` gives, and `workspace --lockable none` refuses."""
+    import warnings
+
+    from real_arms import cli_args
+
+    base = cli_args("ur5e") + ["--joint", "elbow_joint", "--algorithm", "lnva", "--at", "0.5",
+                               "--duration", "1", "--no-progress"]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # the description's meshes are not kept in tests/data
+        assert main(["lock", *base, "--lockable", "none", "--out", str(tmp_path / "a")]) == 0
+        assert main(["lock", *base, "--lockable", "elbow_joint", "--out", str(tmp_path / "b")]) == 0
+        a = json.loads((tmp_path / "a" / "summary.json").read_text())
+        b = json.loads((tmp_path / "b" / "summary.json").read_text())
+        assert a["meta"]["lockable"] == [["elbow_joint"]]
+        assert a["summary"] == b["summary"]
+        assert main(["workspace", *cli_args("ur5e"), "--lockable", "none", "--out",
+                     str(tmp_path / "w")]) == 2
