@@ -44,10 +44,10 @@ _FLOAT = (("G", "mm"), ("B", "mn"), ("c", "n"), ("fw", "2n"), ("p4", "4"), ("lim
           ("prm", "2"), ("buf", "4n"), ("state", "n+2"), ("p3", "3"), ("Zm", "nn"), ("V", "7n"),
           ("Lm", "mm"), ("Y", "mn"), ("z", "m"), ("NSS", "ss"), ("ys", "s"), ("wsf", "8(n+1)"),
           ("gram", "(n+1)(n+1)"), ("wrel", "f"), ("mws", "multi"), ("QA", "nm"), ("hb", "m"),
-          ("Zs", "nn"))  # fmt: skip
+          ("Zs", "nn"), ("posts", "fn"), ("pscale", "f"), ("psolved", "f"))  # fmt: skip
 _INT = (("cols", "k"), ("sets", "fs"), ("wsi", "2(n+1)"), ("mask", "n"))
 (_G, _B, _C, _FW, _P4, _LIM, _PRM, _BUF, _STATE, _P3, _ZM, _V, _LM, _Y, _Z, _NSS, _YS, _WSF, _GRAM,
- _WREL, _MWS, _QA, _HB, _ZS) = range(24)  # fmt: skip
+ _WREL, _MWS, _QA, _HB, _ZS, _POSTS, _PSCALE, _PSOLVED) = range(27)  # fmt: skip
 _COLS, _SETS, _WSI, _MASK = range(4)
 _HEAD = 8
 _NF = len(_FLOAT)
@@ -59,7 +59,8 @@ def _shapes(n, m, f, s, k) -> dict[str, tuple[int, ...]]:
     return {"mm": (m, m), "mn": (m, n), "n": (n,), "2n": (2, n), "4": (4,), "3n": (3, n),
             "2": (2,), "4n": (4, n), "n+2": (n + 2,), "3": (3,), "nn": (n, n), "7n": (7, n),
             "m": (m,), "ss": (s, s), "s": (s,), "8(n+1)": (8, n1), "(n+1)(n+1)": (n1, n1),
-            "f": (f,), "multi": (multi,), "k": (k,), "fs": (f, s), "2(n+1)": (2, n1), "nm": (n, m)}  # fmt: skip
+            "f": (f,), "multi": (multi,), "k": (k,), "fs": (f, s), "2(n+1)": (2, n1), "nm": (n, m),
+            "fn": (f, n)}  # fmt: skip
 
 
 def workspace(n: int, m: int, sets: np.ndarray, cols: np.ndarray, mode: int):
@@ -121,9 +122,11 @@ def _jvja_target(
 ):  # pragma: no cover - numba
     """``c = Σ_S (w_S/W) ˢq̇'_b`` (L4) into ``V[2]``; returns a code, ``res[1] = 1`` if a bound met.
 
-    ``W = (Zs, NSS, ys, Gs, mask, ws, wsi, gram)`` is scratch.
+    ``W = (Zs, NSS, ys, Gs, mask, ws, wsi, gram, P, ps, pb)``: scratch, and each ``ˢq̇'_b`` into
+    row ``S`` of ``P``, its task scaling into ``ps`` and 1.0 into ``pb`` where it was solved under
+    the box (the simulated sample's jump reads them).
     """
-    Zs, NSS, ys, Gs, mask, ws, wsi, gram = W
+    Zs, NSS, ys, Gs, mask, ws, wsi, gram, P, ps, pb = W
     n = Z.shape[0]
     f, s = sets.shape
     post, cbar, act, zr = V[1], V[2], V[5], V[6]
@@ -142,7 +145,9 @@ def _jvja_target(
             inside = inside and lo[j] - BOX_TOL <= post[j] <= hi[j] + BOX_TOL
         if inside:
             for j in range(n):
-                cbar[j] += wrel[sc] * min(max(post[j], lo[j]), hi[j])
+                P[sc, j] = min(max(post[j], lo[j]), hi[j])
+                cbar[j] += wrel[sc] * P[sc, j]
+            ps[sc], pb[sc] = 1.0, 0.0
             continue
         mu2 = undamped(J, S, k, tr * trinv, params, Gs)
         if mu2 < 0.0:
@@ -163,8 +168,9 @@ def _jvja_target(
         for t in range(k):
             V[4, S[t]] = 0.0
         for j in range(n):
+            P[sc, j] = V[4, j]
             cbar[j] += wrel[sc] * V[4, j]
-        res[1] = 1.0
+        ps[sc], pb[sc], res[1] = res[0], 1.0, 1.0
     return 0
 
 
@@ -195,7 +201,7 @@ def bounded_solve(J, xdot, out, mode, F, Iw):  # pragma: no cover - numba
     res[1] = 0.0
     if mode == 1:
         W = (_fm(F, Iw, _ZS, n, n), _fm(F, Iw, _NSS, s, s), _fv(F, Iw, _YS, s), Gs, mask, ws, wsi,
-             gram)  # fmt: skip
+             gram, _fm(F, Iw, _POSTS, f, n), _fv(F, Iw, _PSCALE, f), _fv(F, Iw, _PSOLVED, f))  # fmt: skip
         st = _jvja_target(J, xdot, Z, r, V, tr, lo, hi, _im(F, Iw, _SETS, f, s), _fv(F, Iw, _WREL, f),
                           p3, W, res)  # fmt: skip
         if st:

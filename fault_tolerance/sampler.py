@@ -24,6 +24,7 @@ from .bounded import SCALE_TOL, bounded_least_norm, reduced_bounded
 from .indices import RCN_MAX
 from .kernels import TRACE_MAX
 from .linalg import PIVOT_EPS
+from .sample_bounded import DECLINED, bounded_sample
 
 _TASK_SCALED = 64  # run.FLAG_TASK_SCALED
 _LWA = pin.LOCAL_WORLD_ALIGNED
@@ -87,6 +88,7 @@ class Sampler:
         self.model, self.data, self.fid = arm.model, self.ctrl.data, arm.frame_id
         self.rows = self.ctrl._rows
         self.position_only = bool(np.all(np.asarray(arm.rows) < 3))
+        self.full_pose = list(arm.rows) == [0, 1, 2, 3, 4, 5]
         self.trans_rows = np.asarray(arm.rows)
         self.arm, self.s = arm, s
         self.method = METHODS[s.algorithm]
@@ -117,9 +119,12 @@ class Sampler:
         self.finish = sk.finish_kernel
         self.boxed = None  # the Controller's bounded step, built at the first sample that needs it
         self.reduced_ws = None  # the compiled reduced robots' workspace (boxsolve), built likewise
+        self.bounded_tables = None  # the compiled bounded sample's tables, built likewise
         #: Samples handed to the reference code (not certified, the lock, a bound met after it),
         #: and samples that met a bound, solved by the bounded resolvers here.
         self.reference_samples, self.bounded_samples = 0, 0
+        #: Bounded samples done by one compiled call (:mod:`fault_tolerance.sample_bounded`).
+        self.bounded_compiled = 0
         #: Reduced robots under the box (L4) solved by the compiled code
         #: (:func:`fault_tolerance.boxsolve.reduced_solve`) and by the reference's
         #: :func:`~fault_tolerance.bounded.reduced_bounded` where the compiled code refuses.
@@ -141,11 +146,22 @@ class Sampler:
         return J, np.ascontiguousarray(grad)
 
     def _task(self, x_des: np.ndarray):
-        """``(x, x_des − x)`` of the tip placement just computed, as ``Arm.fk_and_error``."""
+        """``(x, x_des − x)`` of the tip placement just computed, as ``Arm.fk_and_error``.
+
+        The full pose takes the same Pinocchio calls as ``Arm._coords`` / ``Arm._error`` (the
+        rotation vector ``log3 R`` and the error ``log3(exp3(x_des) Rᵀ)``) without their index
+        bookkeeping: the same numbers.
+        """
         M = self.data.oMf[self.fid]
         if self.position_only:
             x = M.translation[self.trans_rows]
             return x, x_des - x
+        if self.full_pose:
+            t, R = M.translation, M.rotation
+            x, err = np.empty(6), np.empty(6)
+            x[:3], x[3:] = t, pin.log3(R)
+            err[:3], err[3:] = x_des[:3] - t, pin.log3(pin.exp3(x_des[3:]).dot(R.T))
+            return x, err
         return self.arm._coords(M), self.arm._error(x_des, M)
 
     def step(self, state, k: int, x_des: np.ndarray, xd_des: np.ndarray) -> bool:
@@ -186,6 +202,10 @@ class Sampler:
         FLAG_BOUND_ACTIVE, FLAG_INTOLERABLE_UNDER_LIMITS, FLAG_STEP_LIMITED, _ = self.run_flags
         s, ws, sc = self.s, self.ws, self.s.sc
         self.bounded_samples += 1
+        if method in (sk.JVJA, sk.LNVA):
+            flag = self._bounded_compiled(state, k, J, xd_cmd, x, x_des, err, method)
+            if flag != DECLINED:
+                return flag
         lo, hi = self.buf[0].copy(), self.buf[1].copy()
         if method == sk.LOCKED:
             return self._locked(state, k, J, xd_cmd, x, x_des, err, lo, hi)
@@ -209,6 +229,51 @@ class Sampler:
             J, state.q, state.qd, x, x_des, err, self.cols, self.vmax, self.params, method, k,
             self.table, self.off, ws, self.lim, qd_cmd, parts.sum(), flag,
         )  # fmt: skip
+
+    def _bounded_compiled(self, state, k: int, J, xd_cmd, x, x_des, err, method: int) -> int:
+        """The same sample in one compiled call (:mod:`fault_tolerance.sample_bounded`), counted.
+
+        Returns its flags, or ``DECLINED`` (nothing counted) for the Python route.
+        """
+        args = self._compiled_tables()
+        if args is None:
+            return DECLINED
+        box, red, tabs, info = args
+        flag = bounded_sample(
+            J, xd_cmd, state.q, state.qd, x, x_des, err, self.cols, self.w, self.vmax, self.params,
+            method, k, self.table, self.off, self.ws, self.lim, self.buf, box, red, tabs, info,
+        )  # fmt: skip
+        if flag != DECLINED:
+            self.bounded_compiled += 1
+            self.boxed.bounded_steps += int(info[0])
+            self.reduced_compiled += int(info[1])
+        return flag
+
+    def _compiled_tables(self):
+        """``(box, red, tabs, info)`` of :func:`~fault_tolerance.sample_bounded.bounded_sample`.
+
+        Built at the first bounded sample; None when the Controller's bounded step is not the
+        compiled one.
+        """
+        if self.bounded_tables is None:
+            from .boxsolve import JVJA, LNVA
+
+            ctrl = self._boxed()
+            if getattr(ctrl, "_box_ws", None) is None:
+                self.bounded_tables = ()
+                return None
+            F, I0, views = ctrl._box_ws
+            Iw = I0.copy()  # its own mode and int scratch
+            Iw[4] = JVJA if self.s.algorithm == "jvja" else LNVA
+            F2, Iw2, buf2 = self._reduced_workspace()[:3]
+            f, n = len(self.cols), self.arm.n
+            tabs = (np.zeros((f, n)), np.ones(f), np.zeros(f, dtype=np.int64),
+                    np.zeros(f, dtype=np.int64), np.zeros(f, dtype=np.int64), np.zeros((f, n)),
+                    np.zeros(f), np.zeros(n))  # fmt: skip
+            info = np.zeros(2, dtype=np.int64)
+            box = (F, Iw, views["state"], views["posts"], views["pscale"], views["psolved"])
+            self.bounded_tables = (box, (F2, Iw2, buf2), tabs, info)
+        return self.bounded_tables or None
 
     def _locked(self, state, k: int, J, xd_cmd, x, x_des, err, lo, hi) -> int:
         """After the lock, a sample that meets a bound: the reduced robot's bounded rates.
@@ -258,16 +323,7 @@ class Sampler:
 
     def _reduced(self, J, xd_cmd, target, todo, lo, hi, post, scales) -> np.ndarray:
         """The reduced robots ``todo`` under the box, compiled (rows of ``post``, ``scales``); codes."""
-        if self.reduced_ws is None:
-            from .boxsolve import reduced_solve, workspace
-
-            m, n = J.shape
-            sets = self.cols.reshape(-1, 1).copy()
-            F, Iw, views = workspace(n, m, sets, self.cols, 1)
-            views["p3"][:] = TRACE_MAX, self.ctrl._pivot_threshold, self.ctrl._rank_coef
-            self.reduced_ws = (F, Iw, views["buf"], np.zeros((len(sets), n)), np.zeros(len(sets)),
-                               reduced_solve)  # fmt: skip
-        F, Iw, buf, rpost, rscale, solve = self.reduced_ws
+        F, Iw, buf, rpost, rscale, solve = self._reduced_workspace()
         buf[0], buf[1] = lo, hi
         c = self.zeros if target is None else np.ascontiguousarray(target, dtype=float)
         codes = np.zeros(len(todo), dtype=np.int64)
@@ -279,6 +335,19 @@ class Sampler:
         post[todo[ok]] = rpost[: len(todo)][ok]
         scales[todo[ok]] = rscale[: len(todo)][ok]
         return codes
+
+    def _reduced_workspace(self):
+        """``(F, Iw, buf, rpost, rscale, reduced_solve)``: the compiled reduced robots' workspace."""
+        if self.reduced_ws is None:
+            from .boxsolve import reduced_solve, workspace
+
+            m, n = self.arm.m, self.arm.n
+            sets = self.cols.reshape(-1, 1).copy()
+            F, Iw, views = workspace(n, m, sets, self.cols, 1)
+            views["p3"][:] = TRACE_MAX, self.ctrl._pivot_threshold, self.ctrl._rank_coef
+            self.reduced_ws = (F, Iw, views["buf"], np.zeros((len(sets), n)), np.zeros(len(sets)),
+                               reduced_solve)  # fmt: skip
+        return self.reduced_ws
 
     def _boxed(self):
         """The Controller whose bounded step solves the samples that meet a bound.

@@ -8,6 +8,7 @@ import pytest
 import fault_tolerance as ft
 from fault_tolerance import sample_kernel as sk
 from fault_tolerance.run import ARRAYS
+from fault_tolerance.sample_bounded import DECLINED
 from fault_tolerance.sampler import Sampler
 from fault_tolerance.simulation import ServoModel, simulate
 from fault_tolerance.trajectories import CirclePath, FunctionPath
@@ -194,6 +195,24 @@ def test_reduced_robots_at_bounds_are_solved_compiled(key, samplers):
     assert smp.reduced_reference == 0  # none left to bounded.reduced_bounded
     assert smp.boxed.bounded_reference_steps == 0  # the bounded step compiled too
     assert smp.reference_samples == 0
+    assert smp.bounded_compiled == smp.bounded_samples  # each in one compiled call
+
+
+@pytest.mark.parametrize("alg", ["lnva", "jvja"])
+def test_bounded_sample_in_one_call_equals_the_python_route(alg, samplers, monkeypatch):
+    """sample_bounded.bounded_sample against Sampler's Python route over the same compiled pieces:
+    the same run (bounds met by the planned rates and by reduced robots, the task scaled)."""
+    arm = ft.load_arm("planar_3r")
+    q0 = np.array([2.9, -2.5, 1.2])
+    path = CirclePath(x0=arm.fk(q0), radius=0.15, omega=8 * np.pi, duration=0.25, rows=(0, 1))
+    kw = dict(q0=q0, lockable="all", feedback_gain=10.0, engine="fast")
+    one = simulate(arm, path, alg, **kw)
+    monkeypatch.setattr(Sampler, "_bounded_compiled", lambda self, *args: DECLINED)
+    route = simulate(arm, path, alg, **kw)
+    _same(one, route)
+    first, second = samplers
+    assert first.bounded_compiled == first.bounded_samples > 0
+    assert second.bounded_compiled == 0 and second.bounded_samples == first.bounded_samples
 
 
 @pytest.mark.parametrize("target", [False, True])
@@ -229,7 +248,11 @@ def test_reduced_robots_refused_by_the_compiled_code_take_reduced_bounded(sample
     def refuse(self, J, xd_cmd, target, todo, lo, hi, post, scales):
         return np.full(len(todo), 3, dtype=np.int64)
 
+    def decline(self, *args):
+        return DECLINED  # the one-call compiled sample declines: the Python route, piece by piece
+
     monkeypatch.setattr(Sampler, "_reduced", refuse)  # the class itself (the fixture wraps it)
+    monkeypatch.setattr(Sampler, "_bounded_compiled", decline)
     arm = ft.load_arm("planar_3r")
     q0 = np.array([2.9, -2.5, 1.2])
     path = CirclePath(x0=arm.fk(q0), radius=0.1, omega=2 * np.pi, duration=0.2, rows=(0, 1))
@@ -322,3 +345,16 @@ def test_kernel_under_limits_checks_the_rate_box():
             np.testing.assert_allclose(buf[:2], [lo, hi], rtol=1e-14, atol=1e-14)
             if expect == 0:
                 np.testing.assert_allclose(rec["qd_cmd"][0], rates, rtol=1e-10, atol=1e-14)
+
+
+def test_compiled_flag_constants_are_the_runs():
+    """The compiled kernels carry copies of run's flags and bounded's tolerance: they must agree."""
+    from fault_tolerance import bounded, run, sample_bounded, sample_limits, sampler
+
+    assert sample_bounded.FLAG_BOUND_ACTIVE == run.FLAG_BOUND_ACTIVE
+    assert sample_bounded.FLAG_TASK_SCALED == run.FLAG_TASK_SCALED == sampler._TASK_SCALED
+    assert sample_bounded.FLAG_INTOLERABLE_UNDER_LIMITS == run.FLAG_INTOLERABLE_UNDER_LIMITS
+    assert sample_limits._FLAG_SERVO_CLIPPED == run.FLAG_SERVO_CLIPPED
+    assert (sk._FLAG_LOCKED, sk._FLAG_STEP_LIMITED, sk._FLAG_OVER_SPEED) == (
+        run.FLAG_LOCKED, run.FLAG_STEP_LIMITED, run.FLAG_OVER_SPEED)
+    assert sample_bounded.SCALE_TOL == bounded.SCALE_TOL

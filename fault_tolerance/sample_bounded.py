@@ -1,0 +1,147 @@
+"""A simulated sample that meets a bound of the rate box, in one compiled call (before a lock).
+
+:func:`fault_tolerance.sample_kernel.sample_kernel` returns ``BOUNDED`` when the planned rates,
+or a reduced robot's rates ``ˢq̇'``, leave the rate box (L1). :func:`bounded_sample` then does the
+rest of the sample without coming back to Python, with the same compiled pieces the Python route
+of :meth:`fault_tolerance.sampler.Sampler._bounded` calls one by one:
+
+* the planned rates: the kernel's own (clipped into the box) for LNVA when they are inside it,
+  else the Controller's bounded step after the Jacobian,
+  :func:`fault_tolerance.boxsolve.bounded_kernel` (L2)-(L4);
+* every reduced robot's rates under the box (L4) and their task scalings (L5): those JVJA's
+  bounded step solved for its target (``ˢq̇'_b``, the same problems), or else (G1)/(G3) from the
+  kernel's factors where they are inside the box (:func:`fault_tolerance.sample_limits.g1_posts`)
+  and the compiled bounded solve :func:`fault_tolerance.boxsolve.reduced_solve` for the others;
+* the jump parts ``w_S ‖ˢq̇'_b − q̇‖²``, the flags, and the end of the sample
+  (``sample_kernel._finish``: indices, servo, record, ``q ← q + q̇ dt``).
+
+It returns :data:`DECLINED` (and has changed nothing the Python route reads) where any of these
+refuses: the Python route then takes the sample and its fallbacks to the reference code. MDA and
+the samples after a lock always take the Python route. Plain Python without numba.
+"""
+
+from __future__ import annotations
+
+from .boxqp import BOX_TOL  # noqa: F401 - the tolerance of the box checks called here
+from .boxsolve import bounded_kernel, reduced_solve
+from .sample_kernel import JVJA, O_PARTS, _finish, _views
+from .sample_limits import g1_posts
+from .sample_linalg import P_CONT, njit
+
+#: Returned when the compiled code refuses a part: the caller takes the Python route.
+DECLINED = -3
+#: ``run.FLAG_BOUND_ACTIVE``, ``run.FLAG_TASK_SCALED``, ``run.FLAG_INTOLERABLE_UNDER_LIMITS``.
+FLAG_BOUND_ACTIVE, FLAG_TASK_SCALED, FLAG_INTOLERABLE_UNDER_LIMITS = 32, 64, 128
+#: ``bounded.SCALE_TOL``: a task scaling below ``1 − SCALE_TOL`` counts as scaled.
+SCALE_TOL = 1e-9
+
+
+@njit
+def _planned(J, q, xd, ws, method, box, qcmd, info) -> int:  # pragma: no cover - numba
+    """Planned rates into ``qcmd`` and their flags; -1 when the bounded step refuses.
+
+    ``box = (F, Iw, state, P, ps, pb)``: the Controller's bounded-step workspace and its views
+    (``state[0]`` the task scale, ``state[2:]`` the joints held at a bound; ``P``, ``ps``, ``pb``
+    the reduced robots' rates under the box, their scalings and which were solved, of JVJA's
+    target).
+    """
+    m, n = J.shape
+    qd = _views(ws, m, n)[8]
+    if ws[-2] > 0.0 and method != JVJA:  # W_INSIDE: the kernel's rates, clipped into the box
+        for c in range(n):
+            qcmd[c] = qd[c]
+        return int(ws[-3])
+    F, Iw, state = box[0], box[1], box[2]
+    st = bounded_kernel(J, q, xd, qcmd, F, Iw)
+    if st >= 2:
+        return -1
+    info[0] = st  # 1: solved as the bounded problem (the Controller's bounded_steps)
+    flag = FLAG_TASK_SCALED if state[0] < 1.0 - SCALE_TOL else 0
+    for c in range(n):
+        if state[2 + c] != 0.0:
+            return flag | FLAG_BOUND_ACTIVE
+    return flag
+
+
+@njit
+def _posts(J, xd, ws, cols, buf, qcmd, cont, red, tabs, info) -> bool:  # pragma: no cover
+    """Every reduced robot's rates under the box into ``post`` (rows), scalings into ``scales``.
+
+    ``red = (F, Iw, buf)``: the reduced robots' workspace of ``boxsolve`` and its box view;
+    ``tabs = (post, scales, inside, codes, todo, rpost, rscale, target)``. False: refused.
+    """
+    m, n = J.shape
+    f = cols.shape[0]
+    post, scales, inside, codes, todo, rpost, rscale, target = tabs
+    B, a, piv = _views(ws, m, n)[3], _views(ws, m, n)[4], _views(ws, m, n)[7]
+    base = qcmd if cont else a
+    for t in range(f):
+        scales[t] = 1.0
+    if g1_posts(J, B, base, piv, cols, buf[0], buf[1], post, inside) == 0:
+        return True
+    nt = 0
+    for t in range(f):
+        if inside[t] == 0:
+            todo[nt] = t
+            nt += 1
+    F, Iw, rbuf = red
+    for c in range(n):
+        rbuf[0, c], rbuf[1, c] = buf[0, c], buf[1, c]
+        target[c] = qcmd[c] if cont else 0.0
+    if reduced_solve(J, xd, target, todo[:nt], rpost, rscale, codes[:nt], F, Iw):
+        return False
+    for i in range(nt):
+        if codes[i] != 0:
+            return False
+    for i in range(nt):
+        t = todo[i]
+        for c in range(n):
+            post[t, c] = rpost[i, c]
+        scales[t] = rscale[i]
+    info[1] = nt
+    return True
+
+
+@njit
+def bounded_sample(
+    J, xd, q, qd_prev, x, x_des, err, cols, w, vmax, params, method, k, T, off, ws, lim, buf,
+    box, red, tabs, info,
+) -> int:  # pragma: no cover - numba
+    """Sample ``k`` after :func:`~fault_tolerance.sample_kernel.sample_kernel` returned ``BOUNDED``.
+
+    The arguments are the kernel's (``buf`` holds the box it built), then the bounded step's
+    workspace ``box``, the reduced robots' ``red`` and the scratch ``tabs`` (see :func:`_posts`);
+    ``info`` gets ``[bounded step solved (1) or not (0), reduced robots solved]``. Returns the
+    sample's flags, ``REFERENCE`` from the end of the sample, or :data:`DECLINED`.
+    """  # fmt: skip
+    m, n = J.shape
+    f = cols.shape[0]
+    info[0], info[1] = 0, 0
+    qcmd = tabs[7]  # the target's buffer holds the planned rates until _posts needs it
+    flag = _planned(J, q, xd, ws, method, box, qcmd, info)
+    if flag < 0:
+        return DECLINED
+    qd = _views(ws, m, n)[8]
+    for c in range(n):
+        qd[c] = qcmd[c]  # (the kernel's own buffer: the target's is overwritten next)
+    post, scales = tabs[0], tabs[1]
+    if method == JVJA and info[0] == 1:  # JVJA's target solved every reduced robot under the box
+        post, scales = box[3], box[4]
+        for t in range(f):
+            info[1] += int(box[5][t])
+    elif not _posts(J, xd, ws, cols, buf, qd, params[P_CONT] > 0.0, red, tabs, info):
+        return DECLINED
+    row = T[k]
+    jv = 0.0
+    for t in range(f):
+        acc = 0.0
+        for c in range(n):
+            e = post[t, c] - qd[c]
+            acc += e * e
+        row[off[O_PARTS] + t] = w[t] * acc
+        jv += w[t] * acc
+        if scales[t] < 1.0 - SCALE_TOL:
+            flag |= FLAG_INTOLERABLE_UNDER_LIMITS
+    ws[-1] = jv
+    return _finish(J, q, qd_prev, x, x_des, err, cols, vmax, params, method, k, row, off, ws, lim,
+                   flag)  # fmt: skip
