@@ -17,14 +17,16 @@ of :meth:`fault_tolerance.sampler.Sampler._bounded` calls one by one:
 
 It returns :data:`DECLINED` (and has changed nothing the Python route reads) where any of these
 refuses: the Python route then takes the sample and its fallbacks to the reference code. MDA and
-the samples after a lock always take the Python route. Plain Python without numba.
+the samples after a lock always take the Python route. :func:`limited_sample` is the sample
+kernel and this in one call (what :class:`~fault_tolerance.sampler.Sampler` runs under joint
+limits). Plain Python without numba.
 """
 
 from __future__ import annotations
 
 from .boxqp import BOX_TOL  # noqa: F401 - the tolerance of the box checks called here
 from .boxsolve import bounded_kernel, reduced_solve
-from .sample_kernel import JVJA, O_PARTS, _finish, _views
+from .sample_kernel import BOUNDED, JVJA, LNVA, O_PARTS, _finish, _views, sample_kernel
 from .sample_limits import g1_posts
 from .sample_linalg import P_CONT, njit
 
@@ -111,12 +113,12 @@ def bounded_sample(
 
     The arguments are the kernel's (``buf`` holds the box it built), then the bounded step's
     workspace ``box``, the reduced robots' ``red`` and the scratch ``tabs`` (see :func:`_posts`);
-    ``info`` gets ``[bounded step solved (1) or not (0), reduced robots solved]``. Returns the
+    ``info`` gets ``[bounded step solved (1) or not (0), reduced robots solved, 1]``. Returns the
     sample's flags, ``REFERENCE`` from the end of the sample, or :data:`DECLINED`.
     """  # fmt: skip
     m, n = J.shape
     f = cols.shape[0]
-    info[0], info[1] = 0, 0
+    info[0], info[1], info[2] = 0, 0, 1
     qcmd = tabs[7]  # the target's buffer holds the planned rates until _posts needs it
     flag = _planned(J, q, xd, ws, method, box, qcmd, info)
     if flag < 0:
@@ -145,3 +147,23 @@ def bounded_sample(
     ws[-1] = jv
     return _finish(J, q, qd_prev, x, x_des, err, cols, vmax, params, method, k, row, off, ws, lim,
                    flag)  # fmt: skip
+
+
+@njit
+def limited_sample(
+    J, xd, qd_in, grad, q, qd_prev, x, x_des, err, cols, w, vmax, params, method, k, T, off, ws,
+    lim, prm, buf, box, red, tabs, info,
+) -> int:  # pragma: no cover - numba
+    """:func:`~fault_tolerance.sample_kernel.sample_kernel`, then :func:`bounded_sample` in the
+    same call when a bound is met (LNVA, JVJA; ``info[2]`` = 1 then, else 0).
+
+    The arguments are the kernel's, then :func:`bounded_sample`'s tables. ``BOUNDED`` is returned
+    for the other methods (MDA, after a lock): the caller solves those.
+    """  # fmt: skip
+    info[2] = 0
+    flag = sample_kernel(J, xd, qd_in, grad, q, qd_prev, x, x_des, err, cols, w, vmax, params,
+                         method, k, T, off, ws, lim, prm, buf)  # fmt: skip
+    if flag != BOUNDED or (method != JVJA and method != LNVA):
+        return flag
+    return bounded_sample(J, xd, q, qd_prev, x, x_des, err, cols, w, vmax, params, method, k, T,
+                          off, ws, lim, buf, box, red, tabs, info)  # fmt: skip

@@ -24,7 +24,7 @@ from .bounded import SCALE_TOL, bounded_least_norm, reduced_bounded
 from .indices import RCN_MAX
 from .kernels import TRACE_MAX
 from .linalg import PIVOT_EPS
-from .sample_bounded import DECLINED, bounded_sample
+from .sample_bounded import DECLINED, limited_sample
 
 _TASK_SCALED = 64  # run.FLAG_TASK_SCALED
 _LWA = pin.LOCAL_WORLD_ALIGNED
@@ -67,6 +67,11 @@ class Sampler:
         s: The simulation's validated setup (``simulation._Setup``).
         rec: The run's arrays (``simulation._allocate``).
     """
+
+    #: Under joint limits, LNVA's and JVJA's samples that meet a bound are solved in the same
+    #: compiled call as the sample (:func:`~fault_tolerance.sample_bounded.limited_sample`);
+    #: False: by the Python route over the same compiled pieces (tests compare the two).
+    ONE_CALL = True
 
     def __init__(self, s, rec: dict) -> None:
         from . import run
@@ -119,7 +124,9 @@ class Sampler:
         self.finish = sk.finish_kernel
         self.boxed = None  # the Controller's bounded step, built at the first sample that needs it
         self.reduced_ws = None  # the compiled reduced robots' workspace (boxsolve), built likewise
-        self.bounded_tables = None  # the compiled bounded sample's tables, built likewise
+        self.bounded_tables = None  # the compiled bounded sample's tables
+        if self.ONE_CALL and s.limits and s.algorithm in ("jvja", "lnva"):
+            self._compiled_tables()
         #: Samples handed to the reference code (not certified, the lock, a bound met after it),
         #: and samples that met a bound, solved by the bounded resolvers here.
         self.reference_samples, self.bounded_samples = 0, 0
@@ -177,10 +184,21 @@ class Sampler:
             from .planner import jvja
 
             qd_in = jvja(J, xd_cmd, self.s.sc, response="continuation", tolerate=True)
-        flag = self.kernel(
-            J, xd_cmd, qd_in, grad, q, state.qd, x, x_des, err, self.cols, self.w, self.vmax,
-            self.params, method, k, self.table, self.off, self.ws, self.lim, self.prm, self.buf,
-        )  # fmt: skip
+        if self.bounded_tables:  # the bounded sample in the same compiled call
+            box, red, tabs, info = self.bounded_tables
+            flag = limited_sample(
+                J, xd_cmd, qd_in, grad, q, state.qd, x, x_des, err, self.cols, self.w, self.vmax,
+                self.params, method, k, self.table, self.off, self.ws, self.lim, self.prm,
+                self.buf, box, red, tabs, info,
+            )  # fmt: skip
+            if info[2]:
+                flag = self._count_compiled(state, k, J, xd_cmd, x, x_des, err, method, flag, info)
+        else:
+            flag = self.kernel(
+                J, xd_cmd, qd_in, grad, q, state.qd, x, x_des, err, self.cols, self.w, self.vmax,
+                self.params, method, k, self.table, self.off, self.ws, self.lim, self.prm,
+                self.buf,
+            )  # fmt: skip
         if flag == sk.BOUNDED:
             flag = self._bounded(state, k, J, xd_cmd, x, x_des, err, method)
         if flag < 0:
@@ -202,10 +220,6 @@ class Sampler:
         FLAG_BOUND_ACTIVE, FLAG_INTOLERABLE_UNDER_LIMITS, FLAG_STEP_LIMITED, _ = self.run_flags
         s, ws, sc = self.s, self.ws, self.s.sc
         self.bounded_samples += 1
-        if method in (sk.JVJA, sk.LNVA):
-            flag = self._bounded_compiled(state, k, J, xd_cmd, x, x_des, err, method)
-            if flag != DECLINED:
-                return flag
         lo, hi = self.buf[0].copy(), self.buf[1].copy()
         if method == sk.LOCKED:
             return self._locked(state, k, J, xd_cmd, x, x_des, err, lo, hi)
@@ -230,30 +244,21 @@ class Sampler:
             self.table, self.off, ws, self.lim, qd_cmd, parts.sum(), flag,
         )  # fmt: skip
 
-    def _bounded_compiled(self, state, k: int, J, xd_cmd, x, x_des, err, method: int) -> int:
-        """The same sample in one compiled call (:mod:`fault_tolerance.sample_bounded`), counted.
-
-        Returns its flags, or ``DECLINED`` (nothing counted) for the Python route.
-        """
-        args = self._compiled_tables()
-        if args is None:
-            return DECLINED
-        box, red, tabs, info = args
-        flag = bounded_sample(
-            J, xd_cmd, state.q, state.qd, x, x_des, err, self.cols, self.w, self.vmax, self.params,
-            method, k, self.table, self.off, self.ws, self.lim, self.buf, box, red, tabs, info,
-        )  # fmt: skip
-        if flag != DECLINED:
-            self.bounded_compiled += 1
-            self.boxed.bounded_steps += int(info[0])
-            self.reduced_compiled += int(info[1])
+    def _count_compiled(self, state, k, J, xd_cmd, x, x_des, err, method, flag, info) -> int:
+        """A bounded sample the compiled call took: counted; the Python route where it declined."""
+        if flag == DECLINED:
+            return self._bounded(state, k, J, xd_cmd, x, x_des, err, method)
+        self.bounded_samples += 1
+        self.bounded_compiled += 1
+        self.boxed.bounded_steps += int(info[0])
+        self.reduced_compiled += int(info[1])
         return flag
 
     def _compiled_tables(self):
         """``(box, red, tabs, info)`` of :func:`~fault_tolerance.sample_bounded.bounded_sample`.
 
-        Built at the first bounded sample; None when the Controller's bounded step is not the
-        compiled one.
+        Built with the Sampler (LNVA and JVJA under joint limits, :data:`ONE_CALL`); empty when
+        the Controller's bounded step is not the compiled one.
         """
         if self.bounded_tables is None:
             from .boxsolve import JVJA, LNVA
@@ -270,7 +275,7 @@ class Sampler:
             tabs = (np.zeros((f, n)), np.ones(f), np.zeros(f, dtype=np.int64),
                     np.zeros(f, dtype=np.int64), np.zeros(f, dtype=np.int64), np.zeros((f, n)),
                     np.zeros(f), np.zeros(n))  # fmt: skip
-            info = np.zeros(2, dtype=np.int64)
+            info = np.zeros(3, dtype=np.int64)
             box = (F, Iw, views["state"], views["posts"], views["pscale"], views["psolved"])
             self.bounded_tables = (box, (F2, Iw2, buf2), tabs, info)
         return self.bounded_tables or None

@@ -8,7 +8,6 @@ import pytest
 import fault_tolerance as ft
 from fault_tolerance import sample_kernel as sk
 from fault_tolerance.run import ARRAYS
-from fault_tolerance.sample_bounded import DECLINED
 from fault_tolerance.sampler import Sampler
 from fault_tolerance.simulation import ServoModel, simulate
 from fault_tolerance.trajectories import CirclePath, FunctionPath
@@ -207,7 +206,7 @@ def test_bounded_sample_in_one_call_equals_the_python_route(alg, samplers, monke
     path = CirclePath(x0=arm.fk(q0), radius=0.15, omega=8 * np.pi, duration=0.25, rows=(0, 1))
     kw = dict(q0=q0, lockable="all", feedback_gain=10.0, engine="fast")
     one = simulate(arm, path, alg, **kw)
-    monkeypatch.setattr(Sampler, "_bounded_compiled", lambda self, *args: DECLINED)
+    monkeypatch.setattr(Sampler, "ONE_CALL", False)
     route = simulate(arm, path, alg, **kw)
     _same(one, route)
     first, second = samplers
@@ -248,11 +247,8 @@ def test_reduced_robots_refused_by_the_compiled_code_take_reduced_bounded(sample
     def refuse(self, J, xd_cmd, target, todo, lo, hi, post, scales):
         return np.full(len(todo), 3, dtype=np.int64)
 
-    def decline(self, *args):
-        return DECLINED  # the one-call compiled sample declines: the Python route, piece by piece
-
     monkeypatch.setattr(Sampler, "_reduced", refuse)  # the class itself (the fixture wraps it)
-    monkeypatch.setattr(Sampler, "_bounded_compiled", decline)
+    monkeypatch.setattr(Sampler, "ONE_CALL", False)  # the Python route, piece by piece
     arm = ft.load_arm("planar_3r")
     q0 = np.array([2.9, -2.5, 1.2])
     path = CirclePath(x0=arm.fk(q0), radius=0.1, omega=2 * np.pi, duration=0.2, rows=(0, 1))
@@ -358,3 +354,25 @@ def test_compiled_flag_constants_are_the_runs():
     assert (sk._FLAG_LOCKED, sk._FLAG_STEP_LIMITED, sk._FLAG_OVER_SPEED) == (
         run.FLAG_LOCKED, run.FLAG_STEP_LIMITED, run.FLAG_OVER_SPEED)
     assert sample_bounded.SCALE_TOL == bounded.SCALE_TOL
+
+
+def test_a_declined_bounded_sample_takes_the_python_route(samplers, monkeypatch):
+    """Where the one-call bounded sample declines (here its bounded step refuses every problem:
+    its workspace says the task has another size), the Python route solves the sample: the run
+    is still the reference's, and nothing is counted twice."""
+    real = Sampler._compiled_tables
+
+    def broken(self):
+        tables = real(self)
+        if tables:
+            tables[0][1][1] += 1  # Iw[1] = m: bounded_kernel refuses (its size check)
+        return tables
+
+    monkeypatch.setattr(Sampler, "_compiled_tables", broken)
+    arm = ft.load_arm("planar_3r")
+    q0 = np.array([2.9, -2.5, 1.2])
+    path = CirclePath(x0=arm.fk(q0), radius=0.15, omega=8 * np.pi, duration=0.25, rows=(0, 1))
+    _bounded_pair(arm, path, "jvja", q0=q0, lockable="all", feedback_gain=10.0)
+    (smp,) = samplers
+    assert smp.bounded_samples > 0 and smp.bounded_compiled == 0
+    assert smp.boxed.bounded_steps > 0  # the Python route's Controller step solved them
