@@ -154,10 +154,10 @@ def limited_sample(
     J, xd, qd_in, grad, q, qd_prev, x, x_des, err, cols, w, vmax, params, method, k, T, off, ws,
     lim, prm, buf, box, red, tabs, info,
 ) -> int:  # pragma: no cover - numba
-    """:func:`~fault_tolerance.sample_kernel.sample_kernel`, then :func:`bounded_sample` in the
-    same call when a bound is met (LNVA, JVJA; ``info[2]`` = 1 then, else 0).
+    """The sample kernel, then :func:`bounded_sample` in the same call when a bound is met.
 
-    The arguments are the kernel's, then :func:`bounded_sample`'s tables. ``BOUNDED`` is returned
+    :func:`~fault_tolerance.sample_kernel.sample_kernel` first; for LNVA and JVJA a ``BOUNDED``
+    sample goes on to :func:`bounded_sample` (``info[2]`` = 1 then, else 0). The arguments are the kernel's, then :func:`bounded_sample`'s tables. ``BOUNDED`` is returned
     for the other methods (MDA, after a lock): the caller solves those.
     """  # fmt: skip
     info[2] = 0
