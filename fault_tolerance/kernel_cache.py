@@ -24,6 +24,7 @@ KERNEL_SOURCES = (
     "sample_kernel.py",
     "sample_limits.py",
     "sample_linalg.py",
+    "small_eigen.py",
     "single_kernel.py",
 )
 STAMP = "kernel_sources.stamp"

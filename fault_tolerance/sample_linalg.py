@@ -13,6 +13,7 @@ import math
 import numpy as np
 
 from .compiled_linalg import cholesky_into, trace_inverse
+from .small_eigen import extreme_eigenvalues
 
 try:  # compiled when numba is there (lazily, on first call; cached on disk)
     import numba
@@ -67,18 +68,52 @@ def _null_times(J, B, v, out, y) -> None:  # pragma: no cover - numba
 
 
 @njit
-def _condition(G, J, cols, ks, W, rcn_max) -> float:  # pragma: no cover - numba
-    """``k_S`` of every single-joint scenario into ``ks``, as ``indices.condition_numbers``; K."""
+def _downdate(G, J, i, W) -> None:  # pragma: no cover - numba
+    """``W = G − J_i J_iᵀ = J_S J_Sᵀ`` of the scenario locking joint ``i``."""
     m = G.shape[0]
+    for r in range(m):
+        for c in range(m):
+            W[r, c] = G[r, c] - J[r, i] * J[c, i]
+
+
+@njit
+def _reduced_extremes(G, J, i, W, t):  # pragma: no cover - numba
+    """``(λ_min, λ_max)`` of ``J_S J_Sᵀ`` (scenario ``i``): :mod:`.small_eigen`, else LAPACK's."""
+    m = G.shape[0]
+    _downdate(G, J, i, W)
+    lo, hi, ok = extreme_eigenvalues(W, m, t)
+    if ok:
+        return lo, hi
+    _downdate(G, J, i, W)  # W was overwritten
+    lam = np.linalg.eigvalsh(W)
+    return lam[0], lam[m - 1]
+
+
+@njit
+def _sigma_min(G, W, t) -> float:  # pragma: no cover - numba
+    """``σ_min(J) = √λ_min(G)``: :mod:`.small_eigen` on a copy in ``W``, else LAPACK's."""
+    m = G.shape[0]
+    for r in range(m):
+        for c in range(m):
+            W[r, c] = G[r, c]
+    lo, hi, ok = extreme_eigenvalues(W, m, t)
+    if not ok:
+        lo = np.linalg.eigvalsh(G)[0]
+    return math.sqrt(max(lo, 0.0))
+
+
+# Eq. (15)
+@njit
+def _condition(G, J, cols, ks, W, rcn_max, t) -> float:  # pragma: no cover - numba
+    """``k_S`` of every single-joint scenario into ``ks``, as ``indices.condition_numbers``; K.
+
+    ``W`` (m, m) and ``t`` (3 m) are scratch.
+    """
     K = 0.0
     for s in range(cols.shape[0]):
-        i = cols[s]
-        for r in range(m):
-            for c in range(m):
-                W[r, c] = G[r, c] - J[r, i] * J[c, i]
-        lam = np.linalg.eigvalsh(W)
-        smax = math.sqrt(max(lam[m - 1], 0.0))
-        smin = max(math.sqrt(max(lam[0], 0.0)), smax / rcn_max)
+        lo, hi = _reduced_extremes(G, J, cols[s], W, t)
+        smax = math.sqrt(max(hi, 0.0))
+        smin = max(math.sqrt(max(lo, 0.0)), smax / rcn_max)
         k = smax / smin if smax > 0.0 else rcn_max  # smin >= smax / rcn_max > 0 then
         k = min(k, rcn_max)
         ks[s] = k
