@@ -87,20 +87,28 @@ def forward(L, b, y, m) -> None:  # pragma: no cover - numba
 
 @njit
 def least_norm(J, xdot, L, Y, z, out) -> None:  # pragma: no cover - numba
-    """``Y = L⁻¹ J``, ``z = L⁻¹ ẋ``, ``out = a = Yᵀ z = J⁺ẋ`` (``J Jᵀ = L Lᵀ``)."""
+    """``Y = L⁻¹ J``, ``z = L⁻¹ ẋ``, ``out = a = Yᵀ z = J⁺ẋ`` (``J Jᵀ = L Lᵀ``), row by row of ``Y``.
+
+    Row ``i`` of ``Y`` is ``(J_i − Σ_{k<i} L_ik Y_k) / L_ii``, ``a`` gains ``z_i Y_i``: every
+    inner loop runs along a row (the Jacobian comes in C order), so numba vectorises it, and each
+    entry sees the same operations in the same order as one forward substitution per column.
+    """
     m, n = J.shape
-    for col in range(n):
-        for i in range(m):
-            t = J[i, col]
-            for k in range(i):
-                t -= L[i, k] * Y[k, col]
-            Y[i, col] = t / L[i, i]
     forward(L, xdot, z, m)
     for col in range(n):
-        t = 0.0
-        for i in range(m):
-            t += Y[i, col] * z[i]
-        out[col] = t
+        out[col] = 0.0
+    for i in range(m):
+        for col in range(n):
+            Y[i, col] = J[i, col]
+        for k in range(i):
+            lik = L[i, k]
+            for col in range(n):
+                Y[i, col] -= lik * Y[k, col]
+        lii, zi = L[i, i], z[i]
+        for col in range(n):
+            y = Y[i, col] / lii
+            Y[i, col] = y
+            out[col] += y * zi
 
 
 @njit

@@ -36,8 +36,7 @@ except ImportError:  # pragma: no cover - numba is a core dependency
 
 
 _INF = math.inf
-#: Offsets in the step's workspace: ``params`` (4), then ``fw`` (2, n), ``G`` (m, m), ``B`` (m, n),
-#: ``c`` (n); see :func:`workspace`.
+#: The step's parameters (the first row of its workspace, :func:`workspace`).
 N_PARAMS = 4
 
 
@@ -69,19 +68,35 @@ def _lnva(J, xdot, out, G, c) -> int:  # pragma: no cover - numba
 
 
 @_njit
+def _pivots(Y, a, c, fw, threshold, n) -> bool:  # pragma: no cover - numba
+    """``N_ii = 1 − ‖Y_i‖²`` (``Y_i`` column i) and ``c_i = (w_i/W) a_i / N_ii``; True if a pivot is low.
+
+    ``fw[0]``: 0 on lockable columns, +inf elsewhere (then ``N_ii = inf``, ``c_i = 0``). The
+    squares are taken off row by row of ``Y`` (vectorised), in the order of a sum per column.
+    """
+    m = Y.shape[0]
+    for i in range(n):
+        c[i] = 1.0 + fw[0, i]
+    for r in range(m):
+        for i in range(n):
+            c[i] -= Y[r, i] * Y[r, i]
+    low = False
+    for i in range(n):
+        d = c[i]
+        low |= d < threshold
+        c[i] = a[i] / d * fw[1, i]
+    return low
+
+
+@_njit
 def _jvja(J, xdot, out, G, B, c, fw, params, tr) -> int:  # pragma: no cover - numba
     """JVJA (G2): ``out = a + alpha N c``, ``c_i = (w_i/W) a_i / N_ii`` on lockable columns."""
     m, n = J.shape
     least_norm(J, xdot, G, B, c, out)  # Y = L⁻¹ J (in B) and z = L⁻¹ ẋ (in c): a = Yᵀ z
     if not rank_ok(J, tr, params[2]):  # rank certificate (linalg.RANK_RTOL), arms without a bound
         return 1
-    for i in range(n):  # fw[0]: 0 on lockable columns, +inf elsewhere (then c_i = 0)
-        d = 1.0 + fw[0, i]
-        for r in range(m):
-            d -= B[r, i] * B[r, i]
-        if d < params[1]:
-            return 2
-        c[i] = out[i] / d * fw[1, i]
+    if _pivots(B, out, c, fw, params[1], n):
+        return 2
     alpha = params[3]
     for r in range(m):
         s = 0.0
@@ -104,7 +119,7 @@ def step_kernel(J, xdot, out, G, B, c, fw, params, jvja):  # pragma: no cover - 
 
     ``params = [TRACE_MAX, pivot threshold, rank coefficient, alpha]``; ``fw[0]`` is 0 on
     lockable columns and +inf elsewhere, ``fw[1]`` the weight ``w_i/W`` (or 1 with uniform
-    weights, then ``alpha = -1/f``); ``G`` (m, m), ``B`` (m, n), ``c`` (n) scratch. Status 0:
+    weights, then ``alpha = -1/f``); ``G`` (m, m), ``B`` (m, ≥ n), ``c`` (≥ n) scratch. Status 0:
     done; 1: no certificate of ``σ_min ≥ SIGMA_EPS`` (or non-finite numbers), the caller falls
     back to the planner; 2: a pivot ``N_ii`` is below the threshold (``PIVOT_TOL``: intolerable;
     ``PIVOT_EPS`` with ``tolerate``: to be damped by the planner). Status 3: ``xdot`` or ``out``
@@ -127,43 +142,47 @@ def step_kernel(J, xdot, out, G, B, c, fw, params, jvja):  # pragma: no cover - 
 def packed_step_kernel(J, xdot, out, ws, jvja):  # pragma: no cover - numba
     """:func:`step_kernel` with its tables in one workspace ``ws`` (:func:`workspace`).
 
-    Five arguments per call (the Controller's step); status 3 also when ``ws`` has the wrong size.
+    Five arguments per call (the Controller's step); status 3 also when ``ws`` has the wrong shape.
     """
     m, n = J.shape
-    if ws.shape[0] != workspace_size(m, n):
+    rows, width = workspace_shape(m, n)
+    if ws.shape[0] != rows or ws.shape[1] != width:
         return 3
     params, fw, G, B, c = _views(ws, m, n)
     return step_kernel(J, xdot, out, G, B, c, fw, params, jvja)
 
 
 @_njit
-def workspace_size(m, n) -> int:  # pragma: no cover - numba
-    """Length of the workspace of :func:`packed_step_kernel`."""
-    return N_PARAMS + 2 * n + m * m + m * n + n
+def workspace_shape(m, n):  # pragma: no cover - numba
+    """Rows and width of the workspace of :func:`packed_step_kernel` (a 2-d C array).
+
+    Rows: ``params`` (its first :data:`N_PARAMS` entries), ``fw`` (2), ``B`` (m), ``c`` (1),
+    ``G`` (m); width ``max(n, 4)``.
+    """
+    return 4 + 2 * m, max(n, N_PARAMS)
 
 
 @_njit
 def _views(ws, m, n):  # pragma: no cover - numba
-    """``params, fw, G, B, c`` in the workspace."""
-    o = N_PARAMS
-    fw = ws[o : o + 2 * n].reshape((2, n))
-    o += 2 * n
-    G = ws[o : o + m * m].reshape((m, m))
-    o += m * m
-    B = ws[o : o + m * n].reshape((m, n))
-    o += m * n
-    return ws[:N_PARAMS], fw, G, B, ws[o : o + n]
+    """``params, fw, G, B, c`` in the workspace, as row slices (no reshape, nothing copied).
+
+    ``fw``, ``B`` and ``c`` are whole rows (C order: the kernels' loops along them vectorise),
+    ``width - n`` columns wider than their tables when ``n < 4``; the kernels loop to ``n``.
+    """
+    return ws[0, :N_PARAMS], ws[1:3], ws[4 + m : 4 + 2 * m, :m], ws[3 : 3 + m], ws[3 + m]
 
 
 def workspace(ctrl: Workspace) -> tuple[np.ndarray, tuple]:
     """The workspace of ``ctrl``'s compiled step and its views ``(params, fw, G, B, c)``.
 
-    Laid out as :func:`packed_step_kernel` reads it.
+    Laid out as :func:`packed_step_kernel` reads it; the views returned here are exactly
+    ``(4,), (2, n), (m, m), (m, n), (n,)``.
     """
     m, n = ctrl.m, ctrl.n
-    ws = np.zeros(workspace_size(m, n))
-    views = _views.py_func(ws, m, n)
-    views[0][:] = TRACE_MAX, ctrl._pivot_threshold, ctrl._rank_coef, ctrl._alpha
+    ws = np.zeros(workspace_shape.py_func(m, n))
+    params, fw, G, B, c = _views.py_func(ws, m, n)
+    views = params, fw[:, :n], G, B[:, :n], c[:n]
+    params[:] = TRACE_MAX, ctrl._pivot_threshold, ctrl._rank_coef, ctrl._alpha
     views[1][:] = ctrl._fw
     return ws, views
 
@@ -250,7 +269,7 @@ def compiled_step(ctrl: Workspace, jvja: int) -> Callable[..., np.ndarray]:
     # so the step needs no type checks of its own.
     J0 = cfj(model, data, pin.neutral(model), fid, _LWA)[rows]
     kernel.disable_compile(False)
-    kernel(J0, np.zeros(m), np.zeros(n), np.zeros(len(ws)), jvja)
+    kernel(J0, np.zeros(m), np.zeros(n), np.zeros(ws.shape), jvja)
     kernel.disable_compile(True)
 
     def slow(q, xdot, out, err: Exception) -> np.ndarray:
