@@ -5,8 +5,10 @@
 LNVA ``a = Jᵀ G⁻¹ ẋ``, or JVJA in closed form (G2) with ``Y = L⁻¹J``: ``a = Yᵀ(L⁻¹ẋ)``,
 ``N_ii = 1 − ‖Y_i‖²``, ``N c = c − Yᵀ(Y c)``, N never formed (O(m² n), linear in n).
 :func:`compiled_step` builds a :class:`~fault_tolerance.realtime.Controller`'s step around it,
-with all of its tables in one float workspace (:func:`packed_step_kernel`: the fixed cost of a
-call is the Jacobian, the kernel and the dispatch of five arguments). :func:`floor_kernel` is the
+with all of its tables in one 2-d float workspace, taken apart by row slices, not reshapes
+(:func:`packed_step_kernel`: the fixed cost of a call is the Jacobian, the kernel and the dispatch
+of five arguments). ``Y`` and the pivots are built row by row along the rows of Pinocchio's
+(C-order) Jacobian, loops that numba vectorises. :func:`floor_kernel` is the
 benchmark's floor: least-norm rates by Cholesky and nothing else.
 
 Plain Python without numba (valid, and tested so: ``step_kernel.py_func``).
