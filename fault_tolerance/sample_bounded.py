@@ -6,8 +6,8 @@ rest of the sample without coming back to Python, with the same compiled pieces 
 of :meth:`fault_tolerance.sampler.Sampler._bounded` calls one by one:
 
 * the planned rates: the kernel's own (clipped into the box) for LNVA when they are inside it,
-  else the Controller's bounded step after the Jacobian,
-  :func:`fault_tolerance.boxsolve.bounded_kernel` (L2)-(L4);
+  else the Controller's bounded solve (:func:`fault_tolerance.boxsolve.bounded_solve`, (L2)-(L4))
+  in the box the kernel built;
 * every reduced robot's rates under the box (L4) and their task scalings (L5): those JVJA's
   bounded step solved for its target (``ˢq̇'_b``, the same problems), or else (G1)/(G3) from the
   kernel's factors where they are inside the box (:func:`fault_tolerance.sample_limits.g1_posts`)
@@ -24,8 +24,10 @@ limits). Plain Python without numba.
 
 from __future__ import annotations
 
+import numpy as np
+
 from .boxqp import BOX_TOL  # noqa: F401 - the tolerance of the box checks called here
-from .boxsolve import bounded_kernel, reduced_solve
+from .boxsolve import bounded_solve, reduced_solve
 from .sample_kernel import BOUNDED, JVJA, LNVA, O_PARTS, _finish, _views, sample_kernel
 from .sample_limits import g1_posts
 from .sample_linalg import P_CONT, njit
@@ -38,14 +40,33 @@ FLAG_BOUND_ACTIVE, FLAG_TASK_SCALED, FLAG_INTOLERABLE_UNDER_LIMITS = 32, 64, 128
 SCALE_TOL = 1e-9
 
 
+def own_workspace(F0: np.ndarray, I0: np.ndarray, mode: int) -> tuple:
+    """``(F, Iw, views)``: a copy of a Controller's bounded-step workspace, in ``mode``.
+
+    The one-call sample solves in its own copy, so it never disturbs the Controller's state
+    (``last_scale``, ``last_active``) that the Python route reads.
+    """
+    from .boxsolve import _FLOAT, _HEAD, _shapes
+
+    F, Iw = F0.copy(), I0.copy()
+    Iw[4] = mode
+    n, m, f, s, _, k = (int(v) for v in Iw[:6])
+    shapes = _shapes(n, m, f, s, k)
+    views = {}
+    for t, (name, code) in enumerate(_FLOAT):
+        o, shape = int(Iw[_HEAD + t]), shapes[code]
+        views[name] = F[o : o + int(np.prod(shape))].reshape(shape)
+    return F, Iw, views
+
+
 @njit
-def _planned(J, q, xd, ws, method, box, qcmd, info) -> int:  # pragma: no cover - numba
+def _planned(J, xd, ws, method, buf, box, qcmd, info) -> int:  # pragma: no cover - numba
     """Planned rates into ``qcmd`` and their flags; -1 when the bounded step refuses.
 
-    ``box = (F, Iw, state, P, ps, pb)``: the Controller's bounded-step workspace and its views
-    (``state[0]`` the task scale, ``state[2:]`` the joints held at a bound; ``P``, ``ps``, ``pb``
-    the reduced robots' rates under the box, their scalings and which were solved, of JVJA's
-    target).
+    ``box = (F, Iw, state, P, ps, pb, fbuf)``: the Controller's bounded-step workspace and its
+    views (``state[0]`` the task scale, ``state[2:]`` the joints held at a bound; ``P``, ``ps``,
+    ``pb`` the reduced robots' rates under the box, their scalings and which were solved, of
+    JVJA's target; ``fbuf`` its box, which gets the kernel's ``buf``).
     """
     m, n = J.shape
     qd = _views(ws, m, n)[8]
@@ -53,11 +74,12 @@ def _planned(J, q, xd, ws, method, box, qcmd, info) -> int:  # pragma: no cover 
         for c in range(n):
             qcmd[c] = qd[c]
         return int(ws[-3])
-    F, Iw, state = box[0], box[1], box[2]
-    st = bounded_kernel(J, q, xd, qcmd, F, Iw)
-    if st >= 2:
+    F, Iw, state, fbuf = box[0], box[1], box[2], box[6]
+    for c in range(n):  # the kernel's box (the same limits and horizon as the Controller's)
+        fbuf[0, c], fbuf[1, c] = buf[0, c], buf[1, c]
+    if bounded_solve(J, xd, qcmd, 1 if method == JVJA else 0, F, Iw):
         return -1
-    info[0] = st  # 1: solved as the bounded problem (the Controller's bounded_steps)
+    info[0] = 1 if state[1] != 0.0 else 0  # solved as the bounded problem (bounded_steps)
     flag = FLAG_TASK_SCALED if state[0] < 1.0 - SCALE_TOL else 0
     for c in range(n):
         if state[2 + c] != 0.0:
@@ -120,7 +142,7 @@ def bounded_sample(
     f = cols.shape[0]
     info[0], info[1], info[2] = 0, 0, 1
     qcmd = tabs[7]  # the target's buffer holds the planned rates until _posts needs it
-    flag = _planned(J, q, xd, ws, method, box, qcmd, info)
+    flag = _planned(J, xd, ws, method, buf, box, qcmd, info)
     if flag < 0:
         return DECLINED
     qd = _views(ws, m, n)[8]

@@ -24,7 +24,7 @@ from .bounded import SCALE_TOL, bounded_least_norm, reduced_bounded
 from .indices import RCN_MAX
 from .kernels import TRACE_MAX
 from .linalg import PIVOT_EPS
-from .sample_bounded import DECLINED, limited_sample
+from .sample_bounded import DECLINED, limited_sample, own_workspace
 
 _TASK_SCALED = 64  # run.FLAG_TASK_SCALED
 _LWA = pin.LOCAL_WORLD_ALIGNED
@@ -267,16 +267,17 @@ class Sampler:
             if getattr(ctrl, "_box_ws", None) is None:
                 self.bounded_tables = ()
                 return None
-            F, I0, views = ctrl._box_ws
-            Iw = I0.copy()  # its own mode and int scratch
-            Iw[4] = JVJA if self.s.algorithm == "jvja" else LNVA
+            mode = JVJA if self.s.algorithm == "jvja" else LNVA
+            F, Iw, views = own_workspace(*ctrl._box_ws[:2], mode)
+            self.box_views = views
             F2, Iw2, buf2 = self._reduced_workspace()[:3]
             f, n = len(self.cols), self.arm.n
             tabs = (np.zeros((f, n)), np.ones(f), np.zeros(f, dtype=np.int64),
                     np.zeros(f, dtype=np.int64), np.zeros(f, dtype=np.int64), np.zeros((f, n)),
                     np.zeros(f), np.zeros(n))  # fmt: skip
             info = np.zeros(3, dtype=np.int64)
-            box = (F, Iw, views["state"], views["posts"], views["pscale"], views["psolved"])
+            box = (F, Iw, views["state"], views["posts"], views["pscale"], views["psolved"],
+                   views["buf"])  # fmt: skip
             self.bounded_tables = (box, (F2, Iw2, buf2), tabs, info)
         return self.bounded_tables or None
 

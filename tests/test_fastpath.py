@@ -357,15 +357,15 @@ def test_compiled_flag_constants_are_the_runs():
 
 
 def test_a_declined_bounded_sample_takes_the_python_route(samplers, monkeypatch):
-    """Where the one-call bounded sample declines (here its bounded step refuses every problem:
-    its workspace says the task has another size), the Python route solves the sample: the run
-    is still the reference's, and nothing is counted twice."""
+    """Where the one-call bounded sample declines (here its bounded solve refuses every problem:
+    its own workspace's trace bound certifies no Jacobian), the Python route solves the sample:
+    the run is still the reference's, and nothing is counted twice."""
     real = Sampler._compiled_tables
 
     def broken(self):
         tables = real(self)
         if tables:
-            tables[0][1][1] += 1  # Iw[1] = m: bounded_kernel refuses (its size check)
+            self.box_views["p3"][0] = -1.0  # trace(G⁻¹) <= -1: never
         return tables
 
     monkeypatch.setattr(Sampler, "_compiled_tables", broken)
