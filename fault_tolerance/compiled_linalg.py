@@ -112,6 +112,34 @@ def least_norm(J, xdot, L, Y, z, out) -> None:  # pragma: no cover - numba
 
 
 @njit
+def null_apply(Y, c, u, n) -> None:  # pragma: no cover - numba
+    """``c ← N c = c − Yᵀ(Y c)`` with ``N = I − YᵀY`` (``Y`` m x n, C order), ``u`` (m) scratch.
+
+    ``u = Y c`` two rows per sweep of ``c`` (two independent sums, each in column order), then
+    ``c`` loses ``u_r Y_r`` row by row (vectorised): for every entry the same operations in the
+    same order as ``c_i − Σ_r Y_ri u_r``.
+    """
+    m = Y.shape[0]
+    r = 0
+    while r + 1 < m:
+        s, t = 0.0, 0.0
+        for i in range(n):
+            s += Y[r, i] * c[i]
+            t += Y[r + 1, i] * c[i]
+        u[r], u[r + 1] = s, t
+        r += 2
+    if r < m:
+        s = 0.0
+        for i in range(n):
+            s += Y[r, i] * c[i]
+        u[r] = s
+    for r in range(m):
+        ur = u[r]
+        for i in range(n):
+            c[i] -= Y[r, i] * ur
+
+
+@njit
 def rank_ok(J, tr, coef) -> bool:  # pragma: no cover - numba
     """The rank certificate ``coef ‖J‖_F² trace(G⁻¹) < 1`` (always met when ``coef <= 0``)."""
     if not coef > 0.0:

@@ -17,7 +17,7 @@ from collections.abc import Callable
 import numpy as np
 import pinocchio as pin
 
-from .compiled_linalg import cholesky, least_norm, rank_ok
+from .compiled_linalg import cholesky, least_norm, null_apply, rank_ok
 from .single_kernel import _factor, _trace_inverse
 
 try:
@@ -115,18 +115,11 @@ def _scenario_shift(Y, a, S, w, threshold, A, L, x, c) -> bool:  # pragma: no co
 @_njit
 def _minus_null(Y, G, c, out) -> int:  # pragma: no cover - numba
     """``out = a - N c = a - c + Yᵀ (Y c)`` (G's first column as scratch); status 0, or 1."""
-    m, n = Y.shape
-    for r in range(m):
-        t = 0.0
-        for i in range(n):
-            t += Y[r, i] * c[i]
-        G[r, 0] = t
+    n = Y.shape[1]
+    null_apply(Y, c, G[:, 0], n)
     total = 0.0
     for i in range(n):
-        t = c[i]
-        for r in range(m):
-            t -= Y[r, i] * G[r, 0]
-        out[i] -= t
+        out[i] -= c[i]
         total += out[i] * out[i]
     return 0 if total < math.inf else 1
 

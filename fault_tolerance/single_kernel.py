@@ -22,7 +22,7 @@ from collections.abc import Callable
 import numpy as np
 import pinocchio as pin
 
-from .compiled_linalg import forward, gram_factor, least_norm, rank_ok, trace_inverse
+from .compiled_linalg import forward, gram_factor, least_norm, null_apply, rank_ok, trace_inverse
 from .errors import FaultToleranceError
 from .kernels import _LWA, _STEP_ERRORS, F64, TRACE_MAX, Workspace
 from .linalg import projection
@@ -93,24 +93,16 @@ def _pivots(Y, a, c, fw, threshold, n) -> bool:  # pragma: no cover - numba
 @_njit
 def _jvja(J, xdot, out, G, B, c, fw, params, tr) -> int:  # pragma: no cover - numba
     """JVJA (G2): ``out = a + alpha N c``, ``c_i = (w_i/W) a_i / N_ii`` on lockable columns."""
-    m, n = J.shape
+    n = J.shape[1]
     least_norm(J, xdot, G, B, c, out)  # Y = L⁻¹ J (in B) and z = L⁻¹ ẋ (in c): a = Yᵀ z
     if not rank_ok(J, tr, params[2]):  # rank certificate (linalg.RANK_RTOL), arms without a bound
         return 1
     if _pivots(B, out, c, fw, params[1], n):
         return 2
-    alpha = params[3]
-    for r in range(m):
-        s = 0.0
-        for i in range(n):
-            s += B[r, i] * c[i]
-        G[r, 0] = s  # the factor is no longer needed: its first column is scratch
-    s2 = 0.0
+    null_apply(B, c, G[:, 0], n)  # c ← N c (the factor is no longer needed: scratch)
+    alpha, s2 = params[3], 0.0
     for i in range(n):
-        s = c[i]
-        for r in range(m):
-            s -= B[r, i] * G[r, 0]
-        out[i] += alpha * s
+        out[i] += alpha * c[i]
         s2 += out[i] * out[i]
     return 0 if s2 < _INF else 1
 
