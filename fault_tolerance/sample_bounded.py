@@ -27,7 +27,17 @@ from __future__ import annotations
 import numpy as np
 
 from .boxqp import BOX_TOL  # noqa: F401 - the tolerance of the box checks called here
-from .boxsolve import bounded_solve, reduced_solve
+from .boxsolve import (
+    _BUF,
+    _POSTS,
+    _PSCALE,
+    _PSOLVED,
+    _STATE,
+    _fm,
+    _fv,
+    bounded_solve,
+    reduced_solve,
+)
 from .sample_kernel import BOUNDED, JVJA, LNVA, O_PARTS, _finish, _views, sample_kernel
 from .sample_limits import g1_posts
 from .sample_linalg import P_CONT, njit
@@ -59,14 +69,30 @@ def own_workspace(F0: np.ndarray, I0: np.ndarray, mode: int) -> tuple:
     return F, Iw, views
 
 
+def scratch(f: int, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """``(TF, TI)``: the float and int scratch of :func:`bounded_sample` (see :func:`_tables`).
+
+    ``TI[3 f : 3 f + 3]`` is ``info``.
+    """
+    return np.zeros(2 * f * n + 2 * f + n), np.zeros(3 * f + 3, dtype=np.int64)
+
+
 @njit
-def _planned(J, xd, ws, method, buf, box, qcmd, info) -> int:  # pragma: no cover - numba
+def _tables(TF, TI, f, n):  # pragma: no cover - numba
+    """``post, scales, rpost, rscale, target`` in ``TF``; ``inside, codes, todo, info`` in ``TI``."""
+    post, rpost = TF[: f * n].reshape((f, n)), TF[f * n : 2 * f * n].reshape((f, n))
+    o = 2 * f * n
+    return (post, TF[o : o + f], rpost, TF[o + f : o + 2 * f], TF[o + 2 * f : o + 2 * f + n],
+            TI[:f], TI[f : 2 * f], TI[2 * f : 3 * f], TI[3 * f : 3 * f + 3])  # fmt: skip
+
+
+@njit
+def _planned(J, xd, ws, method, buf, F, Iw, qcmd, info) -> int:  # pragma: no cover - numba
     """Planned rates into ``qcmd`` and their flags; -1 when the bounded step refuses.
 
-    ``box = (F, Iw, state, P, ps, pb, fbuf)``: the Controller's bounded-step workspace and its
-    views (``state[0]`` the task scale, ``state[2:]`` the joints held at a bound; ``P``, ``ps``,
-    ``pb`` the reduced robots' rates under the box, their scalings and which were solved, of
-    JVJA's target; ``fbuf`` its box, which gets the kernel's ``buf``).
+    ``F, Iw``: the bounded step's workspace (a copy of the Controller's, :func:`own_workspace`):
+    its box gets the kernel's ``buf``; its ``state`` has the task scale and the joints held at a
+    bound, its ``posts`` the reduced robots' rates under the box of JVJA's target.
     """
     m, n = J.shape
     qd = _views(ws, m, n)[8]
@@ -74,7 +100,7 @@ def _planned(J, xd, ws, method, buf, box, qcmd, info) -> int:  # pragma: no cove
         for c in range(n):
             qcmd[c] = qd[c]
         return int(ws[-3])
-    F, Iw, state, fbuf = box[0], box[1], box[2], box[6]
+    state, fbuf = _fv(F, Iw, _STATE, n + 2), _fm(F, Iw, _BUF, 4, n)
     for c in range(n):  # the kernel's box (the same limits and horizon as the Controller's)
         fbuf[0, c], fbuf[1, c] = buf[0, c], buf[1, c]
     if bounded_solve(J, xd, qcmd, 1 if method == JVJA else 0, F, Iw):
@@ -88,15 +114,15 @@ def _planned(J, xd, ws, method, buf, box, qcmd, info) -> int:  # pragma: no cove
 
 
 @njit
-def _posts(J, xd, ws, cols, buf, qcmd, cont, red, tabs, info) -> bool:  # pragma: no cover
+def _posts(J, xd, ws, cols, buf, qcmd, cont, F, Iw, tabs) -> bool:  # pragma: no cover - numba
     """Every reduced robot's rates under the box into ``post`` (rows), scalings into ``scales``.
 
-    ``red = (F, Iw, buf)``: the reduced robots' workspace of ``boxsolve`` and its box view;
-    ``tabs = (post, scales, inside, codes, todo, rpost, rscale, target)``. False: refused.
+    ``F, Iw``: the reduced robots' workspace of ``boxsolve``; ``tabs`` :func:`_tables`'s.
+    False: refused.
     """
     m, n = J.shape
     f = cols.shape[0]
-    post, scales, inside, codes, todo, rpost, rscale, target = tabs
+    post, scales, rpost, rscale, target, inside, codes, todo, info = tabs
     B, a, piv = _views(ws, m, n)[3], _views(ws, m, n)[4], _views(ws, m, n)[7]
     base = qcmd if cont else a
     for t in range(f):
@@ -108,7 +134,7 @@ def _posts(J, xd, ws, cols, buf, qcmd, cont, red, tabs, info) -> bool:  # pragma
         if inside[t] == 0:
             todo[nt] = t
             nt += 1
-    F, Iw, rbuf = red
+    rbuf = _fm(F, Iw, _BUF, 4, n)
     for c in range(n):
         rbuf[0, c], rbuf[1, c] = buf[0, c], buf[1, c]
         target[c] = qcmd[c] if cont else 0.0
@@ -129,20 +155,23 @@ def _posts(J, xd, ws, cols, buf, qcmd, cont, red, tabs, info) -> bool:  # pragma
 @njit
 def bounded_sample(
     J, xd, q, qd_prev, x, x_des, err, cols, w, vmax, params, method, k, T, off, ws, lim, buf,
-    box, red, tabs, info,
+    F, Iw, F2, Iw2, TF, TI,
 ) -> int:  # pragma: no cover - numba
     """Sample ``k`` after :func:`~fault_tolerance.sample_kernel.sample_kernel` returned ``BOUNDED``.
 
     The arguments are the kernel's (``buf`` holds the box it built), then the bounded step's
-    workspace ``box``, the reduced robots' ``red`` and the scratch ``tabs`` (see :func:`_posts`);
-    ``info`` gets ``[bounded step solved (1) or not (0), reduced robots solved, 1]``. Returns the
-    sample's flags, ``REFERENCE`` from the end of the sample, or :data:`DECLINED`.
+    workspace ``F, Iw`` (:func:`own_workspace`), the reduced robots' ``F2, Iw2`` and the scratch
+    ``TF, TI`` (:func:`scratch`); ``info`` gets ``[bounded step solved (1) or not (0), reduced
+    robots solved, 1]``. Returns the sample's flags, ``REFERENCE`` from the end of the sample, or
+    :data:`DECLINED`.
     """  # fmt: skip
     m, n = J.shape
     f = cols.shape[0]
+    tabs = _tables(TF, TI, f, n)
+    info = tabs[8]
     info[0], info[1], info[2] = 0, 0, 1
-    qcmd = tabs[7]  # the target's buffer holds the planned rates until _posts needs it
-    flag = _planned(J, xd, ws, method, buf, box, qcmd, info)
+    qcmd = tabs[4]  # the target's buffer holds the planned rates until _posts needs it
+    flag = _planned(J, xd, ws, method, buf, F, Iw, qcmd, info)
     if flag < 0:
         return DECLINED
     qd = _views(ws, m, n)[8]
@@ -150,10 +179,11 @@ def bounded_sample(
         qd[c] = qcmd[c]  # (the kernel's own buffer: the target's is overwritten next)
     post, scales = tabs[0], tabs[1]
     if method == JVJA and info[0] == 1:  # JVJA's target solved every reduced robot under the box
-        post, scales = box[3], box[4]
+        post, scales = _fm(F, Iw, _POSTS, f, n), _fv(F, Iw, _PSCALE, f)
+        solved = _fv(F, Iw, _PSOLVED, f)
         for t in range(f):
-            info[1] += int(box[5][t])
-    elif not _posts(J, xd, ws, cols, buf, qd, params[P_CONT] > 0.0, red, tabs, info):
+            info[1] += int(solved[t])
+    elif not _posts(J, xd, ws, cols, buf, qd, params[P_CONT] > 0.0, F2, Iw2, tabs):
         return DECLINED
     row = T[k]
     jv = 0.0
@@ -174,18 +204,19 @@ def bounded_sample(
 @njit
 def limited_sample(
     J, xd, qd_in, grad, q, qd_prev, x, x_des, err, cols, w, vmax, params, method, k, T, off, ws,
-    lim, prm, buf, box, red, tabs, info,
+    lim, prm, buf, F, Iw, F2, Iw2, TF, TI,
 ) -> int:  # pragma: no cover - numba
     """The sample kernel, then :func:`bounded_sample` in the same call when a bound is met.
 
     :func:`~fault_tolerance.sample_kernel.sample_kernel` first; for LNVA and JVJA a ``BOUNDED``
-    sample goes on to :func:`bounded_sample` (``info[2]`` = 1 then, else 0). The arguments are the kernel's, then :func:`bounded_sample`'s tables. ``BOUNDED`` is returned
-    for the other methods (MDA, after a lock): the caller solves those.
+    sample goes on to :func:`bounded_sample` (``info[2]`` = 1 then, else 0). The arguments are
+    the kernel's, then :func:`bounded_sample`'s tables. ``BOUNDED`` is returned for the other
+    methods (MDA, after a lock): the caller solves those.
     """  # fmt: skip
-    info[2] = 0
+    TI[3 * cols.shape[0] + 2] = 0  # info[2]
     flag = sample_kernel(J, xd, qd_in, grad, q, qd_prev, x, x_des, err, cols, w, vmax, params,
                          method, k, T, off, ws, lim, prm, buf)  # fmt: skip
     if flag != BOUNDED or (method != JVJA and method != LNVA):
         return flag
     return bounded_sample(J, xd, q, qd_prev, x, x_des, err, cols, w, vmax, params, method, k, T,
-                          off, ws, lim, buf, box, red, tabs, info)  # fmt: skip
+                          off, ws, lim, buf, F, Iw, F2, Iw2, TF, TI)  # fmt: skip

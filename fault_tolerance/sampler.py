@@ -24,7 +24,7 @@ from .bounded import SCALE_TOL, bounded_least_norm, reduced_bounded
 from .indices import RCN_MAX
 from .kernels import TRACE_MAX
 from .linalg import PIVOT_EPS
-from .sample_bounded import DECLINED, limited_sample, own_workspace
+from .sample_bounded import DECLINED, limited_sample, own_workspace, scratch
 
 _TASK_SCALED = 64  # run.FLAG_TASK_SCALED
 _LWA = pin.LOCAL_WORLD_ALIGNED
@@ -185,11 +185,11 @@ class Sampler:
 
             qd_in = jvja(J, xd_cmd, self.s.sc, response="continuation", tolerate=True)
         if self.bounded_tables:  # the bounded sample in the same compiled call
-            box, red, tabs, info = self.bounded_tables
+            F, Iw, F2, Iw2, TF, TI, info = self.bounded_tables
             flag = limited_sample(
                 J, xd_cmd, qd_in, grad, q, state.qd, x, x_des, err, self.cols, self.w, self.vmax,
                 self.params, method, k, self.table, self.off, self.ws, self.lim, self.prm,
-                self.buf, box, red, tabs, info,
+                self.buf, F, Iw, F2, Iw2, TF, TI,
             )  # fmt: skip
             if info[2]:
                 flag = self._count_compiled(state, k, J, xd_cmd, x, x_des, err, method, flag, info)
@@ -255,7 +255,7 @@ class Sampler:
         return flag
 
     def _compiled_tables(self):
-        """``(box, red, tabs, info)`` of :func:`~fault_tolerance.sample_bounded.bounded_sample`.
+        """``(F, Iw, F2, Iw2, TF, TI, info)`` of :func:`~fault_tolerance.sample_bounded.bounded_sample`.
 
         Built with the Sampler (LNVA and JVJA under joint limits, :data:`ONE_CALL`); empty when
         the Controller's bounded step is not the compiled one.
@@ -270,15 +270,10 @@ class Sampler:
             mode = JVJA if self.s.algorithm == "jvja" else LNVA
             F, Iw, views = own_workspace(*ctrl._box_ws[:2], mode)
             self.box_views = views
-            F2, Iw2, buf2 = self._reduced_workspace()[:3]
-            f, n = len(self.cols), self.arm.n
-            tabs = (np.zeros((f, n)), np.ones(f), np.zeros(f, dtype=np.int64),
-                    np.zeros(f, dtype=np.int64), np.zeros(f, dtype=np.int64), np.zeros((f, n)),
-                    np.zeros(f), np.zeros(n))  # fmt: skip
-            info = np.zeros(3, dtype=np.int64)
-            box = (F, Iw, views["state"], views["posts"], views["pscale"], views["psolved"],
-                   views["buf"])  # fmt: skip
-            self.bounded_tables = (box, (F2, Iw2, buf2), tabs, info)
+            F2, Iw2 = self._reduced_workspace()[:2]
+            TF, TI = scratch(len(self.cols), self.arm.n)
+            info = TI[3 * len(self.cols) :]
+            self.bounded_tables = (F, Iw, F2, Iw2, TF, TI, info)
         return self.bounded_tables or None
 
     def _locked(self, state, k: int, J, xd_cmd, x, x_des, err, lo, hi) -> int:
