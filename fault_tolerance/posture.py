@@ -13,6 +13,7 @@ Steps (ii)-(iii), which run the path, are :func:`fault_tolerance.planning.plan` 
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
@@ -21,8 +22,9 @@ import numpy as np
 from .arm import Arm
 from .errors import InvalidInput
 from .failures import Scenarios, scenarios
-from .indices import condition_numbers, rcn_gradient, reduced_singular_values
-from .linalg import projection
+from .indices import rcn_gradient
+from .posture_steps import FastSteps, ReferenceSteps, norm
+from .posture_steps import square_sum as _square_sum
 
 #: Largest reduced condition number k_S accepted along a planned run (step iii).
 RCN_THRESHOLD = 100.0
@@ -52,75 +54,121 @@ def joint_distance(arm: Arm, a: np.ndarray, b: np.ndarray):
     return np.linalg.norm(d, axis=-1)
 
 
+def _steps(arm: Arm, x_des: np.ndarray, reference: bool):
+    """The search's steps at ``x_des``: the plain ones, or the same numbers without the checks."""
+    return (ReferenceSteps if reference else FastSteps)(arm, x_des)
+
+
 def inverse_kinematics(
-    arm: Arm, x_des: np.ndarray, q_seed: np.ndarray, *, tol: float = 1e-10, max_iter: int = 200
+    arm: Arm,
+    x_des: np.ndarray,
+    q_seed: np.ndarray,
+    *,
+    tol: float = 1e-10,
+    max_iter: int = 200,
+    reference: bool = False,
 ) -> np.ndarray | None:
-    """Damped Newton on the task rows from ``q_seed``; ``None`` if it does not converge."""
-    q = arm.check_q(q_seed).copy()
+    """Damped Newton on the task rows from ``q_seed``; ``None`` if it does not converge.
+
+    ``reference=True`` runs the plain steps (:class:`.posture_steps.ReferenceSteps`); the default
+    ones give the same numbers, bit for bit, faster.
+    """
+    x_des = np.asarray(x_des, dtype=float)
+    if x_des.shape != (arm.m,):
+        raise InvalidInput(f"x_des has shape {x_des.shape}; the task needs ({arm.m},)")
+    return _newton(_steps(arm, x_des, reference), arm.check_q(q_seed).copy(), tol, max_iter)
+
+
+def _newton(steps, q: np.ndarray, tol: float, max_iter: int) -> np.ndarray | None:
     for _ in range(max_iter):
-        err = arm.task_error(x_des, q)
-        if np.linalg.norm(err) < tol:
+        err = steps.error(q)
+        if norm(err) < tol:
             return q
-        step = projection(arm.jacobian(q)).Jpinv @ err
-        norm = np.linalg.norm(step)
-        q = q + (step if norm < 0.5 else step * 0.5 / norm)
+        step = steps.newton(steps.jacobian(q), err)
+        size = norm(step)
+        q = q + (step if size < 0.5 else step * 0.5 / size)
     return None
 
 
-def _correct(arm: Arm, x0: np.ndarray, q: np.ndarray, iters: int = 8) -> np.ndarray:
+def _correct(steps, q: np.ndarray, iters: int = 8) -> np.ndarray:
     for _ in range(iters):
-        err = arm.task_error(x0, q)
-        if np.linalg.norm(err) < 1e-12:
+        err = steps.error(q)
+        if norm(err) < 1e-12:
             break
-        q = q + projection(arm.jacobian(q)).Jpinv @ err
+        q = q + steps.newton(steps.jacobian(q), err)
     return q
 
 
 def square_sum_rcn_at(arm: Arm, q: np.ndarray, sc: Scenarios) -> float:
     """``K(q) = Σ_S k_S²`` for the arm at ``q``."""
-    k = condition_numbers(reduced_singular_values(arm.jacobian(q), sc))
-    return float(k @ k)
+    return _square_sum(arm.jacobian(q), sc)
 
 
 def self_motion_curve(
-    arm: Arm, x0: np.ndarray, q_start: np.ndarray, *, step: float = 0.01, max_steps: int = 20000
+    arm: Arm,
+    x0: np.ndarray,
+    q_start: np.ndarray,
+    *,
+    step: float = 0.01,
+    max_steps: int = 20000,
+    reference: bool = False,
 ) -> tuple[np.ndarray, bool]:
     """Trace the self-motion curve through ``q_start`` at ``x(q) = x0`` (one degree of redundancy).
 
     Returns the points (shape (L, n), full-turn joints unwrapped) and whether the curve closed.
     An open curve (it runs into a joint limit of a joint that cannot wrap) is traced both ways.
+    ``reference=True``: the plain steps (same numbers, slower).
     """
     if arm.redundancy != 1:
         raise InvalidInput(f"self-motion curves need r = 1; {arm.name} has r = {arm.redundancy}")
-    q_start = _correct(arm, x0, arm.check_q(q_start))
-    hard = ~_wrappable(arm)
+    x0 = np.asarray(x0, dtype=float)
+    if x0.shape != (arm.m,):
+        raise InvalidInput(f"x0 has shape {x0.shape}; the task needs ({arm.m},)")
+    pts, closed, _ = _curve(arm, _steps(arm, x0, reference), arm.check_q(q_start), step, max_steps)
+    return pts, closed
 
-    def walk(direction: float) -> tuple[list[np.ndarray], bool]:
-        pts = [q_start]
+
+def _curve(arm: Arm, steps, q_start: np.ndarray, step: float, max_steps: int = 20000):
+    """``(points, closed, J at each point)`` of the self-motion curve through ``q_start``."""
+    q_start = _correct(steps, q_start)
+    hard, wrappable = ~_wrappable(arm), _wrappable(arm)
+    lower, upper = arm.lower, arm.upper
+
+    def walk(direction: float) -> tuple[list[np.ndarray], list[np.ndarray], bool]:
+        pts, jacs = [q_start], []
         q = q_start
         prev = None
         for i in range(max_steps):
-            N = projection(arm.jacobian(q)).N
+            J = steps.jacobian(q)
+            jacs.append(J)
+            N = steps.null_projector(J)
             nvec = N[:, int(np.argmax(np.diag(N)))]
-            nvec = nvec / np.linalg.norm(nvec)
+            nvec = nvec / norm(nvec)
             if prev is None:
                 nvec = nvec * direction * (1 if nvec[np.argmax(np.abs(nvec))] > 0 else -1)
             elif nvec @ prev < 0:
                 nvec = -nvec
             prev = nvec
-            q = _correct(arm, x0, q + step * nvec)
-            if np.any(hard & ((q < arm.lower) | (q > arm.upper))):
-                return pts, False
+            q = _correct(steps, q + step * nvec)
+            if np.any(hard & ((q < lower) | (q > upper))):
+                return pts, jacs, False
             pts.append(q)
-            if i > 10 and joint_distance(arm, q, q_start) < 1.5 * step:
-                return pts, True
-        return pts, False
+            if i > 10 and _distance(wrappable, q, q_start) < 1.5 * step:
+                return pts, jacs + [steps.jacobian(q)], True
+        return pts, jacs + [steps.jacobian(q)], False
 
-    fwd, closed = walk(1.0)
+    fwd, fwd_J, closed = walk(1.0)
     if closed:
-        return np.array(fwd), True
-    back, _ = walk(-1.0)
-    return np.array(back[::-1] + fwd[1:]), False
+        return np.array(fwd), True, fwd_J
+    back, back_J, _ = walk(-1.0)
+    return np.array(back[::-1] + fwd[1:]), False, back_J[::-1] + fwd_J[1:]
+
+
+def _distance(wrappable: np.ndarray, a: np.ndarray, b: np.ndarray) -> float:
+    """:func:`joint_distance` of two configurations (the mask of full-turn joints given)."""
+    d = a - b
+    d[wrappable] = (d[wrappable] + np.pi) % (2 * np.pi) - np.pi
+    return math.sqrt(np.add.reduce(d * d))  # as np.linalg.norm(d, axis=-1) sums
 
 
 @dataclass
@@ -157,6 +205,7 @@ def initial_posture(
     rng: np.random.Generator | None = None,
     step: float = 0.01,
     starts: Sequence[np.ndarray] | None = None,
+    reference: bool = False,
 ) -> Posture:
     """Configuration of minimum square-sum RCN at ``x0`` (paper Sec. III.D, step i).
 
@@ -164,7 +213,8 @@ def initial_posture(
     (default 24). ``r > 1``: projected gradient descent on ``K`` from each seed (default 8; local
     minima, best kept). The reference configuration and the neutral one are always tried too.
     ``starts``: the inverse-kinematics seeds to use instead of those (e.g. one configuration that
-    reaches ``x0``: then only its own self-motion is searched).
+    reaches ``x0``: then only its own self-motion is searched). ``reference=True``: the plain steps
+    (:class:`.posture_steps.ReferenceSteps`); the default ones give the same numbers, faster.
 
     Raises:
         InvalidInput: ``x0`` has the wrong size or no seed reaches it (out of reach).
@@ -186,7 +236,8 @@ def initial_posture(
     if starts is None:
         starts = [arm.q_reference, arm.neutral()] + [arm.random_q(rng) for _ in range(seeds)]
     starts = [arm.check_q(q) for q in starts]
-    sols = [s for s in (inverse_kinematics(arm, x0, q) for q in starts) if s is not None]
+    steps = _steps(arm, x0, reference)
+    sols = [s for s in (_newton(steps, q.copy(), 1e-10, 200) for q in starts) if s is not None]
     sols = [s for s in sols if np.all(_wrappable(arm) | ((s >= arm.lower) & (s <= arm.upper)))]
     if not sols:
         raise InvalidInput(
@@ -194,9 +245,9 @@ def initial_posture(
             f"inverse-kinematics solution from {len(starts)} seeds within the joint limits)"
         )
     if arm.redundancy == 1:
-        posture = _posture_on_curves(arm, x0, sols, sc, step)
+        posture = _posture_on_curves(arm, steps, sols, sc, step)
     else:
-        posture = _posture_by_descent(arm, x0, sols, sc)
+        posture = _posture_by_descent(arm, steps, sols, sc)
     miss = float(np.linalg.norm(arm.task_error(x0, posture.q)))
     if miss > POSTURE_TOL:  # only singular configurations reach x0: the search drifted off it
         raise InvalidInput(
@@ -206,65 +257,68 @@ def initial_posture(
     return posture
 
 
-def _posture_on_curves(arm, x0, sols, sc, step) -> Posture:
+def _posture_on_curves(arm, steps, sols, sc, step) -> Posture:
     curves: list[np.ndarray] = []
     curve_K: list[np.ndarray] = []
     cands: list[tuple[float, np.ndarray]] = []
     for s in sols:
         if any(np.min(joint_distance(arm, c, s)) < 5 * step for c in curves):
             continue
-        pts, closed = self_motion_curve(arm, x0, s, step=step)
+        pts, closed, jacs = _curve(arm, steps, s, step)
         curves.append(pts)
-        K = np.array([square_sum_rcn_at(arm, p, sc) for p in pts])
+        K = steps.square_sums(jacs, sc)
         curve_K.append(K)
         for i in _local_minima(K, closed):
             cands.append((float(K[i]), wrap(arm, pts[i])))
     cands.sort(key=lambda c: c[0])
-    best = _refine_on_curve(arm, x0, cands[0][1], sc, step)
+    best = _refine_on_curve(arm, steps, cands[0][1], sc, step)
     cands[0] = (square_sum_rcn_at(arm, best, sc), best)
     return Posture(
         best, cands[0][0], cands, curves, "global search over self-motion curves", curve_K
     )
 
 
-def _refine_on_curve(arm, x0, q, sc, step) -> np.ndarray:
+def _refine_on_curve(arm, steps, q, sc, step) -> np.ndarray:
     """Golden-section search along the curve within ±step of a sampled minimum."""
-    N = projection(arm.jacobian(q)).N
+    N = steps.null_projector(steps.jacobian(q))
     nvec = N[:, int(np.argmax(np.diag(N)))]
-    nvec /= np.linalg.norm(nvec)
+    nvec /= norm(nvec)
 
     def at(s):
-        return _correct(arm, x0, q + s * nvec)
+        return _correct(steps, q + s * nvec)
+
+    def K(q):
+        return _square_sum(steps.jacobian(q), sc)
 
     a, b = -step, step
     g = (np.sqrt(5) - 1) / 2
     c, d = b - g * (b - a), a + g * (b - a)
-    fc, fd = square_sum_rcn_at(arm, at(c), sc), square_sum_rcn_at(arm, at(d), sc)
+    fc, fd = K(at(c)), K(at(d))
     for _ in range(30):
         if fc < fd:
             b, d, fd = d, c, fc
             c = b - g * (b - a)
-            fc = square_sum_rcn_at(arm, at(c), sc)
+            fc = K(at(c))
         else:
             a, c, fc = c, d, fd
             d = a + g * (b - a)
-            fd = square_sum_rcn_at(arm, at(d), sc)
+            fd = K(at(d))
     best = wrap(arm, at((a + b) / 2))
-    return best if square_sum_rcn_at(arm, best, sc) <= square_sum_rcn_at(arm, q, sc) else q
+    return best if K(best) <= K(q) else q
 
 
-def _posture_by_descent(arm, x0, sols, sc, iters: int = 300) -> Posture:
+def _posture_by_descent(arm, steps, sols, sc, iters: int = 300) -> Posture:
     cands = []
     for q in sols:
         K = square_sum_rcn_at(arm, q, sc)
         alpha = 1e-3
         for _ in range(iters):
-            J = arm.jacobian(q)
-            g = projection(J).N @ rcn_gradient(J, arm.jacobian_derivatives(q), sc)
-            if np.linalg.norm(g) < 1e-9:
+            J = steps.jacobian(q)
+            g = steps.null_projector(J) @ rcn_gradient(J, arm.jacobian_derivatives(q), sc)
+            if norm(g) < 1e-9:
                 break
-            trial = _correct(arm, x0, q - alpha * g / max(1.0, np.linalg.norm(g)))
-            Kt = square_sum_rcn_at(arm, trial, sc)
+            trial = _correct(steps, q - alpha * g / max(1.0, norm(g)))
+            Kt = _square_sum(steps.jacobian(trial), sc)
             if Kt < K:
                 q, K, alpha = trial, Kt, alpha * 1.5
             else:
