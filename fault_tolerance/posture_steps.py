@@ -179,4 +179,6 @@ class FastSteps:
         cols = np.array(jacs)[:, :, sc.columns].transpose(0, 2, 1)  # (L, f, m)
         stack = G[:, None, :, :] - cols[:, :, :, None] * cols[:, :, None, :]
         k = condition_numbers(np.sqrt(np.maximum(np.linalg.eigvalsh(stack), 0.0)))  # (L, f)
-        return np.array([float(row @ row) for row in k])
+        # each row copied: a fresh array is aligned as the reference's k is, and BLAS sums a
+        # dot product of a misaligned row in another order
+        return np.array([float(r @ r) for r in (row.copy() for row in k)])
