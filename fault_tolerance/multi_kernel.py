@@ -94,7 +94,7 @@ def _scenario_shift(Y, a, S, w, threshold, A, L, x, c) -> bool:  # pragma: no co
                 t -= Y[r, S[p]] * Y[r, S[q]]
             A[p, q] = t
             A[q, p] = t
-    if not _chol(A, L, s, threshold):
+    if not _gershgorin_above(A, s, threshold) and not _chol(A, L, s, threshold):
         return False
     _chol(A, L, s, 0.0)
     for p in range(s):  # x = N[S, S]⁻¹ a_S
@@ -109,6 +109,23 @@ def _scenario_shift(Y, a, S, w, threshold, A, L, x, c) -> bool:  # pragma: no co
         x[p] = t / L[p, p]
     for p in range(s):
         c[S[p]] += w * x[p]
+    return True
+
+
+@_njit
+def _gershgorin_above(A, s, threshold) -> bool:  # pragma: no cover - numba
+    """Whether every Gershgorin disc of ``A[:s, :s]`` lies above ``threshold`` (with a margin).
+
+    Then ``A − threshold·I`` is positive definite and its Cholesky test is not needed; when a disc
+    reaches the threshold the test decides.
+    """
+    for p in range(s):
+        t = A[p, p]
+        for q in range(s):
+            if q != p:
+                t -= abs(A[p, q])
+        if not t > threshold * (1.0 + 1e-8) + 1e-14:
+            return False
     return True
 
 

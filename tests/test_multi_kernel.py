@@ -52,3 +52,24 @@ def test_plain_python_multi_kernel(panda):
     np.testing.assert_allclose(outs[0], outs[1], rtol=1e-12, atol=1e-14)
     ref = ft.resolve("jvja", J, xd, lockable=[(0, 1), 3])
     np.testing.assert_allclose(outs[0], ref, rtol=1e-9, atol=1e-12)
+
+
+@pytest.mark.parametrize("fn", [mk.multi_kernel, mk.multi_kernel.py_func])
+def test_a_scenario_is_refused_exactly_below_its_pivot_threshold(panda, fn):
+    """Status 2 exactly when ``λ_min(N[S, S])`` of a scenario is below the threshold: the
+    Gershgorin discs that skip the shifted Cholesky test never decide otherwise."""
+    rng = np.random.default_rng(5)
+    sets = np.array([[0, 1], [2, 4], [5, 6], [1, 3]], dtype=np.int64)
+    wrel = np.full(4, 0.25)
+    checked = 0
+    for _ in range(30):
+        q, xd = panda.random_q(rng), rng.standard_normal(3)
+        J = np.ascontiguousarray(panda.jacobian(q))
+        N = ft.nullspace_projector(J)
+        lam = min(np.linalg.eigvalsh(N[np.ix_(S, S)])[0] for S in sets)
+        for factor, status in ((0.999, 0), (1.001, 2)):
+            params = np.array([1e6, lam * factor, 0.0])
+            ws = np.zeros(9 + 21 + 7 + 8 + 4)
+            assert fn(J, xd, np.zeros(7), ws, sets, wrel, params) == status, (lam, factor)
+            checked += 1
+    assert checked == 60
