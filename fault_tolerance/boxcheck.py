@@ -20,7 +20,7 @@ def box_status(q, lim, prm, buf, out, P, Q, c, cols, jv):  # pragma: no cover - 
     ``lim`` rows: lower, upper position limits, velocity limits; ``prm = [1/h, alpha]``; ``out =
     a + alpha N c`` is the JVJA step (``c`` its pivot ratios) with ``N = I - PᵀQ`` (the kernels
     never form N: ``P = Q = Y = L⁻¹J`` compiled, ``P = J, Q = G⁻¹J`` with LAPACK), so ``N[:, i] =
-    e_i - Pᵀ Q[:, i]``; ``buf[2]`` (n) and ``buf[3, :m]`` are scratch. Plain Python with scalar
+    e_i - Pᵀ Q[:, i]``; ``buf[2]`` and ``buf[3]`` are scratch. Plain Python with scalar
     loops (compiled by numba with the numba backend). Returns 1 when ``out`` leaves the box, 2 when
     a reduced robot's rates do.
     """
@@ -52,6 +52,7 @@ def box_status(q, lim, prm, buf, out, P, Q, c, cols, jv):  # pragma: no cover - 
         for r in range(m):
             s -= P[r, j] * y[r]
         a[j] = out[j] - alpha * s
+    col = y  # y is spent: N[:, i] of each scenario, accumulated along the rows of P
     for t in range(cols.shape[0]):
         i = cols[t]
         nii = 1.0
@@ -59,13 +60,14 @@ def box_status(q, lim, prm, buf, out, P, Q, c, cols, jv):  # pragma: no cover - 
             nii -= P[r, i] * Q[r, i]
         ratio = a[i] / nii
         for j in range(n):
-            if j == i:
-                continue
-            nji = 0.0  # N[j, i] = -P_jᵀ Q_i off the diagonal
-            for r in range(m):
-                nji -= P[r, j] * Q[r, i]
-            p = a[j] - ratio * nji
-            if p < lo[j] - BOX_TOL or p > hi[j] + BOX_TOL:
+            col[j] = 0.0  # N[j, i] = -P_jᵀ Q_i off the diagonal (the same sums, r ascending)
+        for r in range(m):
+            qri = Q[r, i]
+            for j in range(n):
+                col[j] -= P[r, j] * qri
+        for j in range(n):
+            p = a[j] - ratio * col[j]
+            if j != i and (p < lo[j] - BOX_TOL or p > hi[j] + BOX_TOL):
                 return 2
     return 0
 
