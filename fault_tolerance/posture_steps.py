@@ -46,18 +46,36 @@ from .linalg import RANK_RTOL, damping_factor, projection
 try:  # the gufunc behind np.linalg.eigh (same LAPACK call, same numbers, without the wrapper)
     from numpy.linalg import _umath_linalg
 
-    def _eigh(G):
+    def eigh(G):
+        """``np.linalg.eigh(G)`` of a float64 matrix (or stack), without the wrapper."""
         return _umath_linalg.eigh_lo(G, signature="d->dd")
 
-    _eigh(np.eye(2))
+    eigh(np.eye(2))
 except Exception:  # pragma: no cover - another NumPy layout
-    _eigh = np.linalg.eigh
+    eigh = np.linalg.eigh
+
+
+def pinv_and_null(J: np.ndarray, eye: np.ndarray, null: bool = True):
+    """``(J⁺, N or None)`` of one Jacobian: :func:`.linalg.projection`'s operations, bit for bit.
+
+    One eigendecomposition for both, without the wrapper's overhead; ``eye`` is ``I`` (n x n).
+    """
+    lam, V = eigh(J @ J.T)
+    lam = np.maximum(lam, 0.0)
+    mu2 = damping_factor(math.sqrt(lam[0]))
+    Jpinv = J.T @ (V / (lam + mu2 + (lam + mu2 == 0.0))) @ V.T
+    if not null:
+        return Jpinv, None
+    keep = lam > (RANK_RTOL**2) * max(lam[-1], 1e-300)
+    U = (J.T @ V[:, keep]) / np.sqrt(lam[keep])
+    return Jpinv, eye - U @ U.T
 
 
 def square_sum(J: np.ndarray, sc) -> float:
     """``K = Σ_S k_S²`` of ``J`` (eq. 15): the reference for :meth:`FastSteps.square_sums`."""
     k = condition_numbers(reduced_singular_values(J, sc))
     return float(k @ k)
+
 
 _LWA = pin.LOCAL_WORLD_ALIGNED
 
@@ -152,15 +170,11 @@ class FastSteps:
 
     def newton(self, J: np.ndarray, err: np.ndarray) -> np.ndarray:
         """``J⁺ e``, ``J⁺`` as :func:`.linalg.projection` forms it (damped the same way)."""
-        lam, V = _eigh(J @ J.T)
-        lam = np.maximum(lam, 0.0)
-        mu2 = damping_factor(math.sqrt(lam[0]))
-        Jpinv = J.T @ (V / (lam + mu2 + (lam + mu2 == 0.0))) @ V.T
-        return Jpinv @ err
+        return pinv_and_null(J, self.eye, False)[0] @ err
 
     def null_projector(self, J: np.ndarray) -> np.ndarray:
         """``N`` as :func:`.linalg.projection` forms it (rank-deficient directions dropped)."""
-        lam, V = _eigh(J @ J.T)
+        lam, V = eigh(J @ J.T)
         lam = np.maximum(lam, 0.0)
         keep = lam > (RANK_RTOL**2) * max(lam[-1], 1e-300)
         U = (J.T @ V[:, keep]) / np.sqrt(lam[keep])

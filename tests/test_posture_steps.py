@@ -15,6 +15,7 @@ from fault_tolerance.failures import scenarios
 from fault_tolerance.linalg import SIGMA_EPS, projection
 from fault_tolerance.posture import initial_posture, inverse_kinematics, self_motion_curve
 from fault_tolerance.posture_steps import FastSteps, ReferenceSteps, norm, square_sum
+from fault_tolerance.wholepath.problem import kinematics, projections
 
 ARMS = [
     ("planar_3r", None),
@@ -45,7 +46,9 @@ def test_every_step_equals_the_reference_bit_for_bit(name, task):
     rng = np.random.default_rng(3)
     x0 = arm.fk(arm.random_q(rng))
     fast, ref = FastSteps(arm, x0), ReferenceSteps(arm, x0)
-    sc = scenarios(arm.default_lockable, arm.n, r=max(arm.redundancy, 1), joint_names=arm.joint_names)
+    sc = scenarios(
+        arm.default_lockable, arm.n, r=max(arm.redundancy, 1), joint_names=arm.joint_names
+    )
     jacs = []
     for _ in range(40):
         q = arm.random_q(rng)
@@ -150,3 +153,109 @@ def test_public_steps_accept_reference_and_check_their_input():
         self_motion_curve(arm, [0.35], q)
     with pytest.raises(ft.InvalidInput, match="shape"):
         inverse_kinematics(arm, x0, [0.1, 0.2])
+
+
+# -- the whole-path planner's per-step kinematics (wholepath/problem.py) -----------------------
+
+
+@pytest.mark.parametrize("name,task", ARMS)
+def test_pinv_and_null_is_linalg_projection_bit_for_bit(name, task):
+    """posture_steps.pinv_and_null: J⁺ and N of linalg.projection, regular and near-singular J."""
+    from fault_tolerance.posture_steps import pinv_and_null
+
+    arm = _load(name, task)
+    rng = np.random.default_rng(7)
+    eye = np.eye(arm.n)
+    Js = [arm.jacobian(arm.random_q(rng)) for _ in range(20)]
+    Js.append(arm.jacobian(np.zeros(arm.n)))  # often stretched out or folded: damped
+    Js.append(np.zeros((arm.m, arm.n)))  # rank 0: N = I
+    for J in Js:
+        P = projection(J)
+        Jpinv, N = pinv_and_null(J, eye)
+        assert _same(Jpinv, P.Jpinv) and _same(N, P.N)
+        assert pinv_and_null(J, eye, False)[1] is None
+
+
+def _post_rates_one_by_one(a, N, sc):
+    """The per-scenario loop post_rates ran before it was vectorised (one-joint scenarios)."""
+    from fault_tolerance.linalg import damped_pivots
+
+    B, n = a.shape
+    out = np.empty((B, sc.f, n))
+    for s, (i,) in enumerate(sc.sets):
+        piv = damped_pivots(N[:, i, i])
+        out[:, s] = a - (a[:, i] / piv)[:, None] * N[:, :, i]
+        out[:, s, i] = 0.0
+    return out
+
+
+@pytest.mark.parametrize(
+    "name,task", [("spatial_4r", None), ("panda", "pose"), ("ur5", "position")]
+)
+def test_post_rates_of_all_scenarios_at_once_equal_one_by_one(name, task):
+    """The vectorised one-joint post_rates: same numbers and C layout (einsum sums by layout)."""
+    from fault_tolerance.wholepath.problem import jumps, post_rates
+
+    arm = _load(name, task)
+    rng = np.random.default_rng(2)
+    sc = scenarios(None, arm.n, r=arm.redundancy)
+    J = np.array([arm.jacobian(arm.random_q(rng)) for _ in range(30)])
+    N = projections(J).N
+    N[0] = np.eye(arm.n) * 1e-6  # tiny pivots: damped
+    a = rng.standard_normal((30, arm.n))
+    got, ref = post_rates(a, N, sc), _post_rates_one_by_one(a, N, sc)
+    assert _same(got, ref) and got.flags["C_CONTIGUOUS"]
+    qd = rng.standard_normal((30, arm.n))
+    assert _same(jumps(got, qd, sc.weights), jumps(ref, qd, sc.weights))
+
+
+@pytest.mark.parametrize("gain", [0.0, 10.0])
+def test_rollout_steps_are_the_plain_steps(gain):
+    """rollout's rates equal a plain loop with linalg.projection (LNVA and JVJA), bit for bit."""
+    from fault_tolerance.paper_cases import CASES
+    from fault_tolerance.wholepath import build_problem, rollout
+    from fault_tolerance.wholepath.problem import jvja_rates, post_rates
+
+    case = CASES["fig7"]
+    arm = ft.load_arm(case.robot)
+    q0 = inverse_kinematics(arm, np.array(case.x0), np.array([0.2574, 1.2106, -0.9513, 1.9333]))
+    prob = build_problem(
+        arm, case.path(0.2), dt=0.002, steps=100, lockable=list(case.lockable),
+        feedback_gain=gain, limits=False,
+    )  # fmt: skip
+    for mode in ("lnva", "jvja"):
+        traj = rollout(prob, q0, mode)
+        q = q0.copy()
+        for k in range(prob.T + 1):
+            xd = prob.xd_des[k] + (gain * arm.task_error(prob.x_des[k], q) if gain else 0.0)
+            P = projection(arm.jacobian(q))
+            a = P.Jpinv @ xd
+            if mode == "jvja":
+                post = post_rates(a[None], P.N[None], prob.sc)
+                a = jvja_rates(a[None], P.N[None], post, prob.sc.weights)[0]
+            assert _same(traj.q[k], q) and _same(traj.qd[k], a)
+            q = q + prob.dt * a
+
+
+def test_batched_kinematics_is_the_arm_row_by_row():
+    """wholepath kinematics: each row's J and task error equal the arm's (position and pose)."""
+    from fault_tolerance.paper_cases import CASES
+    from fault_tolerance.wholepath import build_problem
+
+    for arm in (ft.load_arm("spatial_4r"), ft.load_arm("panda", task="pose")):
+        path = CASES["fig7"].path(0.1)
+        if arm.m == 6:
+            from fault_tolerance.trajectories import CirclePath
+
+            x0 = arm.fk(arm.q_reference)
+            path = CirclePath(x0, 0.05, 2 * np.pi, 0.1, rows=(0, 1))
+        prob = build_problem(arm, path, dt=0.01, steps=10, limits=False)
+        rng = np.random.default_rng(4)
+        Q = np.array([arm.random_q(rng) for _ in range(11)])
+        J, E = kinematics(prob, Q, np.arange(11))
+        for k, q in enumerate(Q):
+            assert _same(J[k], arm.jacobian(q))
+            if arm.m == 3:
+                assert _same(E[k], arm.task_error(prob.x_des[k], q))
+            else:  # scipy's rotation vector vs Pinocchio's log3: the same angle to rounding
+                np.testing.assert_allclose(E[k], arm.task_error(prob.x_des[k], q), atol=1e-12)

@@ -18,7 +18,8 @@ from scipy.spatial.transform import Rotation
 from ..arm import Arm
 from ..errors import InvalidInput
 from ..failures import Scenarios, scenarios
-from ..linalg import DAMPING, PIVOT_EPS, RANK_RTOL, SIGMA_EPS, damped_pivots, projection
+from ..linalg import DAMPING, PIVOT_EPS, RANK_RTOL, SIGMA_EPS, damped_pivots
+from ..posture_steps import pinv_and_null
 
 #: Objectives of the whole-path planner: the mean or the maximum of λ(t) over the path.
 OBJECTIVES = ("mean", "max")
@@ -119,13 +120,11 @@ def kinematics(prob: PathProblem, Q: np.ndarray, ks: np.ndarray) -> tuple[np.nda
     B, n = len(Q), arm.n
     J = np.empty((B, 6, n))
     M = np.empty((B, 3, 4))
-    frame = pin.computeFrameJacobian
+    frame, lwa = pin.computeFrameJacobian, pin.LOCAL_WORLD_ALIGNED
     oMf = data.oMf
-    for b in range(B):
-        J[b] = frame(model, data, Q[b], fid, pin.LOCAL_WORLD_ALIGNED).reshape(6, n)
-        pl = oMf[fid]
-        M[b, :, :3] = pl.rotation
-        M[b, :, 3] = pl.translation
+    for b, q in enumerate(Q):  # the placement as one 4 x 4 array (one conversion, not two)
+        J[b] = frame(model, data, q, fid, lwa).reshape(6, n)
+        M[b] = oMf[fid].homogeneous[:3]
     full = np.zeros((B, 6))
     full[:, rows] = prob.x_des[ks]
     err = np.zeros((B, 6))
@@ -166,6 +165,17 @@ def projections(J: np.ndarray) -> Projections:
 def post_rates(a: np.ndarray, N: np.ndarray, sc: Scenarios) -> np.ndarray:
     """Least-norm post-failure rates ``ˢq̇'`` for every scenario, shape (B, f, n)."""
     B, n = a.shape
+    if sc.singletons:  # every scenario at once: the same elementwise operations as one by one
+        cols = np.asarray(sc.columns)
+        piv = damped_pivots(N[:, cols, cols])  # (B, f)
+        out = np.empty((B, sc.f, n))  # C order, as below: einsum sums other layouts differently
+        np.subtract(
+            a[:, None, :],
+            (a[:, cols] / piv)[:, :, None] * np.swapaxes(N[:, :, cols], 1, 2),
+            out=out,
+        )
+        out[:, np.arange(len(cols)), cols] = 0.0
+        return out
     out = np.empty((B, sc.f, n))
     for s, S in enumerate(sc.sets):
         S = list(S)
@@ -237,20 +247,20 @@ def rollout(
     Q = np.empty((T + 1, n))
     QD = np.empty((T + 1, n))
     q = np.asarray(q0, dtype=float).copy()
-    sc, w = prob.sc, prob.sc.weights
+    sc, w, eye = prob.sc, prob.sc.weights, np.eye(n)
     for k in range(T + 1):
         J = pin.computeFrameJacobian(model, data, q, fid, pin.LOCAL_WORLD_ALIGNED).reshape(6, n)
         xd = prob.xd_des[k]
         if prob.feedback_gain:
             xd = xd + prob.feedback_gain * arm._error(prob.x_des[k], data.oMf[fid])
-        P = projection(J[rows])
-        a = P.Jpinv @ xd
+        Jpinv, N = pinv_and_null(J[rows], eye, mode != "lnva")
+        a = Jpinv @ xd
         if mode == "lnva":
             qd = a
         elif mode == "track" and k < T:
-            qd = a + P.N @ ((q_ref[k + 1] - q) / dt)
+            qd = a + N @ ((q_ref[k + 1] - q) / dt)
         else:
-            qd = jvja_rates(a[None], P.N[None], post_rates(a[None], P.N[None], sc), w)[0]
+            qd = jvja_rates(a[None], N[None], post_rates(a[None], N[None], sc), w)[0]
         Q[k], QD[k] = q, qd
         q = q + dt * qd
     return evaluate(prob, Q, QD)
