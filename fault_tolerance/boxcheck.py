@@ -20,7 +20,7 @@ def box_status(q, lim, prm, buf, out, P, Q, c, cols, jv):  # pragma: no cover - 
     ``lim`` rows: lower, upper position limits, velocity limits; ``prm = [1/h, alpha]``; ``out =
     a + alpha N c`` is the JVJA step (``c`` its pivot ratios) with ``N = I - PᵀQ`` (the kernels
     never form N: ``P = Q = Y = L⁻¹J`` compiled, ``P = J, Q = G⁻¹J`` with LAPACK), so ``N[:, i] =
-    e_i - Pᵀ Q[:, i]``; ``buf[2]`` and ``buf[3]`` are scratch. Plain Python with scalar
+    e_i - Pᵀ Q[:, i]``; ``buf[2]`` and ``buf[3]`` (n each) are scratch. Plain Python with scalar
     loops (compiled by numba with the numba backend). Returns 1 when ``out`` leaves the box, 2 when
     a reduced robot's rates do.
     """
@@ -47,11 +47,14 @@ def box_status(q, lim, prm, buf, out, P, Q, c, cols, jv):  # pragma: no cover - 
         for k in range(n):
             s += Q[r, k] * c[k]
         y[r] = s
+    for j in range(n):  # the loops over j run along the rows of P (vectorised)
+        a[j] = c[j]
+    for r in range(m):
+        yr = y[r]
+        for j in range(n):
+            a[j] -= P[r, j] * yr
     for j in range(n):
-        s = c[j]
-        for r in range(m):
-            s -= P[r, j] * y[r]
-        a[j] = out[j] - alpha * s
+        a[j] = out[j] - alpha * a[j]
     col = y  # y is spent: N[:, i] of each scenario, accumulated along the rows of P
     for t in range(cols.shape[0]):
         i = cols[t]
@@ -59,16 +62,22 @@ def box_status(q, lim, prm, buf, out, P, Q, c, cols, jv):  # pragma: no cover - 
         for r in range(m):
             nii -= P[r, i] * Q[r, i]
         ratio = a[i] / nii
-        for j in range(n):
-            col[j] = 0.0  # N[j, i] = -P_jᵀ Q_i off the diagonal (the same sums, r ascending)
-        for r in range(m):
+        q0 = Q[0, i]
+        for j in range(n):  # N[j, i] = -P_jᵀ Q_i: the same sum as entry by entry, row by row of P
+            col[j] = 0.0 - P[0, j] * q0
+        for r in range(1, m):
             qri = Q[r, i]
             for j in range(n):
                 col[j] -= P[r, j] * qri
+        out_of_box = False  # all j first (vectorised), then without j = i if that fails
         for j in range(n):
             p = a[j] - ratio * col[j]
-            if j != i and (p < lo[j] - BOX_TOL or p > hi[j] + BOX_TOL):
-                return 2
+            out_of_box |= (p < lo[j] - BOX_TOL) | (p > hi[j] + BOX_TOL)
+        if out_of_box:
+            for j in range(n):
+                p = a[j] - ratio * col[j]
+                if j != i and (p < lo[j] - BOX_TOL or p > hi[j] + BOX_TOL):
+                    return 2
     return 0
 
 
