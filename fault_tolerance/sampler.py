@@ -95,7 +95,7 @@ class Sampler:
         self.position_only = bool(np.all(np.asarray(arm.rows) < 3))
         self.full_pose = list(arm.rows) == [0, 1, 2, 3, 4, 5]
         self.trans_rows = np.asarray(arm.rows)
-        self.arm, self.s = arm, s
+        self.arm, self.s, self.kp = arm, s, float(s.feedback_gain)
         self.method = METHODS[s.algorithm]
         self.continuation = s.response == "continuation"
         if self.continuation and s.algorithm == "jvja":
@@ -178,7 +178,8 @@ class Sampler:
         q = state.q
         J, grad = self._jacobian(q)
         x, err = self._task(x_des)
-        xd_cmd = xd_des + self.s.feedback_gain * err
+        # without feedback ẋ_cmd is ẋ_des itself (the reference adds 0·err: the same numbers)
+        xd_cmd = xd_des + self.kp * err if self.kp else xd_des
         method, qd_in = (sk.LOCKED if state.locked else self.method), self.zeros
         if method == sk.GIVEN:
             from .planner import jvja
