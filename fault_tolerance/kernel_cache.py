@@ -20,6 +20,7 @@ KERNEL_SOURCES = (
     "boxsolve.py",
     "compiled_linalg.py",
     "multi_kernel.py",
+    "rank_one_eigen.py",
     "sample_bounded.py",
     "sample_kernel.py",
     "sample_limits.py",

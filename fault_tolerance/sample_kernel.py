@@ -12,7 +12,8 @@ projector ``N`` itself (only its diagonal and its products with vectors, ``N v =
 * the jump each scenario would cause now, ``w_S ‖ˢq̇' − q̇‖²`` (eqs. 9/10; ``ˢq̇'`` by G1, least-norm or
   continuation response, G3);
 * the reduced condition numbers ``k_S`` (eq. 15) from the extreme eigenvalues of ``J_S J_Sᵀ = G −
-  J_i J_iᵀ`` (:mod:`fault_tolerance.small_eigen`), their square sum ``K`` and ``σ_min(J)``;
+  J_i J_iᵀ`` (secular equations on one eigenbasis of ``G``, :mod:`fault_tolerance.rank_one_eigen`),
+  their square sum ``K`` and ``σ_min(J)``;
 * the flags of :mod:`fault_tolerance.run` it can decide (locked, step-limited, over-speed,
   servo-clipped).
 
@@ -54,11 +55,10 @@ from .sample_linalg import (  # noqa: F401 - P_* and N_PARAMS are this kernel's 
     P_TRACE,
     P_WSUM,
     _cholesky,
-    _condition,
     _factor,
     _null_times,
-    _sigma_min,
     _solve,
+    _spectra,
     _trace_inverse,
     njit,
 )
@@ -251,9 +251,9 @@ def _views(ws, m, n):  # pragma: no cover - numba
 
 @njit
 def _eigen_scratch(ws, m, n):  # pragma: no cover - numba
-    """The ``3 m`` numbers of ``ws`` after :func:`_views`' that :mod:`.small_eigen` works in."""
+    """The ``m² + 5 m`` numbers of ``ws`` after :func:`_views`' that ``_spectra`` works in."""
     o = 3 * m * m + m * n + 5 * n + 2 * m
-    return ws[o : o + 3 * m]
+    return ws[o : o + m * m + 5 * m]
 
 
 @njit
@@ -341,10 +341,9 @@ def _finish(
             flag |= _FLAG_OVER_SPEED
     if not total < math.inf:
         return REFERENCE
-    t = _eigen_scratch(ws, m, n)
     ks = row[off[O_RCN] : off[O_RCN] + f]
-    row[off[O_K]] = _condition(G, J, cols, ks, Wm, params[P_RCN_MAX], t)
-    row[off[O_SIGMA]] = _sigma_min(G, Wm, t)
+    scratch = _eigen_scratch(ws, m, n)
+    row[off[O_K]], row[off[O_SIGMA]] = _spectra(G, J, cols, ks, Wm, params[P_RCN_MAX], scratch)
     qd_row = row[off[O_QD] : off[O_QD] + n]
     _follow(qd, qd_prev, params, k, method == LOCKED, qd_row)
     if params[P_BOUNDED] > 0.0:
@@ -378,7 +377,7 @@ W_FLAG, W_INSIDE, W_JUMP = -3, -2, -1
 
 def workspace_size(m: int, n: int) -> int:
     """Length of the float workspace ``ws`` of :func:`sample_kernel` (see ``W_*``)."""
-    return 3 * m * m + m * n + 5 * n + 5 * m + 3
+    return 4 * m * m + m * n + 5 * n + 7 * m + 3
 
 
 def compiled_sample_kernel() -> Callable:

@@ -13,6 +13,7 @@ import math
 import numpy as np
 
 from .compiled_linalg import cholesky_into, trace_inverse
+from .rank_one_eigen import downdate_extremes, eigenpairs
 from .small_eigen import extreme_eigenvalues
 
 try:  # compiled when numba is there (lazily, on first call; cached on disk)
@@ -102,23 +103,62 @@ def _sigma_min(G, W, t) -> float:  # pragma: no cover - numba
     return math.sqrt(max(lo, 0.0))
 
 
+@njit
+def _capped_k(lo, hi, rcn_max) -> float:  # pragma: no cover - numba
+    """``k = σ_max / σ_min`` from ``λ_min, λ_max`` of ``J_S J_Sᵀ``, capped at ``rcn_max``."""
+    smax = math.sqrt(max(hi, 0.0))
+    smin = max(math.sqrt(max(lo, 0.0)), smax / rcn_max)
+    k = smax / smin if smax > 0.0 else rcn_max  # smin >= smax / rcn_max > 0 then
+    return min(k, rcn_max)
+
+
 # Eq. (15)
 @njit
 def _condition(G, J, cols, ks, W, rcn_max, t) -> float:  # pragma: no cover - numba
     """``k_S`` of every single-joint scenario into ``ks``, as ``indices.condition_numbers``; K.
 
-    ``W`` (m, m) and ``t`` (3 m) are scratch.
+    One eigenproblem per scenario (:func:`_reduced_extremes`); ``W`` (m, m), ``t`` (3 m) scratch.
     """
     K = 0.0
     for s in range(cols.shape[0]):
         lo, hi = _reduced_extremes(G, J, cols[s], W, t)
-        smax = math.sqrt(max(hi, 0.0))
-        smin = max(math.sqrt(max(lo, 0.0)), smax / rcn_max)
-        k = smax / smin if smax > 0.0 else rcn_max  # smin >= smax / rcn_max > 0 then
-        k = min(k, rcn_max)
-        ks[s] = k
-        K += k * k
+        ks[s] = _capped_k(lo, hi, rcn_max)
+        K += ks[s] * ks[s]
     return K
+
+
+# Eq. (15)
+@njit
+def _spectra(G, J, cols, ks, W, rcn_max, scratch):  # pragma: no cover - numba
+    """``k_S`` of every scenario into ``ks``; ``(K, σ_min(J))``, from one eigenbasis of ``G``.
+
+    ``G = V diag(d) Vᵀ`` once (:func:`.rank_one_eigen.eigenpairs`); each ``J_S J_Sᵀ = G − J_i
+    J_iᵀ`` by its secular equation (:func:`.rank_one_eigen.downdate_extremes`). A scenario whose
+    roots fail, or all when the eigenbasis fails, takes :func:`_reduced_extremes` (QL, then
+    LAPACK); ``W`` (m, m) and ``scratch`` (``m² + 5 m``: ``V``, ``d``, ``u²``, 3 m) are scratch.
+    """
+    m = G.shape[0]
+    V = scratch[0 : m * m].reshape((m, m))
+    d, u2, t = (
+        scratch[m * m : m * m + m],
+        scratch[m * m + m : m * m + 2 * m],
+        scratch[m * m + 2 * m :],
+    )
+    for r in range(m):
+        for c in range(m):
+            W[r, c] = G[r, c]
+    basis = eigenpairs(W, m, V, d, t)
+    K = 0.0
+    for s in range(cols.shape[0]):
+        ok = False
+        if basis:
+            lo, hi, ok = downdate_extremes(V, d, J, cols[s], m, u2)
+        if not ok:
+            lo, hi = _reduced_extremes(G, J, cols[s], W, t)
+        ks[s] = _capped_k(lo, hi, rcn_max)
+        K += ks[s] * ks[s]
+    smin = math.sqrt(max(d[0], 0.0)) if basis else _sigma_min(G, W, t)
+    return K, smin
 
 
 @njit

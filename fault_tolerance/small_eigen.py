@@ -55,7 +55,8 @@ def tridiagonalize(A, m, d, e, w) -> None:  # pragma: no cover - numba
     """Householder ``A[:m, :m] = Q T Qᵀ`` from its lower triangle (``dsytd2``), ``A`` overwritten.
 
     ``T`` has diagonal ``d[:m]`` and off-diagonal ``e[:m-1]``; ``w`` is m scratch numbers. The
-    reflector ``H_k = I − τ v vᵀ`` (``v = [1, A[k+2:, k] …]``) annihilates ``A[k+2:, k]``.
+    reflector ``H_k = I − τ_k v vᵀ`` that annihilates column ``k`` below ``k+1`` is kept (``Q =
+    H_0 H_1 …``): ``v = A[k+1:, k]`` (``A[k+1, k] = 1``), ``τ_k = A[k, k+1]`` (the upper triangle).
     """
     for k in range(m - 1):
         x0 = A[k + 1, k]
@@ -65,6 +66,7 @@ def tridiagonalize(A, m, d, e, w) -> None:  # pragma: no cover - numba
         d[k] = A[k, k]
         if s == 0.0:  # nothing to annihilate: H_k = I (dlarfg's xnorm = 0)
             e[k] = x0
+            A[k, k + 1] = 0.0
             continue
         beta = -math.copysign(math.sqrt(x0 * x0 + s), x0)
         tau = (beta - x0) / beta
@@ -74,6 +76,7 @@ def tridiagonalize(A, m, d, e, w) -> None:  # pragma: no cover - numba
             A[i, k] *= scale
         _symmetric_rank2(A, k, m, tau, w)
         e[k] = beta
+        A[k, k + 1] = tau
     d[m - 1] = A[m - 1, m - 1]
 
 
