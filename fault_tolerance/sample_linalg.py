@@ -114,21 +114,6 @@ def _capped_k(lo, hi, rcn_max) -> float:  # pragma: no cover - numba
 
 # Eq. (15)
 @njit
-def _condition(G, J, cols, ks, W, rcn_max, t) -> float:  # pragma: no cover - numba
-    """``k_S`` of every single-joint scenario into ``ks``, as ``indices.condition_numbers``; K.
-
-    One eigenproblem per scenario (:func:`_reduced_extremes`); ``W`` (m, m), ``t`` (3 m) scratch.
-    """
-    K = 0.0
-    for s in range(cols.shape[0]):
-        lo, hi = _reduced_extremes(G, J, cols[s], W, t)
-        ks[s] = _capped_k(lo, hi, rcn_max)
-        K += ks[s] * ks[s]
-    return K
-
-
-# Eq. (15)
-@njit
 def _spectra(G, J, cols, ks, W, rcn_max, scratch):  # pragma: no cover - numba
     """``k_S`` of every scenario into ``ks``; ``(K, σ_min(J))``, from one eigenbasis of ``G``.
 

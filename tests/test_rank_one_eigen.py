@@ -152,8 +152,8 @@ def test_sample_spectra_equal_the_reference_and_each_path():
     assert K == pytest.approx(float(ks @ ks), rel=1e-14)
     assert smin == pytest.approx(np.linalg.svd(J, compute_uv=False)[-1], rel=1e-12)
     m = J.shape[0]
-    ql = np.empty(7)
-    sl._condition(J @ J.T, J, np.arange(7), ql, np.empty((m, m)), RCN_MAX, np.empty(3 * m))
+    G, W, t = J @ J.T, np.empty((m, m)), np.empty(3 * m)
+    ql = [sl._capped_k(*sl._reduced_extremes(G, J, i, W, t), RCN_MAX) for i in range(7)]
     _close_k(ks, ql)
     assert not _basis((J * 1e80) @ (J * 1e80).T)[0]
     big, _, smin_big = _spectra(J * 1e80)
