@@ -40,13 +40,13 @@ _box_status = compiled_box_status()
 #: Modes of :func:`bounded_kernel`.
 LNVA, JVJA, MDA, JVJA_MULTI = 0, 1, 2, 3
 #: Float sections of the workspace: name and shape (in n, m, f, s = largest scenario, k = columns).
-_FLOAT = (("G", "mm"), ("B", "mn"), ("c", "n"), ("fw", "2n"), ("p4", "4"), ("lim", "3n"),
-          ("prm", "2"), ("buf", "4n"), ("state", "n+2"), ("p3", "3"), ("Zm", "nn"), ("V", "7n"),
+_FLOAT = (("G", "mm"), ("B", "mn"), ("fw", "2n"), ("lim", "3n"), ("buf", "4n"), ("c", "n"),
+          ("p4", "4"), ("prm", "2"), ("state", "n+2"), ("p3", "3"), ("Zm", "nn"), ("V", "7n"),
           ("Lm", "mm"), ("Y", "mn"), ("z", "m"), ("NSS", "ss"), ("ys", "s"), ("wsf", "8(n+1)"),
           ("gram", "(n+1)(n+1)"), ("wrel", "f"), ("mws", "multi"), ("QA", "nm"), ("hb", "m"),
           ("Zs", "nn"), ("posts", "fn"), ("pscale", "f"), ("psolved", "f"))  # fmt: skip
 _INT = (("cols", "k"), ("sets", "fs"), ("wsi", "2(n+1)"), ("mask", "n"))
-(_G, _B, _C, _FW, _P4, _LIM, _PRM, _BUF, _STATE, _P3, _ZM, _V, _LM, _Y, _Z, _NSS, _YS, _WSF, _GRAM,
+(_G, _B, _FW, _LIM, _BUF, _C, _P4, _PRM, _STATE, _P3, _ZM, _V, _LM, _Y, _Z, _NSS, _YS, _WSF, _GRAM,
  _WREL, _MWS, _QA, _HB, _ZS, _POSTS, _PSCALE, _PSOLVED) = range(27)  # fmt: skip
 _COLS, _SETS, _WSI, _MASK = range(4)
 _HEAD = 8
@@ -264,20 +264,20 @@ def bounded_kernel(J, q, xdot, out, F, Iw):  # pragma: no cover - numba
     n, m, f, s, mode, k = Iw[0], Iw[1], Iw[2], Iw[3], Iw[4], Iw[5]
     if xdot.shape[0] != m or out.shape[0] != n or q.shape[0] != n or J.shape[1] != n:
         return 2
-    state = _fv(F, Iw, _STATE, n + 2)
-    B, c = _fm(F, Iw, _B, m, n), _fv(F, Iw, _C, n)
+    state, c = _fv(F, Iw, _STATE, n + 2), _fv(F, Iw, _C, n)
+    R = _fm(F, Iw, _B, m + 9, n)  # B, fw, lim, buf are adjacent rows of n: one view of them all
+    B, fw, lim, buf = R[:m], R[m : m + 2], R[m + 2 : m + 5], R[m + 5 :]
     if mode == 3:
         st = multi_kernel(J, xdot, out, _fv(F, Iw, _MWS, m * m + m * n + n + 2 * s * s + 2 * s),
                           _im(F, Iw, _SETS, f, s), _fv(F, Iw, _WREL, f), _fv(F, Iw, _P3, 3))  # fmt: skip
     elif mode != 2:
-        st = _step_kernel(J, xdot, out, _fm(F, Iw, _G, m, m), B, c, _fm(F, Iw, _FW, 2, n),
-                          _fv(F, Iw, _P4, 4), mode)  # fmt: skip
+        st = _step_kernel(J, xdot, out, _fm(F, Iw, _G, m, m), B, c, fw, _fv(F, Iw, _P4, 4), mode)
     else:
         st = 0
     if st:
         return 2
-    inside = _box_status(q, _fm(F, Iw, _LIM, 3, n), _fv(F, Iw, _PRM, 2), _fm(F, Iw, _BUF, 4, n),
-                         out, B, B, c, _iv(F, Iw, _COLS, k), mode == 1) == 0  # fmt: skip
+    inside = _box_status(q, lim, _fv(F, Iw, _PRM, 2), buf, out, B, B, c, _iv(F, Iw, _COLS, k),
+                         mode == 1) == 0  # fmt: skip
     if inside and mode != 3:
         if state[1] != 0.0 or state[0] != 1.0:
             state[0], state[1] = 1.0, 0.0

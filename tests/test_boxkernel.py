@@ -309,3 +309,16 @@ def test_chain_14_full_active_set_compiled():
     assert ctrl.bounded_steps - ctrl.bounded_reference_steps == 1  # the compiled route solved it
     assert np.allclose(qd, ref.qd, atol=1e-8) and ref.scale < 1.0
     assert ctrl.last_scale == pytest.approx(ref.scale, rel=1e-9)
+
+
+def test_workspace_rows_of_the_free_step_are_adjacent():
+    """bounded_kernel takes B, fw, lim and buf as one view of m + 9 rows of n: they must follow
+    each other in the workspace in that order."""
+    from fault_tolerance.boxsolve import workspace
+
+    n, m = 7, 3
+    F, Iw, views = workspace(n, m, np.arange(n, dtype=np.int64).reshape(-1, 1), np.arange(n), 1)
+    starts = [views[name].ctypes.data for name in ("B", "fw", "lim", "buf")]
+    sizes = [m * n, 2 * n, 3 * n, 4 * n]
+    for a, b, size in zip(starts, starts[1:], sizes, strict=False):
+        assert b - a == 8 * size
