@@ -6,6 +6,7 @@ one saved run (the command, the machine and its load are printed above the table
     fault-tolerance bench --json bench.json
     python scripts/bench_tables.py bench.json            # every row
     python scripts/bench_tables.py bench.json --ops jacobian,floor,lnva,jvja,sim_jvja
+    python scripts/bench_tables.py chains.json --ratios      # the scaling table
 """
 
 from __future__ import annotations
@@ -58,11 +59,39 @@ def targets_table(bench: dict) -> str:
     return "\n".join(lines)
 
 
+def ratio_table(bench: dict) -> str:
+    """Rows: arms (the chains of the scaling table); medians in µs and the #11 ratios."""
+    lines = [
+        "| arm | Jacobian | floor | LNVA | JVJA | JVJA / LNVA | JVJA / floor | two-joint JVJA "
+        "| simulated JVJA sample | the same under limits (÷ bounded step, no bound) |",
+        "|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    for arm, res in bench["results"].items():
+        med = {k: v["median_us"] for k, v in res["ops"].items()}
+
+        def cell(op, over=None, med=med):
+            if op not in med:
+                return "(none)"
+            if over is None:
+                return f"{med[op]:.2f}"
+            return f"{med[op]:.2f} ({med[op] / med[over]:.2f}×)"
+
+        jv = med.get("jvja")
+        lines.append(
+            f"| {arm} | {cell('jacobian')} | {cell('floor')} | {cell('lnva')} | {cell('jvja')} "
+            f"| {jv / med['lnva']:.2f} | {jv / med['floor']:.2f} | {cell('jvja_multi', 'jvja')} "
+            f"| {cell('sim_jvja', 'jvja')} | {cell('sim_jvja_lim', 'jvja_bounded_free')} |"
+        )
+    return "\n".join(lines)
+
+
 def main(argv: list[str] | None = None) -> int:
     """Print the header, the operations table and the targets table of one saved run."""
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("json", help="a file written by fault-tolerance bench --json FILE")
     p.add_argument("--ops", default=None, help="comma-separated operations (default: all)")
+    p.add_argument("--ratios", action="store_true",
+                   help="print the per-arm ratio table (the README's scaling table) instead")
     args = p.parse_args(argv)
     try:
         bench = json.loads(Path(args.json).read_text())
@@ -71,6 +100,9 @@ def main(argv: list[str] | None = None) -> int:
     except (OSError, ValueError) as err:
         print(f"bench_tables: error: {args.json}: {err}", file=sys.stderr)
         return 2
+    if args.ratios:
+        print(header(bench) + "\n\n" + ratio_table(bench))
+        return 0
     ops = [o for o in (args.ops or "").split(",") if o] or None
     print(header(bench) + "\n\n" + ops_table(bench, ops) + "\n\n" + targets_table(bench))
     return 0

@@ -94,6 +94,24 @@ def test_bench_tables_prints_the_saved_run(tmp_path):
     assert bad.returncode == 2 and "bench_tables: error" in bad.stderr
 
 
+def test_bench_tables_ratios_are_the_scaling_table(tmp_path):
+    """--ratios: one row per arm, medians and the #11 ratios computed from them."""
+    ops = {"jacobian": 1.0, "floor": 2.0, "lnva": 2.2, "jvja": 2.4, "sim_jvja": 19.2,
+           "sim_jvja_lim": 24.0, "jvja_bounded_free": 3.0}  # fmt: skip
+    bench = {
+        "schema": "fault_tolerance.bench/1", "created": "2026-01-01T00:00:00+00:00",
+        "command": "/x/bin/fault-tolerance bench --json c.json", "machine": {},
+        "results": {"chain_7": {"ops": {k: {"median_us": v, "p99_us": v} for k, v in ops.items()}}},
+    }  # fmt: skip
+    f = tmp_path / "c.json"
+    f.write_text(json.dumps(bench))
+    p = subprocess.run([sys.executable, str(ROOT / "scripts" / "bench_tables.py"), str(f),
+                        "--ratios"], capture_output=True, text=True, check=True)  # fmt: skip
+    row = next(line for line in p.stdout.splitlines() if line.startswith("| chain_7 "))
+    assert row == ("| chain_7 | 1.00 | 2.00 | 2.20 | 2.40 | 1.09 | 1.20 | (none) "
+                   "| 19.20 (8.00×) | 24.00 (8.00×) |")  # fmt: skip
+
+
 def test_inspect_takes_robot_like_the_other_commands(capsys):
     """`inspect --robot NAME` prints what `inspect NAME` prints; none or two robots are refused."""
     assert main(["inspect", "planar_3r"]) == 0
