@@ -9,8 +9,10 @@ test's temporary folder for inspection, where the kernel's temporary files go to
 
 from __future__ import annotations
 
+import gc
 import json
 import os
+import warnings
 from pathlib import Path
 
 import pytest
@@ -83,6 +85,11 @@ def test_notebook_executes(path: Path, tmp_path: Path, kernel_manager_factory):
         client.execute(env={**os.environ, "TMPDIR": str(tmp_path)})
     finally:
         nbformat.write(nb, tmp_path / path.name)  # the executed copy, for a look after a failure
+        # jupyter_client leaves the kernel channels' zmq sockets to the garbage collector: collect
+        # them here, or their "Unclosed socket" ResourceWarning lands in a later test's warnings
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", ResourceWarning)
+            gc.collect()
     errors = [
         o for c in nb.cells if c.cell_type == "code" for o in c.outputs if o.output_type == "error"
     ]
