@@ -131,6 +131,14 @@ def _count(run, flag):
     return int(np.count_nonzero(run.flags & flag))
 
 
+def _near_limits(radius: float, omega: float, duration: float):
+    """The planar 3R with joints 1 and 2 near their limits and a circle from there."""
+    arm = ft.load_arm("planar_3r")
+    q0 = np.array([2.9, -2.5, 1.2])
+    path = CirclePath(x0=arm.fk(q0), radius=radius, omega=omega, duration=duration, rows=(0, 1))
+    return arm, q0, path
+
+
 @pytest.mark.parametrize("alg", ["lnva", "jvja", "mda"])
 def test_bounds_met_before_and_after_a_lock_agree(alg, samplers):
     """Joints near their limits: bounds are met (planned rates, reduced robots' rates) before and
@@ -142,9 +150,7 @@ def test_bounds_met_before_and_after_a_lock_agree(alg, samplers):
         FLAG_NEAR_INTOLERABLE,
     )
 
-    arm = ft.load_arm("planar_3r")
-    q0 = np.array([2.9, -2.5, 1.2])  # joints 1 and 2 near their limits
-    path = CirclePath(x0=arm.fk(q0), radius=0.1, omega=2 * np.pi, duration=0.6, rows=(0, 1))
+    arm, q0, path = _near_limits(0.1, 2 * np.pi, 0.6)
     kw = dict(q0=q0, lockable="all", lock_joint="joint3", lock_time=0.3,
               servo=ServoModel(tau=0.05), feedback_gain=10.0)  # fmt: skip
     fast, ref = _bounded_pair(arm, path, alg, **kw)
@@ -167,9 +173,7 @@ def test_bounded_planned_rates_and_scaled_task_agree(alg, samplers):
     """A fast circle near a limit: the planned rates meet bounds and the task is scaled."""
     from fault_tolerance.run import FLAG_BOUND_ACTIVE, FLAG_TASK_SCALED
 
-    arm = ft.load_arm("planar_3r")
-    q0 = np.array([2.9, -2.5, 1.2])
-    path = CirclePath(x0=arm.fk(q0), radius=0.15, omega=8 * np.pi, duration=0.25, rows=(0, 1))
+    arm, q0, path = _near_limits(0.15, 8 * np.pi, 0.25)
     fast, ref = _bounded_pair(arm, path, alg, q0=q0, lockable="all", feedback_gain=10.0,
                               lock_joint="joint2", lock_time=0.12)  # fmt: skip
     assert _count(ref, FLAG_BOUND_ACTIVE) > 0 and _count(ref, FLAG_TASK_SCALED) > 0
@@ -201,9 +205,7 @@ def test_reduced_robots_at_bounds_are_solved_compiled(key, samplers):
 def test_bounded_sample_in_one_call_equals_the_python_route(alg, samplers, monkeypatch):
     """sample_bounded.bounded_sample against Sampler's Python route over the same compiled pieces:
     the same run (bounds met by the planned rates and by reduced robots, the task scaled)."""
-    arm = ft.load_arm("planar_3r")
-    q0 = np.array([2.9, -2.5, 1.2])
-    path = CirclePath(x0=arm.fk(q0), radius=0.15, omega=8 * np.pi, duration=0.25, rows=(0, 1))
+    arm, q0, path = _near_limits(0.15, 8 * np.pi, 0.25)
     kw = dict(q0=q0, lockable="all", feedback_gain=10.0, engine="fast")
     one = simulate(arm, path, alg, **kw)
     monkeypatch.setattr(Sampler, "ONE_CALL", False)
@@ -249,9 +251,7 @@ def test_reduced_robots_refused_by_the_compiled_code_take_reduced_bounded(sample
 
     monkeypatch.setattr(Sampler, "_reduced", refuse)  # the class itself (the fixture wraps it)
     monkeypatch.setattr(Sampler, "ONE_CALL", False)  # the Python route, piece by piece
-    arm = ft.load_arm("planar_3r")
-    q0 = np.array([2.9, -2.5, 1.2])
-    path = CirclePath(x0=arm.fk(q0), radius=0.1, omega=2 * np.pi, duration=0.2, rows=(0, 1))
+    arm, q0, path = _near_limits(0.1, 2 * np.pi, 0.2)
     _bounded_pair(arm, path, "jvja", q0=q0, lockable="all", feedback_gain=10.0)
     (smp,) = samplers
     assert smp.reduced_reference > 0 and smp.reduced_compiled == 0
@@ -369,9 +369,7 @@ def test_a_declined_bounded_sample_takes_the_python_route(samplers, monkeypatch)
         return tables
 
     monkeypatch.setattr(Sampler, "_compiled_tables", broken)
-    arm = ft.load_arm("planar_3r")
-    q0 = np.array([2.9, -2.5, 1.2])
-    path = CirclePath(x0=arm.fk(q0), radius=0.15, omega=8 * np.pi, duration=0.25, rows=(0, 1))
+    arm, q0, path = _near_limits(0.15, 8 * np.pi, 0.25)
     _bounded_pair(arm, path, "jvja", q0=q0, lockable="all", feedback_gain=10.0)
     (smp,) = samplers
     assert smp.bounded_samples > 0 and smp.bounded_compiled == 0
