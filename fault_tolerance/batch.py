@@ -26,6 +26,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from . import batch_kernel
 from .errors import IntolerableFailure, InvalidInput
 from .failures import Scenarios, scenarios
 from .indices import RCN_MAX, RESPONSES
@@ -136,21 +137,23 @@ def _reduced(base: np.ndarray, N: np.ndarray, S: list[int], good: np.ndarray) ->
 
 
 def _jvja_rows(a, N, sc: Scenarios, good, response: str) -> np.ndarray:
-    W = sc.weights.sum()
+    """JVJA (5) from ``a = J⁺ẋ`` and ``N`` per row; weights over the largest (no overflow)."""
+    weights = sc.weights / sc.weights.max()
+    W = weights.sum()
     if response == "least_norm":
         if sc.singletons:
             c = np.zeros_like(a)
             cols = sc.columns
             piv = np.where(good[:, None], N[:, cols, cols], 1.0)
-            c[:, cols] = sc.weights * a[:, cols] / piv
+            c[:, cols] = weights * a[:, cols] / piv
             return a - np.einsum("bij,bj->bi", N, c) / W
         shift = sum(
             w * (a - _reduced(a, N, list(S), good))
-            for S, w in zip(sc.sets, sc.weights, strict=True)
+            for S, w in zip(sc.sets, weights, strict=True)
         )
         return a - shift / W
     Wm = np.zeros_like(N)
-    for S, w in zip(sc.sets, sc.weights, strict=True):
+    for S, w in zip(sc.sets, weights, strict=True):
         S = list(S)
         M = np.where(good[:, None, None], N[:, S][:, :, S], np.eye(len(S)))
         Wm[np.ix_(np.arange(len(N)), S, S)] += w * np.linalg.inv(M)
@@ -177,15 +180,65 @@ def resolve(
     Row b equals ``ft.resolve(name, Js[b], xdots[b], lockable, ...)``. ``intolerable="nan"``
     fills rows with an intolerable scenario with NaN (jvja) instead of raising. MDA needs the
     configurations and Jacobian derivatives; it is not batched (use :func:`ft.resolve` per row).
+
+    With numba, LNVA and least-norm single-joint JVJA run the Controller's compiled step on
+    every row (:mod:`.batch_kernel`); the rows it refuses (near a singularity, a small pivot, an
+    ill-conditioned ``J Jᵀ``), multi-joint scenarios and the continuation response take
+    :func:`resolve_stacked`, the stacked NumPy code.
     """
+    Js, xdots, sc = _resolve_input(
+        name, Js, xdots, lockable, weights, response, intolerable, joint_names
+    )
+    if not _compiled(Js, sc, response):
+        return _stacked(Js, xdots, sc, response, intolerable, chunk)
+    out, status = batch_kernel.rates(Js, xdots, sc)
+    redo = np.flatnonzero(status)
+    if redo.size:
+        out[redo] = _stacked(Js[redo], xdots[redo], sc, response, intolerable, chunk)
+    return out
+
+
+def _compiled(Js: np.ndarray, sc: Scenarios | None, response: str) -> bool:
+    """Whether :func:`resolve` runs the compiled step (LNVA, least-norm single-joint JVJA)."""
+    if not (batch_kernel.COMPILED and Js.shape[0] and Js.shape[1]):
+        return False
+    return sc is None or (sc.singletons and response == "least_norm")
+
+
+def resolve_stacked(
+    name: str,
+    Js: np.ndarray,
+    xdots: np.ndarray,
+    lockable=None,
+    *,
+    weights: Sequence[float] | None = None,
+    response: str = "least_norm",
+    joint_names: Sequence[str] = (),
+    intolerable: str = "raise",
+    chunk: int = CHUNK,
+) -> np.ndarray:
+    """:func:`resolve` by stacked NumPy alone (the path without numba, and its reference)."""
+    Js, xdots, sc = _resolve_input(
+        name, Js, xdots, lockable, weights, response, intolerable, joint_names
+    )
+    return _stacked(Js, xdots, sc, response, intolerable, chunk)
+
+
+def _resolve_input(name, Js, xdots, lockable, weights, response, intolerable, joint_names):
+    """Validated ``Js``, ``xdots`` and the scenarios (None for LNVA) of :func:`resolve`."""
     if name not in ("lnva", "jvja"):
         raise InvalidInput(f"batched resolver '{name}' is not one of ['jvja', 'lnva']")
     if response not in RESPONSES:
         raise InvalidInput(f"response {response!r} is not one of {RESPONSES}")
-    intolerable = _option(intolerable)
+    _option(intolerable)
     Js, xdots = _check(Js, ("xdots", xdots, np.shape(Js)[1]))
-    B, m, n = Js.shape
     sc = _scenarios(Js, lockable, weights, joint_names) if name == "jvja" else None
+    return Js, xdots, sc
+
+
+def _stacked(Js, xdots, sc: Scenarios | None, response, intolerable, chunk) -> np.ndarray:
+    """LNVA (``sc=None``) or JVJA rates of every row by stacked NumPy, in chunks."""
+    B, m, n = Js.shape
     out = np.empty((B, n))
     for s in range(0, B, max(int(chunk), 1)):
         e = min(s + max(int(chunk), 1), B)

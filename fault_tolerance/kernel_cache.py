@@ -14,6 +14,7 @@ from pathlib import Path
 
 #: Modules with compiled (numba) code, or code numba inlines into another module's kernel.
 KERNEL_SOURCES = (
+    "batch_kernel.py",
     "boxbasis.py",
     "boxcheck.py",
     "boxkernel.py",
