@@ -302,10 +302,31 @@ def rcn(
 ) -> np.ndarray:
     """Reduced condition numbers ``k_S`` of every row, shape (B, f), as :func:`ft.rcn`.
 
-    ``J_S J_Sᵀ = J Jᵀ − J[:, S] J[:, S]ᵀ``: one stacked ``eigvalsh`` of (B, f, m, m) per chunk.
+    ``J_S J_Sᵀ = J Jᵀ − J[:, S] J[:, S]ᵀ``: one stacked ``eigvalsh`` of (B, f, m, m) per chunk
+    (:func:`rcn_stacked`). With numba, single-joint scenarios take the compiled sample's spectra
+    per row (:func:`.batch_kernel.reduced_condition_numbers`); rows with a large ``k_S`` (where
+    the two routes could differ by more than ~1e-10) are redone the stacked way.
     """
     (Js,) = _check(Js)
     sc = _scenarios(Js, lockable, None, joint_names)
+    if not (batch_kernel.COMPILED and sc.singletons and Js.shape[0] and Js.shape[1]):
+        return _rcn_stacked(Js, sc, chunk)
+    out, status = batch_kernel.reduced_condition_numbers(Js, sc)
+    redo = np.flatnonzero(status)
+    if redo.size:
+        out[redo] = _rcn_stacked(Js[redo], sc, chunk)
+    return out
+
+
+def rcn_stacked(
+    Js: np.ndarray, lockable=None, *, joint_names: Sequence[str] = (), chunk: int = CHUNK
+) -> np.ndarray:
+    """:func:`rcn` by stacked NumPy alone (the path without numba, and its reference)."""
+    (Js,) = _check(Js)
+    return _rcn_stacked(Js, _scenarios(Js, lockable, None, joint_names), chunk)
+
+
+def _rcn_stacked(Js: np.ndarray, sc: Scenarios, chunk: int) -> np.ndarray:
     B, m, n = Js.shape
     out = np.empty((B, sc.f))
     step = max(int(chunk), 1)

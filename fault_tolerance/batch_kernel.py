@@ -27,12 +27,16 @@ Example:
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
+from .compiled_linalg import gram_factor, trace_inverse
 from .failures import Scenarios
+from .indices import RCN_MAX
 from .kernels import TRACE_MAX
 from .linalg import PIVOT_TOL, RANK_RTOL
-from .compiled_linalg import gram_factor, trace_inverse
+from .sample_linalg import _spectra
 from .single_kernel import _views, packed_step_kernel, workspace_shape
 
 try:  # compiled when numba is there (lazily, on first call; cached on disk)
@@ -53,6 +57,8 @@ THRESHOLD = 2.0 * PIVOT_TOL
 #: Largest estimated difference (relative) from the NumPy code for a row the kernel keeps.
 ACCURACY = 1e-11
 EPS = float(np.finfo(float).eps)
+#: Largest ``k_S`` the compiled RCN keeps (``ε k² ≈ 1e-11``); rows above take LAPACK's eigvalsh.
+RCN_KMAX = math.sqrt(ACCURACY / EPS)
 #: The rank certificate's coefficient: a batch has no arm whose Jacobian is known to be bounded.
 RANK_COEF = RANK_RTOL**2
 
@@ -98,6 +104,46 @@ def _accurate(J, Y, lock, jvja, L, z) -> bool:  # pragma: no cover - numba
                     d -= Y[r, i] * Y[r, i]
                 piv = min(piv, d)
     return EPS * tr * nf <= ACCURACY * piv
+
+
+# Eq. (15)
+@_njit
+def rcn_rows(Js, cols, out, status, G, W, scratch, kmax) -> None:  # pragma: no cover - numba
+    """``k_S`` of every row and single-joint scenario into ``out`` (B, f), a status per row.
+
+    The compiled sample's spectra (:func:`.sample_linalg._spectra`: one eigenbasis of ``G`` and
+    a secular equation per scenario, :mod:`.rank_one_eigen`). Status 1 where a ``k_S`` is not
+    finite or above ``kmax``: the eigenvalues of the two routes agree to a few ``ε ‖G‖``, so
+    ``k_S`` to about ``ε k_S²``; such rows are left to the caller.
+    """
+    m = Js.shape[1]
+    for b in range(Js.shape[0]):
+        J = Js[b]
+        for i in range(m):
+            for j in range(i + 1):
+                t = 0.0
+                for k in range(J.shape[1]):
+                    t += J[i, k] * J[j, k]
+                G[i, j] = t
+                G[j, i] = t
+        _spectra(G, J, cols, out[b], W, RCN_MAX, scratch)
+        st = 0
+        for s in range(cols.shape[0]):
+            if not out[b, s] <= kmax:
+                st = 1
+        status[b] = st
+
+
+def reduced_condition_numbers(Js: np.ndarray, sc: Scenarios) -> tuple[np.ndarray, np.ndarray]:
+    """``k_S`` (B, f) of single-joint scenarios ``sc`` and a status per row (≠ 0: not computed)."""
+    Js = np.ascontiguousarray(Js, dtype=float)
+    B, m, _ = Js.shape
+    out = np.empty((B, sc.f))
+    status = np.empty(B, dtype=np.int64)
+    G, W, scratch = np.empty((m, m)), np.empty((m, m)), np.empty(m * m + 5 * m)
+    cols = np.ascontiguousarray(sc.columns, dtype=np.int64)
+    rcn_rows(Js, cols, out, status, G, W, scratch, RCN_KMAX)
+    return out, status
 
 
 def _unit_weights(sc: Scenarios) -> np.ndarray:

@@ -169,3 +169,30 @@ def test_kernel_runs_as_plain_python():
     np.testing.assert_array_equal(status, status2)
     ok = status == 0
     assert _rel(out[ok], out2[ok]) < 1e-12
+
+
+@pytest.mark.parametrize("which", [0, 1, 3])
+def test_rcn_compiled_equals_stacked_and_scalar(which):
+    """Compiled k_S (rank-one eigen) = stacked eigvalsh = ft.rcn within 1e-9; large k redone."""
+    name, kw, lockable = ARMS[which]
+    arm = ft.load_arm(name, **kw)
+    Js, _ = _rows(arm, np.random.default_rng(4), 120, near=30)
+    k = batch.rcn(Js, lockable)
+    ref = batch.rcn_stacked(Js, lockable)
+    assert _rel(k, ref) < 1e-9
+    assert _rel(k, np.array([ft.rcn(J, lockable) for J in Js])) < 1e-9
+    _, status = batch_kernel.reduced_condition_numbers(Js, scenarios(lockable, arm.n, r=arm.redundancy))
+    assert 0 < status.sum() < len(Js)
+    np.testing.assert_array_equal(k[status != 0], ref[status != 0])
+    K = batch.square_sum_rcn(Js, lockable)
+    assert _rel(K, np.einsum("bf,bf->b", ref, ref)) < 1e-9
+
+
+def test_rcn_multi_joint_and_degenerate_rows_take_the_stacked_path():
+    """Multi-joint scenarios and a zero Jacobian row give the stacked results exactly."""
+    arm = ft.load_arm("panda", task="position")
+    Js, _ = _rows(arm, np.random.default_rng(9), 10)
+    lock = [(0, 2), 3]
+    np.testing.assert_array_equal(batch.rcn(Js, lock), batch.rcn_stacked(Js, lock))
+    Js[3] = 0.0
+    np.testing.assert_array_equal(batch.rcn(Js, [0, 1])[3], batch.rcn_stacked(Js, [0, 1])[3])
