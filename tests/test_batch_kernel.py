@@ -1,4 +1,4 @@
-"""batch.resolve on the Controller's compiled kernels equals its stacked NumPy path and ft.resolve."""
+"""batch.resolve / rcn on the compiled kernels equal their stacked NumPy paths and ft.resolve."""
 
 import numpy as np
 import pytest
@@ -81,7 +81,8 @@ def test_near_singular_rows_are_refused_and_redone():
     refused = np.flatnonzero(status)
     assert 0 < refused.size < 30
     qd = batch.resolve("jvja", Js, xd, [0, 1, 2, 3, 4], intolerable="nan")
-    ref = batch.resolve_stacked("jvja", Js[refused], xd[refused], [0, 1, 2, 3, 4], intolerable="nan")
+    lock = [0, 1, 2, 3, 4]
+    ref = batch.resolve_stacked("jvja", Js[refused], xd[refused], lock, intolerable="nan")
     np.testing.assert_array_equal(qd[refused], ref)
     ok = np.isfinite(ref).all(axis=1)
     assert _rel(ref[ok], _scalar("jvja", Js[refused], xd[refused], [0, 1, 2, 3, 4])[ok]) < 1e-9
@@ -106,7 +107,7 @@ def test_intolerable_rows_raise_or_nan_as_the_stacked_path():
 @pytest.mark.parametrize("lock,w", [([0, 2, 5], [1.0, 3.0, 0.5]), ([(0, 2), 3, (1, 5)], None),
                                     ([(0, 2), 3, (1, 5)], [1.0, 2.0, 0.5])])  # fmt: skip
 def test_weights_and_multi_joint(lock, w):
-    """Weights (compiled) and multi-joint scenarios (stacked) equal the stacked path and ft.resolve."""
+    """Weights (compiled) and multi-joint scenarios (stacked) equal the stacked path, ft.resolve."""
     arm = ft.load_arm("panda", task="position")
     Js, xd = _rows(arm, np.random.default_rng(5), 60, near=10)
     qd = batch.resolve("jvja", Js, xd, lock, weights=w, intolerable="nan")
@@ -119,7 +120,7 @@ def test_weights_and_multi_joint(lock, w):
 
 
 def test_huge_weights_do_not_overflow():
-    """Weights whose sum overflows: both paths give ft.resolve's rates (the weights over the max)."""
+    """Weights whose sum overflows: both paths give ft.resolve's rates (weights over the max)."""
     arm = ft.load_arm("panda", task="position")
     Js, xd = _rows(arm, np.random.default_rng(8), 10)
     w = [1e308, 1e308, 5e307]
@@ -139,7 +140,8 @@ def test_continuation_and_other_layouts_take_the_stacked_path():
     np.testing.assert_array_equal(cont, ref)
     F = np.asfortranarray(Js)
     F.flags.writeable = False
-    assert _rel(batch.resolve("jvja", F, xd, [0, 1, 2]), batch.resolve("jvja", Js, xd, [0, 1, 2])) == 0
+    same = batch.resolve("jvja", Js, xd, [0, 1, 2])
+    assert _rel(batch.resolve("jvja", F, xd, [0, 1, 2]), same) == 0
 
 
 def test_errors_unchanged():
@@ -181,7 +183,8 @@ def test_rcn_compiled_equals_stacked_and_scalar(which):
     ref = batch.rcn_stacked(Js, lockable)
     assert _rel(k, ref) < 1e-9
     assert _rel(k, np.array([ft.rcn(J, lockable) for J in Js])) < 1e-9
-    _, status = batch_kernel.reduced_condition_numbers(Js, scenarios(lockable, arm.n, r=arm.redundancy))
+    sc = scenarios(lockable, arm.n, r=arm.redundancy)
+    _, status = batch_kernel.reduced_condition_numbers(Js, sc)
     assert 0 < status.sum() < len(Js)
     np.testing.assert_array_equal(k[status != 0], ref[status != 0])
     K = batch.square_sum_rcn(Js, lockable)
