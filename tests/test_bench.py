@@ -141,3 +141,31 @@ def test_cli_subcommand_help():
     with pytest.raises(SystemExit) as exc:
         main(["bench", "--help"])
     assert exc.value.code == 0
+
+
+@pytest.mark.parametrize("key", ["spatial_4r", "panda_position"])
+def test_two_bound_pool_is_the_same_without_quadprog(key, monkeypatch):
+    """The README's first install has no quadprog: the problems the bounded-step rows time must
+    not depend on it (without it, near-damped reduced robots once entered and took the reference
+    route: a FAIL on spatial_4r that the test install never showed)."""
+    from fault_tolerance.bench import limits_rows as lr
+    from fault_tolerance.bench.cases import make_case
+    from fault_tolerance.realtime import Controller
+
+    pytest.importorskip("quadprog")
+    case = make_case(key)
+    pools = []
+    for has_qp in (True, False):
+        if not has_qp:
+            monkeypatch.setattr(lr, "installed", lambda name: name != "quadprog")
+        ctrl = Controller(case.arm, case.spec["lockable"], backend=case.ctrl.backend)
+        pools.append(lr._pools(case, ctrl)[1])
+        before = ctrl.bounded_reference_steps
+        for q, xd in pools[-1]:
+            ctrl.jvja(q, xd)
+        assert ctrl.bounded_reference_steps == before  # every timed problem solved compiled
+    with_qp, without = pools
+    assert len(with_qp) == len(without)
+    for (qa, xa), (qb, xb) in zip(with_qp, without, strict=True):
+        np.testing.assert_array_equal(qa, qb)
+        np.testing.assert_array_equal(xa, xb)

@@ -81,6 +81,8 @@ def _two_bound_case(arm, sc, ctrl, q, xs, h):
     if np.any((q2 < arm.lower) | (q2 > arm.upper)):
         return None
     q2 = np.ascontiguousarray(q2)
+    if not _undamped(arm.jacobian(q2), sc):
+        return None
     res = ft.resolve_bounded("jvja", arm.jacobian(q2), xs, sc, bounds=arm.rate_bounds(q2, h))
     before = ctrl.bounded_steps
     ctrl.jvja(q2, xs)
@@ -92,6 +94,19 @@ def _two_bound_case(arm, sc, ctrl, q, xs, h):
         except ValueError:
             return None
     return q2, xs
+
+
+def _undamped(J, sc) -> bool:
+    """Whether ``J`` and every reduced Jacobian ``J_S`` are well away from the damping zone.
+
+    Near it the reference damps a reduced robot (its rates then miss ``ẋ`` and still count as
+    ``s = 1``): not the bounded problem this row times. The test is the problem's, so the pool is
+    the same whether quadprog is installed or not (it refused those problems as inconsistent).
+    """
+    from ..linalg import SIGMA_EPS
+
+    mats = [J] + [np.delete(J, list(S), axis=1) for S in sc.sets]
+    return all(np.linalg.svd(M, compute_uv=False)[-1] >= 2.0 * SIGMA_EPS for M in mats)
 
 
 def limits_rows(case) -> dict:
