@@ -17,7 +17,7 @@ from collections.abc import Callable
 import numpy as np
 import pinocchio as pin
 
-from .compiled_linalg import cholesky, least_norm, null_apply, rank_ok
+from .compiled_linalg import chol_solve, cholesky, least_norm, null_apply, rank_ok
 from .single_kernel import _factor, _trace_inverse
 
 try:
@@ -98,15 +98,8 @@ def _scenario_shift(Y, a, S, w, threshold, A, L, x, c) -> bool:  # pragma: no co
         return False
     _chol(A, L, s, 0.0)
     for p in range(s):  # x = N[S, S]⁻¹ a_S
-        t = a[S[p]]
-        for q in range(p):
-            t -= L[p, q] * x[q]
-        x[p] = t / L[p, p]
-    for p in range(s - 1, -1, -1):
-        t = x[p]
-        for q in range(p + 1, s):
-            t -= L[q, p] * x[q]
-        x[p] = t / L[p, p]
+        x[p] = a[S[p]]
+    chol_solve(L, s, x)
     for p in range(s):
         c[S[p]] += w * x[p]
     return True

@@ -38,6 +38,7 @@ import math
 from collections.abc import Callable
 
 from .boxqp import BOX_TOL
+from .compiled_linalg import chol_solve
 from .sample_limits import _in_box, _servo_clip
 from .sample_linalg import (  # noqa: F401 - P_* and N_PARAMS are this kernel's interface
     N_PARAMS,
@@ -57,7 +58,6 @@ from .sample_linalg import (  # noqa: F401 - P_* and N_PARAMS are this kernel's 
     _cholesky,
     _factor,
     _null_times,
-    _solve,
     _spectra,
     _trace_inverse,
     njit,
@@ -156,7 +156,9 @@ def _locked(J, xd, G, params, Wm, L, y, z, qd) -> bool:  # pragma: no cover - nu
             Wm[i, j] = G[i, j] - J[i, lock] * J[j, lock]
     if not _cholesky(Wm, L, m) or not _trace_inverse(L, z, m) <= params[P_TRACE]:
         return False
-    _solve(L, xd, y, m)
+    for i in range(m):
+        y[i] = xd[i]
+    chol_solve(L, m, y)
     for c in range(n):
         s = 0.0
         if c != lock:

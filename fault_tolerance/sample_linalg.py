@@ -12,7 +12,7 @@ import math
 
 import numpy as np
 
-from .compiled_linalg import cholesky_into, trace_inverse
+from .compiled_linalg import chol_solve, cholesky_into, trace_inverse
 from .rank_one_eigen import downdate_extremes, eigenpairs
 from .small_eigen import extreme_eigenvalues
 
@@ -35,21 +35,6 @@ N_PARAMS = 13
 
 _cholesky = cholesky_into  # G = L Lᵀ into L, G kept (compiled_linalg)
 _trace_inverse = trace_inverse
-
-
-@njit
-def _solve(L, b, y, m) -> None:  # pragma: no cover - numba
-    """``y = G⁻¹ b`` with ``G = L Lᵀ`` (``y`` may be ``b``)."""
-    for i in range(m):
-        t = b[i]
-        for k in range(i):
-            t -= L[i, k] * y[k]
-        y[i] = t / L[i, i]
-    for i in range(m - 1, -1, -1):
-        t = y[i]
-        for k in range(i + 1, m):
-            t -= L[k, i] * y[k]
-        y[i] = t / L[i, i]
 
 
 @njit
@@ -168,7 +153,7 @@ def _factor(J, xd, cols, params, G, L, B, a, piv, y, z) -> bool:  # pragma: no c
     for c in range(n):  # B = G⁻¹ J column by column
         for i in range(m):
             y[i] = J[i, c]
-        _solve(L, y, y, m)
+        chol_solve(L, m, y)
         for i in range(m):
             B[i, c] = y[i]
     for c in range(n):
