@@ -87,23 +87,22 @@ def _tables(TF, TI, f, n):  # pragma: no cover - numba
 
 
 @njit
-def _planned(J, xd, ws, method, buf, F, Iw, qcmd, info) -> int:  # pragma: no cover - numba
-    """Planned rates into ``qcmd`` and their flags; -1 when the bounded step refuses.
+def _planned(J, xd, ws, method, buf, F, Iw, info) -> int:  # pragma: no cover - numba
+    """Planned rates into the kernel's ``qd`` and their flags; -1 when the bounded step refuses.
 
     ``F, Iw``: the bounded step's workspace (a copy of the Controller's, :func:`own_workspace`):
     its box gets the kernel's ``buf``; its ``state`` has the task scale and the joints held at a
-    bound, its ``posts`` the reduced robots' rates under the box of JVJA's target.
+    bound, its ``posts`` the reduced robots' rates under the box of JVJA's target. A refused
+    solve leaves ``qd`` as the kernel left it.
     """
     m, n = J.shape
     qd = _views(ws, m, n)[8]
     if ws[-2] > 0.0 and method != JVJA:  # W_INSIDE: the kernel's rates, clipped into the box
-        for c in range(n):
-            qcmd[c] = qd[c]
         return int(ws[-3])
     state, fbuf = _fv(F, Iw, _STATE, n + 2), _fm(F, Iw, _BUF, 4, n)
     for c in range(n):  # the kernel's box (the same limits and horizon as the Controller's)
         fbuf[0, c], fbuf[1, c] = buf[0, c], buf[1, c]
-    if bounded_solve(J, xd, qcmd, 1 if method == JVJA else 0, F, Iw):
+    if bounded_solve(J, xd, qd, 1 if method == JVJA else 0, F, Iw):
         return -1
     info[0] = 1 if state[1] != 0.0 else 0  # solved as the bounded problem (bounded_steps)
     flag = FLAG_TASK_SCALED if state[0] < 1.0 - SCALE_TOL else 0
@@ -170,13 +169,10 @@ def bounded_sample(
     tabs = _tables(TF, TI, f, n)
     info = tabs[8]
     info[0], info[1], info[2] = 0, 0, 1
-    qcmd = tabs[4]  # the target's buffer holds the planned rates until _posts needs it
-    flag = _planned(J, xd, ws, method, buf, F, Iw, qcmd, info)
+    flag = _planned(J, xd, ws, method, buf, F, Iw, info)
     if flag < 0:
         return DECLINED
     qd = _views(ws, m, n)[8]
-    for c in range(n):
-        qd[c] = qcmd[c]  # (the kernel's own buffer: the target's is overwritten next)
     post, scales = tabs[0], tabs[1]
     if method == JVJA and info[0] == 1:  # JVJA's target solved every reduced robot under the box
         post, scales = _fm(F, Iw, _POSTS, f, n), _fv(F, Iw, _PSCALE, f)
