@@ -18,7 +18,7 @@ import numpy as np
 import pinocchio as pin
 
 from .compiled_linalg import chol_solve, cholesky, least_norm, null_apply, rank_ok
-from .single_kernel import _factor, _trace_inverse
+from .single_kernel import _factor, _trace_inverse, refusal_route
 
 try:
     import numba
@@ -137,7 +137,6 @@ def _minus_null(Y, G, c, out) -> int:  # pragma: no cover - numba
 def compiled_multi_step(ctrl) -> Callable[..., np.ndarray]:
     """The compiled JVJA step of a controller whose scenarios may lock several joints."""
     from .kernels import TRACE_MAX
-    from .linalg import projection
 
     model, data, fid, rows = ctrl.model, ctrl.data, ctrl.frame_id, ctrl._rows
     n, m, sc = ctrl.n, ctrl.m, ctrl.scenarios
@@ -150,7 +149,7 @@ def compiled_multi_step(ctrl) -> Callable[..., np.ndarray]:
     params = np.array([TRACE_MAX, ctrl._pivot_threshold, ctrl._rank_coef])
     ws = np.zeros(m * m + m * n + n + 2 * smax * smax + 2 * smax)
     cfj, ndarray = pin.computeFrameJacobian, np.ndarray
-    fallback, bad_call, tolerate = ctrl._fallback, ctrl._bad_call, ctrl.tolerate
+    bad_call = ctrl._bad_call
     multi_kernel(np.zeros((m, n)), np.zeros(m), np.zeros(n), ws, sets, wrel, params)  # compile
 
     def slow(q, xdot, out, err):
@@ -159,6 +158,8 @@ def compiled_multi_step(ctrl) -> Callable[..., np.ndarray]:
             if x2.shape == (m,) and not (type(xdot) is ndarray and xdot.dtype is _F64):
                 return jvja(q, np.ascontiguousarray(x2), out)
         raise bad_call(err, q, xdot, out) from err
+
+    refused = refusal_route(ctrl, "jvja", slow)
 
     def jvja(q: np.ndarray, xdot: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
         """JVJA, minimum square-sum jump rates, eq. (5) (G1, any scenarios); compiled."""
@@ -174,12 +175,7 @@ def compiled_multi_step(ctrl) -> Callable[..., np.ndarray]:
         except (ValueError, TypeError, RuntimeError, AttributeError, IndexError) as err:
             return slow(q, xdot, out, err)
         if status:
-            if status == 3:
-                return slow(q, xdot, out, ValueError("shape"))
-            J = cfj(model, data, q, fid, _LWA)[rows]
-            if status == 2 and not tolerate:
-                sc.check_tolerable(projection(J).N)  # raises IntolerableFailure naming them
-            return fallback("jvja", J, xdot, out)
+            return refused(status, q, xdot, out)
         return out
 
     return jvja

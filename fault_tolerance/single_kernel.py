@@ -251,10 +251,8 @@ def compiled_step(ctrl: Workspace, jvja: int) -> Callable[..., np.ndarray]:
     kernel = compiled_kernel("packed")
     cfj, empty, ndarray = pin.computeFrameJacobian, np.empty, np.ndarray
     ws, (_, _, _, B, c) = workspace(ctrl)
-    tolerate = ctrl.tolerate
     shape_n, shape_m = (n,), (m,)
-    fallback, bad_call = ctrl._fallback, ctrl._bad_call
-    check_tolerable = ctrl.scenarios.check_tolerable
+    bad_call = ctrl._bad_call
     name = "jvja" if jvja else "lnva"
     if jvja:  # N = I - YᵀY with Y = L⁻¹J in B, for the bounded step's box check (boxstep)
         ctrl._jvja_ws[0], ctrl._jvja_ws[1], ctrl._jvja_ws[2] = B, B, c
@@ -277,6 +275,8 @@ def compiled_step(ctrl: Workspace, jvja: int) -> Callable[..., np.ndarray]:
                     return step(q, x2, out)
         raise bad_call(err, q, xdot, out) from err
 
+    refused = refusal_route(ctrl, name, slow)
+
     def step(q: np.ndarray, xdot: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
         if out is None:
             out = empty(n)
@@ -287,12 +287,7 @@ def compiled_step(ctrl: Workspace, jvja: int) -> Callable[..., np.ndarray]:
         except _STEP_ERRORS as err:
             return slow(q, xdot, out, err)
         if status:
-            if status == 3:
-                return slow(q, xdot, out, ValueError("shape"))
-            J = cfj(model, data, q, fid, _LWA)[rows]
-            if status == 2 and not tolerate:
-                check_tolerable(projection(J).N)  # raises IntolerableFailure naming the joint
-            return fallback(name, J, xdot, out)
+            return refused(status, q, xdot, out)
         return out
 
     step.__name__ = name
@@ -302,3 +297,25 @@ def compiled_step(ctrl: Workspace, jvja: int) -> Callable[..., np.ndarray]:
         else "LNVA, least-norm rates ``q̇ = J⁺ẋ``; compiled."
     )
     return step
+
+
+def refusal_route(ctrl, name: str, slow: Callable) -> Callable[..., np.ndarray]:
+    """``route(status, q, xdot, out)``: what a compiled step of ``ctrl`` does with a refused call.
+
+    Status 3 (sizes) goes to ``slow``; 1 (no certificate) and 2 (a pivot below the threshold) to
+    the planner's step, after the tolerability check that names the joints (``tolerate=False``).
+    Shared by the single- and multi-joint steps.
+    """
+    model, data, fid, rows = ctrl.model, ctrl.data, ctrl.frame_id, ctrl._rows
+    cfj, fallback, tolerate = pin.computeFrameJacobian, ctrl._fallback, ctrl.tolerate
+    check_tolerable = ctrl.scenarios.check_tolerable
+
+    def route(status: int, q, xdot, out) -> np.ndarray:
+        if status == 3:
+            return slow(q, xdot, out, ValueError("shape"))
+        J = cfj(model, data, q, fid, _LWA)[rows]
+        if status == 2 and not tolerate:
+            check_tolerable(projection(J).N)  # raises IntolerableFailure naming the joints
+        return fallback(name, J, xdot, out)
+
+    return route
