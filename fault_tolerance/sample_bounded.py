@@ -26,7 +26,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .boxqp import BOX_TOL  # noqa: F401 - the tolerance of the box checks called here
+from .bounded import SCALE_TOL  # a task scaling below 1 − SCALE_TOL counts as scaled
 from .boxsolve import (
     _BUF,
     _POSTS,
@@ -46,8 +46,6 @@ from .sample_linalg import P_CONT, njit
 DECLINED = -3
 #: ``run.FLAG_BOUND_ACTIVE``, ``run.FLAG_TASK_SCALED``, ``run.FLAG_INTOLERABLE_UNDER_LIMITS``.
 FLAG_BOUND_ACTIVE, FLAG_TASK_SCALED, FLAG_INTOLERABLE_UNDER_LIMITS = 32, 64, 128
-#: ``bounded.SCALE_TOL``: a task scaling below ``1 − SCALE_TOL`` counts as scaled.
-SCALE_TOL = 1e-9
 
 
 def own_workspace(F0: np.ndarray, I0: np.ndarray, mode: int) -> tuple:
