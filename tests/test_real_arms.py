@@ -221,3 +221,36 @@ def test_inspect_simulate_and_replay_from_the_command_line(name, tmp_path):
     assert p.returncode == 0, p.stderr
     assert not _only_expected_warnings(p.stderr), p.stderr
     assert html.stat().st_size > 1000 and "<html" in html.read_text()[:2000].lower()
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_compiled_run_equals_the_reference_from_the_default_start(name):
+    """From the arm's default start (its manifest's lockable joints, limits on), a JVJA run on the
+    compiled sample equals the plain reference's: the commanded rates to
+    1e-9 of their size, the same flags, and the jump λ = Σ w_S ‖ˢq̇' − q̇‖² within what rates
+    that close allow, |Δλ| ≤ 2 (2 δ) √(W λ) (Cauchy-Schwarz, δ the rates' tolerance, W = Σ w_S).
+
+    (PR2 under limits: λ agrees to 1.06e-9 relative at one bounded sample, with its rates to
+    7e-10: the compiled bounded solver and the reference's active set round differently.)"""
+    from fault_tolerance.simulation import simulate
+    from fault_tolerance.trajectories import CirclePath
+
+    e = ARMS[name]
+    arm = load(name)
+    lockable = e["lockable"] or None
+    args = e.get("path_args", [])
+    radius = float(args[args.index("--radius") + 1]) if "--radius" in args else 0.05
+
+    def circle(x0):  # the CLI's default circle (1 s), with the manifest's radius
+        return CirclePath(x0, radius, 2 * np.pi, 1.0)
+
+    q0 = ft.default_start(arm, lockable, path=circle).q0
+    path = CirclePath(arm.fk(q0), radius, 2 * np.pi, 0.2)
+    fast = simulate(arm, path, "jvja", q0=q0, lockable=lockable, engine="fast")
+    ref = simulate(arm, path, "jvja", q0=q0, lockable=lockable, engine="reference")
+    delta = 1e-9 * max(1.0, float(np.abs(ref.qd).max()))
+    np.testing.assert_allclose(fast.qd, ref.qd, rtol=0, atol=delta)
+    W = float(np.sum(fast.meta.get("weights") or np.ones(fast.jvj_parts.shape[1])))
+    bound = 4.0 * delta * np.sqrt(W * np.abs(ref.jvj)) + 1e-12
+    assert np.all(np.abs(fast.jvj - ref.jvj) <= bound), np.max(np.abs(fast.jvj - ref.jvj) / bound)
+    np.testing.assert_array_equal(fast.flags, ref.flags)
