@@ -68,6 +68,20 @@ class URDFError(FaultToleranceError):
     """A URDF file cannot be read or turned into an arm."""
 
 
+class PackageNotFound(URDFError):
+    """A ``package://pkg`` or ``$(find pkg)`` names a package none of the package folders holds."""
+
+    def __init__(self, package: str, package_dirs: Sequence[str], where: str = "") -> None:
+        self.package = package
+        dirs = [str(d) for d in package_dirs]
+        looked = f"looked in {dirs}" if dirs else "no package folder was given"
+        super().__init__(
+            f"{where + ': ' if where else ''}package '{package}' not found ({looked}); pass the "
+            f"folder that holds '{package}/' or whose package.xml names it with package_dirs=[...] "
+            "(--package-dir DIR, repeatable)"
+        )
+
+
 class InvalidTask(FaultToleranceError):
     """A task specification is not one of the allowed ones."""
 

@@ -90,8 +90,11 @@ def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("json", help="a file written by fault-tolerance bench --json FILE")
     p.add_argument("--ops", default=None, help="comma-separated operations (default: all)")
-    p.add_argument("--ratios", action="store_true",
-                   help="print the per-arm ratio table (the README's scaling table) instead")
+    p.add_argument(
+        "--ratios",
+        action="store_true",
+        help="print the per-arm ratio table (the README's scaling table) instead",
+    )
     args = p.parse_args(argv)
     try:
         bench = json.loads(Path(args.json).read_text())

@@ -6,7 +6,7 @@ python scripts/benchmark.py --robots panda_pose --json new.json
 python scripts/benchmark.py --compare old.json new.json       # per-row ratio
 """
 
-from fault_tolerance.bench import main
+from fault_tolerance.bench.command import main
 
 if __name__ == "__main__":
     raise SystemExit(main())

@@ -13,7 +13,7 @@ import sys
 import numpy as np
 
 import fault_tolerance as ft
-from fault_tolerance.realtime import Controller
+from fault_tolerance.control.controller import Controller
 
 
 def main(robot: str = "panda", task: str = "pose", samples: int = 2000) -> None:
@@ -33,8 +33,10 @@ def main(robot: str = "panda", task: str = "pose", samples: int = 2000) -> None:
             J = arm.jacobian(q)
             pivot = float(np.diag(ft.nullspace_projector(J)).min())
             worst, at = d, (np.linalg.svd(J, compute_uv=False)[-1], pivot)
-    print(f"{robot} {task}: largest relative difference {worst:.2e} "
-          f"(there σ_min(J) {at[0]:.3g}, smallest pivot N_ii {at[1]:.3g})")
+    print(
+        f"{robot} {task}: largest relative difference {worst:.2e} "
+        f"(there σ_min(J) {at[0]:.3g}, smallest pivot N_ii {at[1]:.3g})"
+    )
 
 
 if __name__ == "__main__":

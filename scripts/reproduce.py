@@ -1,6 +1,6 @@
 """Regenerate every result of the paper: ``python scripts/reproduce.py [--out DIR] [--quick]``.
 
-A thin entry point; the pipeline is :func:`fault_tolerance.experiments.reproduce`.
+A thin entry point; the pipeline is :func:`fault_tolerance.paper.reproduce.reproduce`.
 """
 
 import sys

@@ -54,8 +54,8 @@ def measure(args: list[str], timeout: float) -> tuple[float, float, int]:
 DATA = """
 import resource, sys, time
 from pathlib import Path
-from fault_tolerance.models import build_model
-from fault_tolerance.urdf import read_urdf
+from fault_tolerance.model.formats.build import build_model
+from fault_tolerance.model.formats.urdf import read_urdf
 model = build_model(read_urdf(Path(sys.argv[1])))
 t = time.perf_counter()
 data = model.createData()

@@ -21,7 +21,7 @@ import numpy as np
 import pytest
 
 import fault_tolerance as ft
-from fault_tolerance.linalg import min_pivot
+from fault_tolerance.numerics.linalg import min_pivot
 
 #: Base seed of every RNG in the suite.
 SEED = 20240521

@@ -12,7 +12,7 @@ import pytest
 from conftest import ROOT, SHIPPED
 
 import fault_tolerance as ft
-from fault_tolerance.arm import TASK_ROWS
+from fault_tolerance.model.arm import TASK_ROWS
 
 H = 1e-6  # central-difference step [rad]
 FD_TOL = 1e-5
@@ -38,7 +38,7 @@ def test_catalog_arms_load_with_their_presets(name, n, m):
 
 def test_catalog_lists_the_shipped_robots():
     """robots/catalog.json names exactly the three paper arms and the iiwa, each with its URDF."""
-    from fault_tolerance.catalog import catalog, robot_path
+    from fault_tolerance.model.catalog import catalog, robot_path
 
     cat = catalog()
     assert set(cat) == set(SHIPPED) | {"iiwa"}

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 import fault_tolerance as ft
-from fault_tolerance import batch
+from fault_tolerance.analysis import batch
 from fault_tolerance.errors import IntolerableFailure, InvalidInput
 
 ARMS = [
@@ -73,11 +73,17 @@ def test_multi_joint_weights_and_continuation():
     for response in ("least_norm", "continuation"):
         qd = batch.resolve("jvja", Js, xd, lock, weights=w, response=response)
         ref = np.array(
-            [ft.resolve("jvja", J, x, lock, weights=w, response=response) for J, x in zip(Js, xd, strict=True)]
+            [
+                ft.resolve("jvja", J, x, lock, weights=w, response=response)
+                for J, x in zip(Js, xd, strict=True)
+            ]
         )
         assert _rel(qd, ref) < 1e-9
         lam = batch.jvj(Js, xd, qd, lock, weights=w, response=response)
-        lref = [ft.jvj(J, x, v, lock, weights=w, response=response) for J, x, v in zip(Js, xd, ref, strict=True)]
+        lref = [
+            ft.jvj(J, x, v, lock, weights=w, response=response)
+            for J, x, v in zip(Js, xd, ref, strict=True)
+        ]
         assert _rel(lam, np.array(lref)) < 1e-9
 
 
@@ -118,13 +124,13 @@ def test_bench_has_the_batched_row(tmp_path, capsys):
     """fault-tolerance bench times the batched API against the loop and lists its target."""
     import json
 
-    from fault_tolerance import bench
+    from fault_tolerance.bench import command as bench_command
 
     out = tmp_path / "b.json"
     args = ["--robots", "planar_3r", "--steps", "4", "--warmup", "1"]
-    assert bench.main([*args, "--batch-configurations", "300", "--json", str(out)]) == 0
+    assert bench_command.main([*args, "--batch-configurations", "300", "--json", str(out)]) == 0
     text = capsys.readouterr().out
     assert "batched API" in text and "loop / batched API per configuration" in text
     data = json.loads(out.read_text())
     assert data["batch"]["configurations"] > 200 and data["batch"]["speedup"] > 0
-    assert bench.main([*args, "--batch-configurations", "-1"]) == 2
+    assert bench_command.main([*args, "--batch-configurations", "-1"]) == 2

@@ -4,9 +4,10 @@ import numpy as np
 import pytest
 
 import fault_tolerance as ft
-from fault_tolerance import batch, batch_kernel
+from fault_tolerance.analysis import batch
+from fault_tolerance.analysis.fast import batch as batch_kernel
 from fault_tolerance.errors import IntolerableFailure, InvalidInput
-from fault_tolerance.failures import scenarios
+from fault_tolerance.resolution.scenarios import scenarios
 
 pytest.importorskip("numba")
 

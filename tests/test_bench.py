@@ -13,8 +13,10 @@ import numpy as np
 import pytest
 
 import fault_tolerance as ft
-from fault_tolerance import bench
-from fault_tolerance.planner import jvja_explicit
+from fault_tolerance.bench import command as bench_command
+from fault_tolerance.bench import report as bench_report
+from fault_tolerance.bench import routes as bench_routes
+from fault_tolerance.resolution.resolvers import jvja_explicit
 
 ROOT = __import__("pathlib").Path(__file__).resolve().parents[1]
 TINY = ["--robots", "planar_3r", "--steps", "4", "--warmup", "1", "--batch-configurations", "200"]
@@ -24,14 +26,14 @@ TINY = ["--robots", "planar_3r", "--steps", "4", "--warmup", "1", "--batch-confi
 def tiny_run(tmp_path_factory):
     """One tiny benchmark run of the planar 3R, written to JSON (shared by the tests below)."""
     path = tmp_path_factory.mktemp("bench") / "a.json"
-    assert bench.main([*TINY, "--json", str(path)]) == 0
+    assert bench_command.main([*TINY, "--json", str(path)]) == 0
     return path, json.loads(path.read_text())
 
 
 def test_json_structure(tiny_run):
     """The JSON holds the machine, the settings, every row's median and p99, and the targets."""
     path, data = tiny_run
-    assert data["schema"] == bench.SCHEMA
+    assert data["schema"] == bench_report.SCHEMA
     machine = data["machine"]
     for key in ("cpu", "cores", "numpy", "pinocchio", "python", "blas_threads", "env", "loadavg"):
         assert key in machine
@@ -67,7 +69,7 @@ def test_json_structure(tiny_run):
 
 def test_table_and_targets_are_printed(tmp_path, capsys):
     """The printed report has the table (arm, operation, median, p99) and PASS/FAIL lines."""
-    assert bench.main([*TINY, "--robots", "spatial_4r"]) == 0
+    assert bench_command.main([*TINY, "--robots", "spatial_4r"]) == 0
     out = capsys.readouterr().out
     assert "median µs" in out and "p99 µs" in out
     assert "spatial_4r      jvja " in out
@@ -83,28 +85,31 @@ def test_compare(tiny_run, tmp_path, capsys):
         st["median_us"] *= 2.0
         st["p99_us"] *= 4.0
     b = tmp_path / "b.json"
-    bench.write_json(b, slower)
+    bench_report.write_json(b, slower)
     capsys.readouterr()
-    assert bench.main(["--compare", str(path), str(b)]) == 0
+    assert bench_command.main(["--compare", str(path), str(b)]) == 0
     out = capsys.readouterr().out
     jvja_line = next(line for line in out.splitlines() if line.startswith("planar_3r       jvja "))
     assert "2.00" in jvja_line and "4.00" in jvja_line
-    rows = bench.compare(data, slower)
+    rows = bench_report.compare(data, slower)
     assert len(rows) == len(data["results"]["planar_3r"]["ops"])
     assert all(r["median_ratio"] == pytest.approx(2.0) for r in rows)
 
 
 def test_bad_input_exits_2(tmp_path, capsys):
     """Unknown arms, unreadable or foreign JSON and bad counts exit 2 with a one-line message."""
-    assert bench.main(["--robots", "nope"]) == 2
+    assert bench_command.main(["--robots", "nope"]) == 2
     assert "unknown benchmark arm" in capsys.readouterr().err
-    assert bench.main(["--compare", str(tmp_path / "missing.json"), str(tmp_path / "x.json")]) == 2
+    assert (
+        bench_command.main(["--compare", str(tmp_path / "missing.json"), str(tmp_path / "x.json")])
+        == 2
+    )
     assert "cannot read" in capsys.readouterr().err
     foreign = tmp_path / "foreign.json"
     foreign.write_text('{"hello": 1}')
-    assert bench.main(["--compare", str(foreign), str(foreign)]) == 2
+    assert bench_command.main(["--compare", str(foreign), str(foreign)]) == 2
     assert "not a benchmark file" in capsys.readouterr().err
-    assert bench.main(["--robots", "planar_3r", "--steps", "0"]) == 2
+    assert bench_command.main(["--robots", "planar_3r", "--steps", "0"]) == 2
     assert "--steps" in capsys.readouterr().err
 
 
@@ -115,10 +120,10 @@ def test_generic_solver_routes_match_closed_form(planar_3r, draw_q, draw_xdot, r
     q, xd = draw_q(planar_3r, rng), draw_xdot(rng, arm.m)
     J = arm.jacobian(q)
     ref = jvja_explicit(J, xd, sc)
-    if bench._installed("quadprog"):
-        np.testing.assert_allclose(bench.jvja_qp(J, xd, sc), ref, rtol=0, atol=1e-10)
-    if bench._installed("scipy"):
-        np.testing.assert_allclose(bench.jvja_slsqp(J, xd, sc), ref, rtol=0, atol=1e-5)
+    if bench_routes._installed("quadprog"):
+        np.testing.assert_allclose(bench_routes.jvja_qp(J, xd, sc), ref, rtol=0, atol=1e-10)
+    if bench_routes._installed("scipy"):
+        np.testing.assert_allclose(bench_routes.jvja_slsqp(J, xd, sc), ref, rtol=0, atol=1e-5)
 
 
 def test_script_runs(tmp_path):
@@ -150,7 +155,7 @@ def test_two_bound_pool_is_the_same_without_quadprog(key, monkeypatch):
     route: a FAIL on spatial_4r that the test install never showed)."""
     from fault_tolerance.bench import limits_rows as lr
     from fault_tolerance.bench.cases import make_case
-    from fault_tolerance.realtime import Controller
+    from fault_tolerance.control.controller import Controller
 
     pytest.importorskip("quadprog")
     case = make_case(key)

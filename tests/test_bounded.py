@@ -6,8 +6,8 @@ import quadprog
 from scipy.optimize import linprog
 
 import fault_tolerance as ft
-from fault_tolerance import bounded, limits
 from fault_tolerance.errors import InfeasibleBounds, IntolerableUnderLimits, InvalidInput
+from fault_tolerance.resolution import bounded, limits
 
 REL = 1e-6
 
@@ -249,7 +249,7 @@ def test_arm_rate_bounds_and_inspect():
     assert hi[3] == pytest.approx(0.01 / bounded.RATE_HORIZON)
     assert np.allclose(lo, -arm.velocity_limit) and np.all(hi <= arm.velocity_limit)
     assert np.all(limits.outside_limits(arm, q) == False)  # noqa: E712
-    from fault_tolerance.inspection import inspect_text
+    from fault_tolerance.analysis.inspection import inspect_text
 
     text = inspect_text("panda")
     assert "under joint limits there" in text and "intolerable under limits only" in text

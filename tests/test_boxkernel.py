@@ -9,10 +9,12 @@ import pytest
 import quadprog
 
 import fault_tolerance as ft
-from fault_tolerance import bounded, boxkernel, boxqp
-from fault_tolerance.boxsolve import bounded_rates
+from fault_tolerance.control.controller import Controller, available_backends
+from fault_tolerance.control.fast.bounded_solve import bounded_rates
 from fault_tolerance.errors import InfeasibleBounds
-from fault_tolerance.realtime import Controller
+from fault_tolerance.resolution import bounded
+from fault_tolerance.resolution import box_qp as boxqp
+from fault_tolerance.resolution.fast import box_qp as boxkernel
 
 REL = 1e-6
 
@@ -165,7 +167,7 @@ CONTROLLERS = [
 @pytest.mark.parametrize("method", ["lnva", "jvja", "mda"])
 @pytest.mark.parametrize("robot,task,lockable,weights", CONTROLLERS)
 def test_controller_compiled_step_equals_reference(robot, task, lockable, weights, method):
-    if "numba" not in ft.realtime.available_backends():
+    if "numba" not in available_backends():
         pytest.skip("numba not installed")
     arm = ft.load_arm(robot, task=task) if task else ft.load_arm(robot)
     ctrl = Controller(arm, lockable, method=method, weights=weights, backend="numba")
@@ -253,7 +255,7 @@ def test_plain_python_equals_compiled():
     """The kernels are valid Python: with NUMBA_DISABLE_JIT the same numbers."""
     code = (
         "import numpy as np, fault_tolerance as ft\n"
-        "from fault_tolerance.boxsolve import bounded_rates\n"
+        "from fault_tolerance.control.fast.bounded_solve import bounded_rates\n"
         "rng = np.random.default_rng(5)\n"
         "out = []\n"
         "for _ in range(6):\n"
@@ -295,7 +297,7 @@ def test_chain_14_full_active_set_compiled():
     """Issue 12: the chain_14 configuration whose reduced robot of joint 8 returned 4 ("no s ≥ 0")
     with 0 inside the box: with r active rows the step direction is z = 0 exactly (its Gram solve
     left a tiny z and a huge step). The compiled step equals the reference, scaled task and all."""
-    if "numba" not in ft.realtime.available_backends():
+    if "numba" not in available_backends():
         pytest.skip("numba not installed")
     from test_bounded import CHAIN14_Q, CHAIN14_XD
 
@@ -314,7 +316,7 @@ def test_chain_14_full_active_set_compiled():
 def test_workspace_rows_of_the_free_step_are_adjacent():
     """bounded_kernel takes B, fw, lim and buf as one view of m + 9 rows of n: they must follow
     each other in the workspace in that order."""
-    from fault_tolerance.boxsolve import workspace
+    from fault_tolerance.control.fast.bounded_solve import workspace
 
     n, m = 7, 3
     F, Iw, views = workspace(n, m, np.arange(n, dtype=np.int64).reshape(-1, 1), np.arange(n), 1)

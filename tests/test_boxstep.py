@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 
 import fault_tolerance as ft
-from fault_tolerance import boxstep
-from fault_tolerance.realtime import Controller, available_backends
+from fault_tolerance.control.controller import Controller, available_backends
+from fault_tolerance.control.fast import box_check
 
 
 def _near_limits(arm, rng):
@@ -45,7 +45,9 @@ def test_bounded_step_equals_bounded_planner(robot, lockable, method, backend):
         assert np.all(qd >= lo - 1e-12) and np.all(qd <= hi + 1e-12)
         active += bool(ref.active.any())
         fast += not ref.active.any()
-    assert active and (fast or method == "mda")  # both paths (MDA on random Panda postures: large ∇K)
+    assert active and (
+        fast or method == "mda"
+    )  # both paths (MDA on random Panda postures: large ∇K)
 
 
 def test_status_kernels_agree():
@@ -72,9 +74,11 @@ def test_status_kernels_agree():
             want = 2 if ((post < lo - 1e-9).any() or (post > hi + 1e-9).any()) else 0
         res = []
         lim, prm = np.array([lower, upper, v]), np.array([20.0, -0.25])
-        for f in (boxstep.box_status, boxstep.box_status_numpy):
+        for f in (box_check.box_status, box_check.box_status_numpy):
             buf = np.empty((4, n))  # lo, hi, scratch a (n), scratch y (m <= n)
-            res.append((f(q, lim, prm, buf, out, P, Q, c, cols, True), buf[0].copy(), buf[1].copy()))
+            res.append(
+                (f(q, lim, prm, buf, out, P, Q, c, cols, True), buf[0].copy(), buf[1].copy())
+            )
         assert res[0][0] == res[1][0] == want
         assert np.allclose(res[0][1], lo) and np.allclose(res[1][1], lo)
         assert np.allclose(res[0][2], hi) and np.allclose(res[1][2], hi)

@@ -8,8 +8,8 @@ import zipfile
 import numpy as np
 import pytest
 
-from fault_tolerance import budget
 from fault_tolerance.errors import InvalidInput
+from fault_tolerance.storage import budget
 
 
 @pytest.mark.parametrize(
@@ -119,7 +119,7 @@ def test_too_large_or_foreign_members_are_refused(tmp_path, monkeypatch):
 def test_path_files_are_bounded(tmp_path, monkeypatch):
     """A CSV path larger than MAX_PATH_FILE_BYTES, or with more rows than a run may have samples,
     or with too many columns is refused before it is parsed whole."""
-    from fault_tolerance.trajectories import load_csv
+    from fault_tolerance.simulation.paths import load_csv
 
     path = tmp_path / "p.csv"
     path.write_text("t,x,y\n" + "".join(f"{i * 1e-3},0.3,0\n" for i in range(50)))

@@ -11,8 +11,13 @@ from conftest import SEED
 from test_urdf_safety import billion_laughs, chain3, robot
 
 import fault_tolerance as ft
-from fault_tolerance.carried import arm_from_record, arm_record, check_record, confine_meshes
 from fault_tolerance.errors import InvalidInput, URDFError
+from fault_tolerance.model.arm_record import (
+    arm_from_record,
+    arm_record,
+    check_record,
+    confine_meshes,
+)
 
 STL = """solid t
 facet normal 0 0 1
@@ -175,8 +180,8 @@ def test_replay_of_a_redirected_run_reads_nothing_it_names(package, tmp_path, ca
     import json
 
     from fault_tolerance.cli import main
-    from fault_tolerance.results import write_record
-    from fault_tolerance.run import Run
+    from fault_tolerance.simulation.run import Run
+    from fault_tolerance.storage.result_folder import write_record
 
     secret = package / "secret.stl"
     secret.write_text(STL.replace("solid t", "solid TOPSECRET"))

@@ -24,7 +24,7 @@ def test_help_states_every_default(cmd, capsys):
         main([cmd, "--help"])
     out = " ".join(capsys.readouterr().out.split())
     if cmd == "workspace":
-        from fault_tolerance.workspace import CHUNKS, SAMPLES, THETA_SAMPLES
+        from fault_tolerance.analysis.workspace.closed_form import CHUNKS, SAMPLES, THETA_SAMPLES
 
         for text in ("--grid GRID points per axis (default: 201 for a planar 3R;",
                      "24 for position", f"(default {SAMPLES})", f"(default: {THETA_SAMPLES} for",
@@ -38,8 +38,22 @@ def test_help_states_every_default(cmd, capsys):
 def test_workspace_writes_json_npz_png_and_resumes(tmp_path, capsys):
     """workspace writes its three files with areas in m², limits in rad; a rerun reuses chunks."""
     out = tmp_path / "ws"
-    args = ["workspace", "--robot", "planar_3r", "--limits=-60:60,-120:120,-120:120", "--deg",
-            "--grid", "41", "--samples", "20", "--workers", "0", "--out", str(out), "--no-progress"]
+    args = [
+        "workspace",
+        "--robot",
+        "planar_3r",
+        "--limits=-60:60,-120:120,-120:120",
+        "--deg",
+        "--grid",
+        "41",
+        "--samples",
+        "20",
+        "--workers",
+        "0",
+        "--out",
+        str(out),
+        "--no-progress",
+    ]
     assert main(args) == 0
     rec = json.loads((out / "workspace.json").read_text())
     np.testing.assert_allclose(rec["limits"][0], np.deg2rad([-60, 60]))
@@ -58,8 +72,27 @@ def test_workspace_writes_json_npz_png_and_resumes(tmp_path, capsys):
 def test_spatial_workspace_reports_volumes(tmp_path):
     """A position task reports volumes in m³."""
     out = tmp_path / "sp"
-    assert main(["workspace", "--robot", "spatial_4r", "--grid", "8", "--samples", "2000",
-                 "--theta-samples", "3", "--workers", "0", "--out", str(out), "--no-progress"]) == 0
+    assert (
+        main(
+            [
+                "workspace",
+                "--robot",
+                "spatial_4r",
+                "--grid",
+                "8",
+                "--samples",
+                "2000",
+                "--theta-samples",
+                "3",
+                "--workers",
+                "0",
+                "--out",
+                str(out),
+                "--no-progress",
+            ]
+        )
+        == 0
+    )
     rec = json.loads((out / "workspace.json").read_text())
     assert rec["volume_pre"] > 0 and "area_ftw" not in rec
 
@@ -67,9 +100,29 @@ def test_spatial_workspace_reports_volumes(tmp_path):
 def test_design_writes_json_and_png(tmp_path):
     """design writes design.json (limits in rad, area, jvj, rcn) and design.png."""
     out = tmp_path / "d"
-    assert main(["design", "--robot", "planar_3r", "--objective", "ftw-area", "--candidates", "4",
-                 "--rounds", "0", "--grid", "31", "--workers", "0", "--out", str(out),
-                 "--no-progress"]) == 0
+    assert (
+        main(
+            [
+                "design",
+                "--robot",
+                "planar_3r",
+                "--objective",
+                "ftw-area",
+                "--candidates",
+                "4",
+                "--rounds",
+                "0",
+                "--grid",
+                "31",
+                "--workers",
+                "0",
+                "--out",
+                str(out),
+                "--no-progress",
+            ]
+        )
+        == 0
+    )
     rec = json.loads((out / "design.json").read_text())
     assert len(rec["limits"]) == 3 and rec["area_ftw"] >= 0 and "jvj" in rec and "rcn" in rec
     assert (out / "design.png").stat().st_size > 0

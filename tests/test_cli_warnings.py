@@ -55,7 +55,7 @@ def test_lock_warns_about_the_servo_lag(tmp_path, capsys):
 
 def test_error_under_a_progress_bar_has_its_own_line(monkeypatch, capsys):
     """An error raised while the bar is drawn starts a new line and is printed once."""
-    import fault_tolerance.simulation as simulation
+    import fault_tolerance.simulation.simulate as simulation
 
     def failing(*args, progress=None, **kwargs):
         for _ in range(5):
@@ -85,7 +85,7 @@ def test_reproduce_lists_warnings(tmp_path, capsys, quick_case):
 
 def test_report_names_degenerate_starts(tmp_path):
     """REPORT.md's start-sensitivity section names each degenerate start with its warnings."""
-    from fault_tolerance.experiments import reproduce
+    from fault_tolerance.paper.reproduce import reproduce
 
     summary = reproduce(tmp_path, cases=["fig3"], quick=True, progress=False)
     sens = summary["details"]["fig3"]["start_sensitivity"]

@@ -14,8 +14,7 @@ import pytest
 
 import fault_tolerance as ft
 from fault_tolerance.cli import main
-from fault_tolerance.run import Run
-from fault_tolerance.simulation import FLAG_NEAR_SINGULAR
+from fault_tolerance.simulation.run import FLAG_NEAR_SINGULAR, Run
 
 ERROR_TOL = 1e-3  # [m] and [rad]
 

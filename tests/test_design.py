@@ -6,10 +6,11 @@ import numpy as np
 import pytest
 
 import fault_tolerance as ft
-from fault_tolerance.design import scaled_arm
-from fault_tolerance.design_search import design, pareto
+from fault_tolerance.analysis.design.planar import scaled_arm
+from fault_tolerance.analysis.design.search import design, pareto
 from fault_tolerance.errors import InvalidInput
-from fault_tolerance.planar import planar_chain
+from fault_tolerance.figures.design import plot_design
+from fault_tolerance.model.planar import planar_chain
 
 
 def test_scaled_arm_has_the_lengths_asked_for():
@@ -33,7 +34,7 @@ def test_area_design_beats_no_limits(tmp_path):
     assert min(d.evaluated["score"]) <= d.evaluated["score"][0]
     lim = np.array(d.record["limits"])
     assert np.all(lim[:, 0] >= arm.lower - 1e-12) and np.all(lim[:, 1] <= arm.upper + 1e-12)
-    d.save(tmp_path)
+    d.save(tmp_path, draw=plot_design)
     rec = json.loads((tmp_path / "design.json").read_text())
     assert {"limits", "area_ftw", "jvj", "rcn", "pareto"} <= set(rec)
     assert (tmp_path / "design.png").stat().st_size > 0

@@ -8,15 +8,13 @@ import numpy as np
 import pytest
 
 import fault_tolerance as ft
-from fault_tolerance import diagnostics as dg
-from fault_tolerance.posture import RCN_THRESHOLD, initial_posture
-from fault_tolerance.simulation import (
-    FLAG_NEAR_SINGULAR,
-    FLAG_OVER_SPEED,
-    ServoModel,
-    simulate,
-)
-from fault_tolerance.trajectories import CirclePath
+from fault_tolerance.planning.posture import initial_posture
+from fault_tolerance.resolution.indices import RCN_THRESHOLD
+from fault_tolerance.simulation import diagnostics as dg
+from fault_tolerance.simulation.paths import CirclePath
+from fault_tolerance.simulation.run import FLAG_NEAR_SINGULAR, FLAG_OVER_SPEED
+from fault_tolerance.simulation.setup import ServoModel
+from fault_tolerance.simulation.simulate import simulate
 
 
 @pytest.fixture(scope="module")
@@ -133,7 +131,7 @@ def test_servo_lag_is_a_tracking_error_not_a_lost_path(arm):
 
 def test_report_leaves_degenerate_starts_out_and_names_them():
     """A start whose runs broke a check is counted as left out, not averaged into the numbers."""
-    from fault_tolerance.report import _sensitivity_row
+    from fault_tolerance.paper.report import _sensitivity_row
 
     good = {"jvj_mean_lnva": 2.0, "jvj_mean_jvja": 1.0, "degenerate": False, "warnings": []}
     bad = {"jvj_mean_lnva": 1.0, "jvj_mean_jvja": 900.0, "degenerate": True, "warnings": ["x"]}

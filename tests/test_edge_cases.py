@@ -6,8 +6,9 @@ import numpy as np
 import pytest
 
 import fault_tolerance as ft
-from fault_tolerance import kernels
-from fault_tolerance.realtime import Controller
+from fault_tolerance.control import lapack_steps as kernels
+from fault_tolerance.control.controller import Controller
+from fault_tolerance.resolution.resolvers import MDA_MAX_STEP
 
 
 def test_numpy_backend_reports_singular_factors_instead_of_raising():
@@ -37,11 +38,11 @@ def test_mda_keeps_the_capped_step_near_a_singular_reduced_jacobian(backend):
         ref = ft.resolve("mda", J, xd, lockable="all", arm=arm, q=q)
         got = ctrl.mda(q, xd)
         a = ft.resolve("lnva", J, xd)
-        assert np.linalg.norm(got - a) == pytest.approx(ft.planner.MDA_MAX_STEP, rel=1e-9)
-        np.testing.assert_allclose(got, ref, rtol=1e-9, atol=1e-9 * ft.planner.MDA_MAX_STEP)
+        assert np.linalg.norm(got - a) == pytest.approx(MDA_MAX_STEP, rel=1e-9)
+        np.testing.assert_allclose(got, ref, rtol=1e-9, atol=1e-9 * MDA_MAX_STEP)
     q = np.array([0.3, 1.0, 0.0])  # exactly singular J_S: the direction is undefined, the cap holds
     step = ctrl.mda(q, xd) - ft.resolve("lnva", arm.jacobian(q), xd)
-    assert np.linalg.norm(step) == pytest.approx(ft.planner.MDA_MAX_STEP, rel=1e-9)
+    assert np.linalg.norm(step) == pytest.approx(MDA_MAX_STEP, rel=1e-9)
 
 
 def test_weights_whose_sum_overflows_still_give_jvja():

@@ -6,10 +6,11 @@ import numpy as np
 import pytest
 
 import fault_tolerance as ft
-from fault_tolerance.experiments import reproduce
-from fault_tolerance.posture import initial_posture
-from fault_tolerance.simulation import Run, simulate
-from fault_tolerance.trajectories import CirclePath, FunctionPath, load_csv
+from fault_tolerance.paper.reproduce import reproduce
+from fault_tolerance.planning.posture import initial_posture
+from fault_tolerance.simulation.paths import CirclePath, FunctionPath, load_csv
+from fault_tolerance.simulation.run import Run
+from fault_tolerance.simulation.simulate import simulate
 
 Q = np.array([0.3, 1.2, 1.0])  # a regular planar 3R configuration
 
@@ -286,7 +287,7 @@ def test_output_folder_that_is_a_file_is_refused_before_any_work(tmp_path, plana
     run = simulate(planar_3r.arm, circle(duration=0.01), "lnva", q0=Q)
     with pytest.raises(ft.InvalidInput, match="exists and is not a folder"):
         run.save(blocker)
-    import fault_tolerance.experiments as experiments
+    import fault_tolerance.paper.reproduce as experiments
 
     monkeypatch.setattr(experiments, "run_case", lambda *a, **k: pytest.fail("a case ran"))
     with pytest.raises(ft.InvalidInput, match="exists and is not a folder"):
@@ -302,7 +303,7 @@ def test_loading_a_run_that_is_not_there_is_refused(tmp_path):
     (tmp_path / "run.npz").write_bytes(b"garbage")
     with pytest.raises(ft.FaultToleranceError, match="no completion record"):
         Run.load(tmp_path)  # not written whole by Run.save
-    from fault_tolerance.results import write_record
+    from fault_tolerance.storage.result_folder import write_record
 
     write_record(tmp_path)  # a record that matches the garbage: the file itself is refused
     with pytest.raises(ft.InvalidInput, match="not a readable run file"):

@@ -7,8 +7,9 @@ import json
 import numpy as np
 import pytest
 
-from fault_tolerance.experiments import CASES, EXPERIMENT, reproduce
-from fault_tolerance.report import write_report
+from fault_tolerance.paper.cases import CASES, EXPERIMENT
+from fault_tolerance.paper.report import write_report
+from fault_tolerance.paper.reproduce import reproduce
 
 ALG_KEYS = {"jvj_mean", "jvj_max", "rcn_mean", "rcn_max", "tracking_error_max"}
 CASE_KEYS = {"robot", "lockable", "x0", "q0", "algorithms"}

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 import fault_tolerance as ft
-from fault_tolerance.failures import Scenarios
+from fault_tolerance.resolution.scenarios import Scenarios
 
 NAMES = ("joint1", "joint2", "joint3", "joint4")
 

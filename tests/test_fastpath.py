@@ -6,11 +6,13 @@ import numpy as np
 import pytest
 
 import fault_tolerance as ft
-from fault_tolerance import sample_kernel as sk
-from fault_tolerance.run import ARRAYS
-from fault_tolerance.sampler import Sampler
-from fault_tolerance.simulation import ServoModel, simulate
-from fault_tolerance.trajectories import CirclePath, FunctionPath
+from fault_tolerance.numerics.fast import sample_dense as sd
+from fault_tolerance.simulation.fast import sample as sk
+from fault_tolerance.simulation.fast.sampler import Sampler
+from fault_tolerance.simulation.paths import CirclePath, FunctionPath
+from fault_tolerance.simulation.run import ARRAYS
+from fault_tolerance.simulation.setup import ServoModel
+from fault_tolerance.simulation.simulate import simulate
 
 pytest.importorskip("numba")
 
@@ -105,8 +107,8 @@ def test_engine_is_checked():
 
 @pytest.fixture
 def samplers(monkeypatch):
-    """The :class:`~fault_tolerance.sampler.Sampler` objects simulate builds, in order."""
-    from fault_tolerance import sampler
+    """The :class:`~fault_tolerance.simulation.fast.sampler.Sampler` objects simulate builds, in order."""
+    from fault_tolerance.simulation.fast import sampler
 
     built, real = [], sampler.Sampler
 
@@ -143,7 +145,7 @@ def _near_limits(radius: float, omega: float, duration: float):
 def test_bounds_met_before_and_after_a_lock_agree(alg, samplers):
     """Joints near their limits: bounds are met (planned rates, reduced robots' rates) before and
     after the lock; the compiled sample solves those samples by the bounded resolvers."""
-    from fault_tolerance.run import (
+    from fault_tolerance.simulation.run import (
         FLAG_BOUND_ACTIVE,
         FLAG_INTOLERABLE_UNDER_LIMITS,
         FLAG_LOCKED,
@@ -171,7 +173,7 @@ def test_bounds_met_before_and_after_a_lock_agree(alg, samplers):
 @pytest.mark.parametrize("alg", ["lnva", "jvja"])
 def test_bounded_planned_rates_and_scaled_task_agree(alg, samplers):
     """A fast circle near a limit: the planned rates meet bounds and the task is scaled."""
-    from fault_tolerance.run import FLAG_BOUND_ACTIVE, FLAG_TASK_SCALED
+    from fault_tolerance.simulation.run import FLAG_BOUND_ACTIVE, FLAG_TASK_SCALED
 
     arm, q0, path = _near_limits(0.15, 8 * np.pi, 0.25)
     fast, ref = _bounded_pair(arm, path, alg, q0=q0, lockable="all", feedback_gain=10.0,
@@ -219,10 +221,10 @@ def test_bounded_sample_in_one_call_equals_the_python_route(alg, samplers, monke
 @pytest.mark.parametrize("target", [False, True])
 def test_compiled_reduced_solve_equals_reduced_bounded(target):
     """boxsolve.reduced_solve against bounded.reduced_bounded: rates and task scale (L4)."""
-    from fault_tolerance.bounded import reduced_bounded
-    from fault_tolerance.boxsolve import reduced_solve, workspace
-    from fault_tolerance.kernels import TRACE_MAX
-    from fault_tolerance.linalg import PIVOT_EPS
+    from fault_tolerance.control.fast.bounded_solve import reduced_solve, workspace
+    from fault_tolerance.control.lapack_steps import TRACE_MAX
+    from fault_tolerance.numerics.linalg import PIVOT_EPS
+    from fault_tolerance.resolution.bounded import reduced_bounded
 
     rng = np.random.default_rng(3)
     m, n, solved, scaled = 4, 7, 0, 0
@@ -246,6 +248,7 @@ def test_compiled_reduced_solve_equals_reduced_bounded(target):
 
 def test_reduced_robots_refused_by_the_compiled_code_take_reduced_bounded(samplers, monkeypatch):
     """Where the compiled code refuses a reduced robot, bounded.reduced_bounded solves it (counted)."""
+
     def refuse(self, J, xd_cmd, target, todo, lo, hi, post, scales):
         return np.full(len(todo), 3, dtype=np.int64)
 
@@ -284,7 +287,7 @@ def test_continuation_jvja_under_limits_takes_the_reference():
 
 def test_plain_python_kernel_matches_the_compiled_one():
     """The kernel is valid Python without numba: same row from ``py_func``; rates as ft.resolve."""
-    from fault_tolerance.simulation import HISTORIES, _allocate
+    from fault_tolerance.simulation.setup import HISTORIES, _allocate
 
     assert sk.COLUMNS == HISTORIES
     arm = ft.load_arm("spatial_4r")
@@ -293,8 +296,8 @@ def test_plain_python_kernel_matches_the_compiled_one():
     m, n = J.shape
     xd = np.array([0.1, 0.0, 0.05])
     cols, w = np.array([0, 1, 2], dtype=np.int64), np.ones(3)
-    params = np.zeros(sk.N_PARAMS)
-    params[[sk.P_TRACE, sk.P_PIVOT, sk.P_WSUM, sk.P_RCN_MAX, sk.P_LOCK]] = 1e6, 1e-4, 3.0, 1e8, -1
+    params = np.zeros(sd.N_PARAMS)
+    params[[sk.P_TRACE, sd.P_PIVOT, sk.P_WSUM, sk.P_RCN_MAX, sk.P_LOCK]] = 1e6, 1e-4, 3.0, 1e8, -1
     params[[sk.P_DT, sk.P_DECAY, sk.P_ACCEL]] = 1e-3, -1.0, np.inf
     rows = []
     for fn in (sk.compiled_sample_kernel(), sk.compiled_sample_kernel().py_func):
@@ -315,8 +318,8 @@ def test_plain_python_kernel_matches_the_compiled_one():
 def test_kernel_under_limits_checks_the_rate_box():
     """With P_BOUNDED: a wide box gives the unbounded row; a tight one returns BOUNDED (compiled
     and plain Python alike), with the box (L1) of bounded.rate_box in ``buf``."""
-    from fault_tolerance.bounded import rate_box
-    from fault_tolerance.simulation import _allocate
+    from fault_tolerance.model.joint_limits import rate_box
+    from fault_tolerance.simulation.setup import _allocate
 
     arm = ft.load_arm("spatial_4r")
     q = arm.random_q(np.random.default_rng(3))
@@ -324,8 +327,8 @@ def test_kernel_under_limits_checks_the_rate_box():
     m, n = J.shape
     xd = np.array([0.1, 0.0, 0.05])
     cols, w = np.array([0, 1, 2], dtype=np.int64), np.ones(3)
-    params = np.zeros(sk.N_PARAMS)
-    params[[sk.P_TRACE, sk.P_PIVOT, sk.P_WSUM, sk.P_RCN_MAX, sk.P_LOCK]] = 1e6, 1e-4, 3.0, 1e8, -1
+    params = np.zeros(sd.N_PARAMS)
+    params[[sk.P_TRACE, sd.P_PIVOT, sk.P_WSUM, sk.P_RCN_MAX, sk.P_LOCK]] = 1e6, 1e-4, 3.0, 1e8, -1
     params[[sk.P_DT, sk.P_DECAY, sk.P_ACCEL, sk.P_BOUNDED]] = 1e-3, -1.0, np.inf, 1.0
     rates = ft.resolve("jvja", J, xd, lockable=[0, 1, 2])
     for fn in (sk.compiled_sample_kernel(), sk.compiled_sample_kernel().py_func):
@@ -345,14 +348,19 @@ def test_kernel_under_limits_checks_the_rate_box():
 
 def test_compiled_flag_constants_are_the_runs():
     """The compiled kernels carry copies of run's flags and bounded's tolerance: they must agree."""
-    from fault_tolerance import bounded, run, sample_bounded, sample_limits, sampler
+    from fault_tolerance.resolution import bounded
+    from fault_tolerance.simulation import run
+    from fault_tolerance.simulation.fast import sample_bounded, sample_limits, sampler
 
     assert sample_bounded.FLAG_BOUND_ACTIVE == run.FLAG_BOUND_ACTIVE
     assert sample_bounded.FLAG_TASK_SCALED == run.FLAG_TASK_SCALED == sampler._TASK_SCALED
     assert sample_bounded.FLAG_INTOLERABLE_UNDER_LIMITS == run.FLAG_INTOLERABLE_UNDER_LIMITS
     assert sample_limits._FLAG_SERVO_CLIPPED == run.FLAG_SERVO_CLIPPED
     assert (sk._FLAG_LOCKED, sk._FLAG_STEP_LIMITED, sk._FLAG_OVER_SPEED) == (
-        run.FLAG_LOCKED, run.FLAG_STEP_LIMITED, run.FLAG_OVER_SPEED)
+        run.FLAG_LOCKED,
+        run.FLAG_STEP_LIMITED,
+        run.FLAG_OVER_SPEED,
+    )
     assert sample_bounded.SCALE_TOL == bounded.SCALE_TOL
 
 

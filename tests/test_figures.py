@@ -9,10 +9,10 @@ import numpy as np
 import pytest
 
 import fault_tolerance as ft
-from fault_tolerance import plots
-from fault_tolerance.posture import initial_posture
-from fault_tolerance.simulation import simulate
-from fault_tolerance.trajectories import CirclePath
+from fault_tolerance.figures import runs as plots
+from fault_tolerance.planning.posture import initial_posture
+from fault_tolerance.simulation.paths import CirclePath
+from fault_tolerance.simulation.simulate import simulate
 
 pytest.importorskip("matplotlib")
 

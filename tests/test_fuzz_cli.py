@@ -201,7 +201,7 @@ JSON = st.recursive(
 
 def _rewrite(folder: Path, mutate) -> None:
     """Apply ``mutate(members)`` to run.npz's members, then re-record the folder as complete."""
-    from fault_tolerance.results import write_record
+    from fault_tolerance.storage.result_folder import write_record
 
     with np.load(folder / "run.npz", allow_pickle=False) as z:
         members = {k: z[k] for k in z.files}
@@ -265,7 +265,7 @@ def test_replay_of_a_tampered_run(saved, how, key, value, field, capsys, tmp_pat
 @given(cut=st.floats(0.0, 1.0), flip=st.integers(0, 10_000))
 def test_replay_of_a_corrupted_file(saved, cut, flip, capsys, tmp_path_factory):
     """A run.npz truncated or with a flipped byte, recorded or not: exit 2 in one line."""
-    from fault_tolerance.results import write_record
+    from fault_tolerance.storage.result_folder import write_record
 
     folder = tmp_path_factory.mktemp("corrupt") / "run"
     shutil.copytree(saved, folder)
@@ -284,8 +284,8 @@ def test_replay_of_a_corrupted_file(saved, cut, flip, capsys, tmp_path_factory):
 def test_zip_bomb_member_is_refused(saved, capsys, tmp_path, monkeypatch):
     """A run.npz whose member inflates past the saved-run limit (here lowered to 8 MiB) is refused
     from the zip directory, before anything is inflated."""
-    from fault_tolerance import budget
-    from fault_tolerance.results import write_record
+    from fault_tolerance.storage import budget
+    from fault_tolerance.storage.result_folder import write_record
 
     monkeypatch.setattr(budget, "MAX_RUN_FILE_BYTES", 8 << 20)
     MAX_RUN_FILE_BYTES = budget.MAX_RUN_FILE_BYTES

@@ -13,9 +13,9 @@ import pinocchio as pin
 import pytest
 
 import fault_tolerance as ft
-from fault_tolerance.catalog import catalog
 from fault_tolerance.errors import IntolerableFailure
-from fault_tolerance.linalg import projection, reduced_rates
+from fault_tolerance.model.catalog import catalog
+from fault_tolerance.numerics.linalg import projection, reduced_rates
 
 H = 1e-6  # central-difference step [rad]
 FD_TOL = 1e-6

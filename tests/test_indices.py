@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 import fault_tolerance as ft
-from fault_tolerance import indices
+from fault_tolerance.resolution import indices
 
 ATOL = 1e-10
 RTOL = 1e-9

@@ -8,9 +8,10 @@ import numpy as np
 import pytest
 
 import fault_tolerance as ft
-from fault_tolerance.limits import outside_limits, velocity_limits
-from fault_tolerance.simulation import ServoModel, simulate
-from fault_tolerance.trajectories import CirclePath
+from fault_tolerance.model.joint_limits import outside_limits, velocity_limits
+from fault_tolerance.simulation.paths import CirclePath
+from fault_tolerance.simulation.setup import ServoModel
+from fault_tolerance.simulation.simulate import simulate
 
 #: A generic Panda start inside its limits from which JVJA's unbounded rates leave them.
 PANDA_Q0 = np.array([-1.304, -0.256, -2.004, -2.07, -0.32, 0.828, 0.54])
@@ -45,8 +46,15 @@ def test_lock_runs_stay_inside_before_and_after_the_lock(algorithm):
     q0 = np.array([2.9, -2.5, 1.2])  # joints 1 and 2 near their limits
     path = CirclePath(x0=arm.fk(q0), radius=0.1, omega=2 * np.pi, duration=0.6, rows=(0, 1))
     run = simulate(
-        arm, path, algorithm, q0=q0, lockable="all", lock_joint="joint3", lock_time=0.3,
-        servo=ServoModel(tau=0.05), feedback_gain=10.0,
+        arm,
+        path,
+        algorithm,
+        q0=q0,
+        lockable="all",
+        lock_joint="joint3",
+        lock_time=0.3,
+        servo=ServoModel(tau=0.05),
+        feedback_gain=10.0,
     )
     assert _inside(arm, run) == (0, 0)
     s = run.summary()
@@ -54,8 +62,16 @@ def test_lock_runs_stay_inside_before_and_after_the_lock(algorithm):
     after = run.t >= 0.3
     assert np.all(run.qd[after, 2] == 0.0)
     paper = simulate(
-        arm, path, algorithm, q0=q0, lockable="all", lock_joint="joint3", lock_time=0.3,
-        servo=ServoModel(tau=0.05), feedback_gain=10.0, limits=False,
+        arm,
+        path,
+        algorithm,
+        q0=q0,
+        lockable="all",
+        lock_joint="joint3",
+        lock_time=0.3,
+        servo=ServoModel(tau=0.05),
+        feedback_gain=10.0,
+        limits=False,
     )
     assert paper.summary()["limits"] is False
 
@@ -72,10 +88,30 @@ def test_start_outside_the_limits_is_refused_with_limits():
 
 def test_cli_no_limits(tmp_path):
     q0 = ",".join(str(v) for v in PANDA_Q0)
-    base = [sys.executable, "-m", "fault_tolerance", "simulate", "--robot", "panda",
-            f"--q0={q0}", "--lockable", "panda_joint1,panda_joint3,panda_joint5,panda_joint7",
-            "--radius", "0.1", "--omega", "3.14159", "--duration", "0.6", "--dt", "0.002",
-            "--feedback", "10", "--algorithms", "jvja", "--no-progress"]
+    base = [
+        sys.executable,
+        "-m",
+        "fault_tolerance",
+        "simulate",
+        "--robot",
+        "panda",
+        f"--q0={q0}",
+        "--lockable",
+        "panda_joint1,panda_joint3,panda_joint5,panda_joint7",
+        "--radius",
+        "0.1",
+        "--omega",
+        "3.14159",
+        "--duration",
+        "0.6",
+        "--dt",
+        "0.002",
+        "--feedback",
+        "10",
+        "--algorithms",
+        "jvja",
+        "--no-progress",
+    ]
     res = {}
     for flag, name in (([], "on"), (["--no-limits"], "off")):
         out = tmp_path / name

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 import fault_tolerance as ft
-from fault_tolerance import linalg
+from fault_tolerance.numerics import linalg
 
 ATOL = 1e-10  # algebraic identities
 RTOL = 1e-9

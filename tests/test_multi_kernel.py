@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 import fault_tolerance as ft
-from fault_tolerance import multi_kernel as mk
-from fault_tolerance.realtime import Controller
+from fault_tolerance.control.controller import Controller
+from fault_tolerance.control.fast import multi_step as mk
 
 pytest.importorskip("numba")
 

@@ -33,8 +33,8 @@ def own_listening() -> list[tuple[str, int]]:
 def saved_run(tmp_path_factory):
     """A short planar 3R run, saved (for the command-line path)."""
     import fault_tolerance as ft
-    from fault_tolerance.experiments import CASES
-    from fault_tolerance.simulation import simulate
+    from fault_tolerance.paper.cases import CASES
+    from fault_tolerance.simulation.simulate import simulate
 
     arm = ft.load_arm("planar_3r")
     run = simulate(arm, CASES["fig2"].path(0.05), "jvja", q0=np.array([0.3, 1.2, 1.0]))
@@ -46,7 +46,7 @@ def saved_run(tmp_path_factory):
 def test_live_replay_server_listens_on_loopback_only(saved_run):
     """viz.serve: the server process listens (web and ZMQ ports) on 127.0.0.1 and nowhere else,
     the URL points there, and closing it leaves no listening socket behind."""
-    from fault_tolerance import viz  # imported here: viz is optional (meshcat)
+    from fault_tolerance.viz import server as viz
 
     run, arm, _ = saved_run
     before = own_listening()
@@ -68,7 +68,7 @@ def test_live_replay_server_listens_on_loopback_only(saved_run):
 def test_replay_command_serves_on_loopback_only(saved_run):
     """`fault-tolerance replay RUN --open` (replay_main): while it waits, every socket it listens
     on is on 127.0.0.1, and it says so."""
-    from fault_tolerance import viz
+    from fault_tolerance.viz import server as viz
 
     _, _, folder = saved_run
     seen = []
@@ -121,7 +121,7 @@ def _ws_status(port: int, host: str, origin: str | None) -> int:
 def test_live_server_refuses_foreign_host_and_origin(saved_run):
     """HTTP and the websocket answer only a loopback Host (a rebinding page's own name is refused
     with 403) and websockets open only from a loopback Origin."""
-    from fault_tolerance import viz
+    from fault_tolerance.viz import server as viz
 
     run, arm, _ = saved_run
     url, server = viz.serve(run, arm, fps=10)
@@ -200,7 +200,7 @@ def test_dns_rebinding_in_chromium(saved_run):
     open the websocket; the same browser on 127.0.0.1 loads the viewer."""
     from test_viz import CHROMIUM, CHROMIUM_ARGS, _browser_missing
 
-    from fault_tolerance import viz
+    from fault_tolerance.viz import server as viz
 
     reason = _browser_missing()
     if reason:

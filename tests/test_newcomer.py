@@ -24,15 +24,15 @@ def test_unknown_robot_suggests_the_closest_name_and_the_preset_arms():
     msg = str(err.value)
     assert "did you mean 'panda'?" in msg
     assert "'talos'" not in msg and "'anymal'" not in msg  # legged robots are not offered
-    from fault_tolerance.catalog import preset_names
+    from fault_tolerance.model.catalog import preset_names
 
     assert err.value.suits == preset_names()
 
 
 def test_suited_arms_are_those_the_command_runs():
     """Each arm offered for `workspace` / `design` really passes that command's own check."""
-    from fault_tolerance.design_search import design
-    from fault_tolerance.workspace import workspace_spec
+    from fault_tolerance.analysis.design.search import design
+    from fault_tolerance.analysis.workspace.closed_form import workspace_spec
 
     assert suited_arms("simulate") == suited_arms(None)
     assert set(suited_arms("design")) == {"planar_3r", "powercube_3r"}
@@ -55,8 +55,20 @@ def test_robots_all_lists_every_example_robot_data_model(capsys):
 def test_lockable_none_runs_an_lnva_lock(tmp_path, capsys):
     """`lock --algorithm lnva --lockable none`: rates anticipate no failure; the locking joint's
     jump is measured, and it equals the run with the locking joint named as the lockable one."""
-    common = ["lock", "--robot", "planar_3r", "--joint", "joint2", "--algorithm", "lnva", "--at",
-              "0.2", "--duration", "0.4", "--no-progress"]
+    common = [
+        "lock",
+        "--robot",
+        "planar_3r",
+        "--joint",
+        "joint2",
+        "--algorithm",
+        "lnva",
+        "--at",
+        "0.2",
+        "--duration",
+        "0.4",
+        "--no-progress",
+    ]
     assert main(common + ["--lockable", "none", "--out", str(tmp_path / "a")]) == 0
     assert main(common + ["--lockable", "joint2", "--out", str(tmp_path / "b")]) == 0
     a = json.loads((tmp_path / "a" / "summary.json").read_text())
@@ -75,22 +87,41 @@ def test_bench_tables_prints_the_saved_run(tmp_path):
         "machine": {"cpu": "CPU", "cores": 2, "loadavg": [0.5, 0.4, 0.3]},
         "results": {"arm": {"ops": {"jvja": {"median_us": 1.234, "p99_us": 2.5}}}},
         "targets": [
-            {"arm": "arm", "label": "JVJA / floor", "value": 1.31, "limit": 1.3,
-             "relation": "<=", "pass": False},
-            {"arm": "arm", "label": "info row", "value": 2.0, "limit": 1.5, "relation": "<=",
-             "pass": None},
+            {
+                "arm": "arm",
+                "label": "JVJA / floor",
+                "value": 1.31,
+                "limit": 1.3,
+                "relation": "<=",
+                "pass": False,
+            },
+            {
+                "arm": "arm",
+                "label": "info row",
+                "value": 2.0,
+                "limit": 1.5,
+                "relation": "<=",
+                "pass": None,
+            },
         ],
     }
     f = tmp_path / "b.json"
     f.write_text(json.dumps(bench))
-    p = subprocess.run([sys.executable, str(ROOT / "scripts" / "bench_tables.py"), str(f)],
-                       capture_output=True, text=True, check=True)
+    p = subprocess.run(
+        [sys.executable, str(ROOT / "scripts" / "bench_tables.py"), str(f)],
+        capture_output=True,
+        text=True,
+        check=True,
+    )
     assert "`fault-tolerance bench --json b.json`" in p.stdout
     assert "| jvja | 1.23 / 2.50 |" in p.stdout
     assert "| arm | JVJA / floor | 1.31 | <= 1.3 | FAIL |" in p.stdout
     assert "info (target not applied here)" in p.stdout
-    bad = subprocess.run([sys.executable, str(ROOT / "scripts" / "bench_tables.py"),
-                          str(ROOT / "README.md")], capture_output=True, text=True)
+    bad = subprocess.run(
+        [sys.executable, str(ROOT / "scripts" / "bench_tables.py"), str(ROOT / "README.md")],
+        capture_output=True,
+        text=True,
+    )
     assert bad.returncode == 2 and "bench_tables: error" in bad.stderr
 
 
@@ -128,7 +159,7 @@ def test_a_reader_that_leaves_ends_the_command_quietly(capsys):
     (it used to be "unexpected error", exit 1)."""
     import argparse
 
-    from fault_tolerance.cli.common import run_command
+    from fault_tolerance.cli.runner import run_command
 
     def prints_into_a_closed_pipe(args):
         raise BrokenPipeError(32, "Broken pipe")
@@ -146,8 +177,17 @@ def test_lockable_none_on_a_real_arm_from_its_default_start(tmp_path):
 
     from real_arms import cli_args
 
-    base = cli_args("ur5e") + ["--joint", "elbow_joint", "--algorithm", "lnva", "--at", "0.5",
-                               "--duration", "1", "--no-progress"]
+    base = cli_args("ur5e") + [
+        "--joint",
+        "elbow_joint",
+        "--algorithm",
+        "lnva",
+        "--at",
+        "0.5",
+        "--duration",
+        "1",
+        "--no-progress",
+    ]
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # the description's meshes are not kept in tests/data
         assert main(["lock", *base, "--lockable", "none", "--out", str(tmp_path / "a")]) == 0
@@ -156,5 +196,9 @@ def test_lockable_none_on_a_real_arm_from_its_default_start(tmp_path):
         b = json.loads((tmp_path / "b" / "summary.json").read_text())
         assert a["meta"]["lockable"] == [["elbow_joint"]]
         assert a["summary"] == b["summary"]
-        assert main(["workspace", *cli_args("ur5e"), "--lockable", "none", "--out",
-                     str(tmp_path / "w")]) == 2
+        assert (
+            main(
+                ["workspace", *cli_args("ur5e"), "--lockable", "none", "--out", str(tmp_path / "w")]
+            )
+            == 2
+        )

@@ -14,11 +14,11 @@ import numpy as np
 import pytest
 
 import fault_tolerance as ft
-import fault_tolerance.experiments as experiments
-import fault_tolerance.files as files
-import fault_tolerance.simulation as simulation
-from fault_tolerance.files import write_atomic
-from fault_tolerance.run import Run
+import fault_tolerance.paper.reproduce as experiments
+import fault_tolerance.simulation.simulate as simulation
+import fault_tolerance.storage.atomic as files
+from fault_tolerance.simulation.run import Run
+from fault_tolerance.storage.atomic import write_atomic
 
 OLD = b"the previous, complete content\n"
 
@@ -103,7 +103,7 @@ def test_run_save_failing_on_the_last_file_keeps_the_earlier_run_whole(
     earlier run, whole (it loads, its record verifies), and nothing of the new one; the disk error
     is the toolkit's one-line OutputError."""
     from fault_tolerance.errors import OutputError
-    from fault_tolerance.results import verify_folder
+    from fault_tolerance.storage.result_folder import verify_folder
 
     path = experiments.CASES["fig2"].path(0.02)
     first = simulation.simulate(planar_3r.arm, path, "lnva", q0=np.array([0.3, 1.2, 1.0]))

@@ -6,15 +6,15 @@ import numpy as np
 import pytest
 
 import fault_tolerance as ft
-from fault_tolerance.failures import scenarios
-from fault_tolerance.planning import plan
-from fault_tolerance.posture import (
+from fault_tolerance.planning.paper_loop import plan
+from fault_tolerance.planning.posture import (
     initial_posture,
     inverse_kinematics,
     self_motion_curve,
     square_sum_rcn_at,
 )
-from fault_tolerance.trajectories import CirclePath
+from fault_tolerance.resolution.scenarios import scenarios
+from fault_tolerance.simulation.paths import CirclePath
 
 
 @pytest.fixture(scope="module")
@@ -83,13 +83,3 @@ def test_plan_reports_its_choice(arm3):
     run, attempts = plan(arm3, path, "jvja", threshold=1.0, max_attempts=2)
     assert not any(a.accepted for a in attempts)
     assert any("no start met the threshold" in a.reason for a in attempts)
-
-
-def test_plan_is_still_importable_from_posture():
-    """The planning loop moved to fault_tolerance.planning (#11); the old import path still works."""
-    import fault_tolerance.planning as planning
-    import fault_tolerance.posture as posture
-
-    assert posture.plan is planning.plan and posture.PlanAttempt is planning.PlanAttempt
-    with pytest.raises(AttributeError, match="no attribute 'nothing'"):
-        posture.nothing  # noqa: B018

@@ -11,11 +11,11 @@ import numpy as np
 import pytest
 
 import fault_tolerance as ft
-from fault_tolerance.failures import scenarios
-from fault_tolerance.linalg import SIGMA_EPS, projection
-from fault_tolerance.posture import initial_posture, inverse_kinematics, self_motion_curve
-from fault_tolerance.posture_steps import FastSteps, ReferenceSteps, norm, square_sum
-from fault_tolerance.wholepath.problem import kinematics, projections
+from fault_tolerance.numerics.linalg import SIGMA_EPS, projection
+from fault_tolerance.planning.posture import initial_posture, inverse_kinematics, self_motion_curve
+from fault_tolerance.planning.posture_steps import FastSteps, ReferenceSteps, norm, square_sum
+from fault_tolerance.planning.wholepath.problem import kinematics, projections
+from fault_tolerance.resolution.scenarios import scenarios
 
 ARMS = [
     ("planar_3r", None),
@@ -161,7 +161,7 @@ def test_public_steps_accept_reference_and_check_their_input():
 @pytest.mark.parametrize("name,task", ARMS)
 def test_pinv_and_null_is_linalg_projection_bit_for_bit(name, task):
     """posture_steps.pinv_and_null: J⁺ and N of linalg.projection, regular and near-singular J."""
-    from fault_tolerance.posture_steps import pinv_and_null
+    from fault_tolerance.planning.posture_steps import pinv_and_null
 
     arm = _load(name, task)
     rng = np.random.default_rng(7)
@@ -178,7 +178,7 @@ def test_pinv_and_null_is_linalg_projection_bit_for_bit(name, task):
 
 def _post_rates_one_by_one(a, N, sc):
     """The per-scenario loop post_rates ran before it was vectorised (one-joint scenarios)."""
-    from fault_tolerance.linalg import damped_pivots
+    from fault_tolerance.numerics.linalg import damped_pivots
 
     B, n = a.shape
     out = np.empty((B, sc.f, n))
@@ -194,7 +194,7 @@ def _post_rates_one_by_one(a, N, sc):
 )
 def test_post_rates_of_all_scenarios_at_once_equal_one_by_one(name, task):
     """The vectorised one-joint post_rates: same numbers and C layout (einsum sums by layout)."""
-    from fault_tolerance.wholepath.problem import jumps, post_rates
+    from fault_tolerance.planning.wholepath.problem import jumps, post_rates
 
     arm = _load(name, task)
     rng = np.random.default_rng(2)
@@ -212,9 +212,13 @@ def test_post_rates_of_all_scenarios_at_once_equal_one_by_one(name, task):
 @pytest.mark.parametrize("gain", [0.0, 10.0])
 def test_rollout_steps_are_the_plain_steps(gain):
     """rollout's rates equal a plain loop with linalg.projection (LNVA and JVJA), bit for bit."""
-    from fault_tolerance.paper_cases import CASES
-    from fault_tolerance.wholepath import build_problem, rollout
-    from fault_tolerance.wholepath.problem import jvja_rates, post_rates
+    from fault_tolerance.paper.cases import CASES
+    from fault_tolerance.planning.wholepath.problem import (
+        build_problem,
+        jvja_rates,
+        post_rates,
+        rollout,
+    )
 
     case = CASES["fig7"]
     arm = ft.load_arm(case.robot)
@@ -239,13 +243,13 @@ def test_rollout_steps_are_the_plain_steps(gain):
 
 def test_batched_kinematics_is_the_arm_row_by_row():
     """wholepath kinematics: each row's J and task error equal the arm's (position and pose)."""
-    from fault_tolerance.paper_cases import CASES
-    from fault_tolerance.wholepath import build_problem
+    from fault_tolerance.paper.cases import CASES
+    from fault_tolerance.planning.wholepath.problem import build_problem
 
     for arm in (ft.load_arm("spatial_4r"), ft.load_arm("panda", task="pose")):
         path = CASES["fig7"].path(0.1)
         if arm.m == 6:
-            from fault_tolerance.trajectories import CirclePath
+            from fault_tolerance.simulation.paths import CirclePath
 
             x0 = arm.fk(arm.q_reference)
             path = CirclePath(x0, 0.05, 2 * np.pi, 0.1, rows=(0, 1))

@@ -15,7 +15,7 @@ from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
 import fault_tolerance as ft
-from fault_tolerance import linalg
+from fault_tolerance.numerics import linalg
 
 ATOL = 1e-10
 RTOL = 1e-9

@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 
 import fault_tolerance as ft
-from fault_tolerance import rank_one_eigen as ro
-from fault_tolerance import sample_linalg as sl
-from fault_tolerance.indices import RCN_MAX
+from fault_tolerance.numerics.fast import rank_one_eigen as ro
+from fault_tolerance.numerics.fast import sample_dense as sl
+from fault_tolerance.resolution.indices import RCN_MAX
 
 EPS = np.finfo(float).eps
 

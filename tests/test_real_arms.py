@@ -20,8 +20,8 @@ import pytest
 from real_arms import ARMS, DATA, cli_args, load, package_dirs, path_args, source
 
 import fault_tolerance as ft
-from fault_tolerance.chains import serial_chains
-from fault_tolerance.models import build_model, read_description
+from fault_tolerance.model.chains import serial_chains
+from fault_tolerance.model.formats.build import build_model, read_description
 
 NAMES = sorted(ARMS)
 #: Samples with σ_min(J) below this are near-singular (the simulation flags < 1e-6; a real start
@@ -201,9 +201,9 @@ def test_inspect_simulate_and_replay_from_the_command_line(name, tmp_path):
     # the diagnostics may say that k_S passes the paper's RCN threshold of 100 (a quality warning
     # that issue 10 does not exclude); any other warning (velocity, near-singular,
     # near-intolerable, off the path) fails
-    assert not [
-        line for line in _only_expected_warnings(p.stderr) if RCN_WARNING not in line
-    ], p.stderr
+    assert not [line for line in _only_expected_warnings(p.stderr) if RCN_WARNING not in line], (
+        p.stderr
+    )
     arm = load(name)
     run = np.load(out / "jvja" / "run.npz")
     q = run["q"]
@@ -216,7 +216,9 @@ def test_inspect_simulate_and_replay_from_the_command_line(name, tmp_path):
     assert summary["summary"]["near_singular_samples"] == 0
 
     html = tmp_path / "replay.html"
-    dirs = [a for d in package_dirs(name) for a in ("--package-dir", d)]  # meshes: named folders only
+    dirs = [
+        a for d in package_dirs(name) for a in ("--package-dir", d)
+    ]  # meshes: named folders only
     p = _cli("replay", str(out / "jvja"), "--html", str(html), *dirs)
     assert p.returncode == 0, p.stderr
     assert not _only_expected_warnings(p.stderr), p.stderr
@@ -232,8 +234,8 @@ def test_compiled_run_equals_the_reference_from_the_default_start(name):
 
     (PR2 under limits: λ agrees to 1.06e-9 relative at one bounded sample, with its rates to
     7e-10: the compiled bounded solver and the reference's active set round differently.)"""
-    from fault_tolerance.simulation import simulate
-    from fault_tolerance.trajectories import CirclePath
+    from fault_tolerance.simulation.paths import CirclePath
+    from fault_tolerance.simulation.simulate import simulate
 
     e = ARMS[name]
     arm = load(name)

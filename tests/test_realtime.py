@@ -6,11 +6,12 @@ import numpy as np
 import pytest
 
 import fault_tolerance as ft
-from fault_tolerance import planner, realtime
-from fault_tolerance.indices import rcn_gradient
-from fault_tolerance.linalg import PIVOT_TOL, SIGMA_EPS
-from fault_tolerance.planner import jvja_explicit
-from fault_tolerance.realtime import BACKENDS, Controller, available_backends
+from fault_tolerance.control import controller as realtime
+from fault_tolerance.control.controller import BACKENDS, Controller, available_backends
+from fault_tolerance.numerics.linalg import PIVOT_TOL, SIGMA_EPS
+from fault_tolerance.resolution import resolvers as planner
+from fault_tolerance.resolution.indices import rcn_gradient
+from fault_tolerance.resolution.resolvers import jvja_explicit
 
 AVAILABLE = available_backends()
 ATOL = 1e-10
@@ -163,7 +164,7 @@ def test_mda_matches_resolve(robot, draw_q, draw_xdot, rng):
 
 def test_kernel_as_plain_python(robot, draw_q, draw_xdot, rng):
     """The compiled kernel's source, run as plain Python, gives the planner's LNVA and JVJA."""
-    from fault_tolerance import single_kernel
+    from fault_tolerance.control.fast import step as single_kernel
 
     ctrl = _controllers(robot, "numpy")
     n = robot.n
@@ -297,7 +298,9 @@ def test_tolerate_damps_pivots_like_the_planner(spatial_4r, backend, draw_q, dra
         assert np.all(np.isfinite(qd))
         assert_close(qd, planner.jvja(J, xd, "all", tolerate=True))
     # away from small pivots the fast path is taken and equals the plain JVJA
-    ctrl = Controller(spatial_4r.arm, list(spatial_4r.lockable), tolerate=True, backend=backend, limits=False)
+    ctrl = Controller(
+        spatial_4r.arm, list(spatial_4r.lockable), tolerate=True, backend=backend, limits=False
+    )
     q, xd = draw_q(spatial_4r, rng), draw_xdot(rng, 3)
     lock = list(spatial_4r.lockable)
     ref = ft.resolve("jvja", spatial_4r.arm.jacobian(q), xd, lockable=lock)

@@ -15,9 +15,9 @@ import numpy as np
 import pytest
 
 import fault_tolerance as ft
-from fault_tolerance.posture import initial_posture
-from fault_tolerance.simulation import simulate
-from fault_tolerance.trajectories import CirclePath
+from fault_tolerance.planning.posture import initial_posture
+from fault_tolerance.simulation.paths import CirclePath
+from fault_tolerance.simulation.simulate import simulate
 
 viz = pytest.importorskip("fault_tolerance.viz")
 from fault_tolerance.viz import charts  # noqa: E402

@@ -12,16 +12,10 @@ from pathlib import Path
 
 import pytest
 
-from fault_tolerance import results
 from fault_tolerance.errors import FolderLocked, IncompleteResult, InvalidInput, OutputError
-from fault_tolerance.results import (
-    RECORD,
-    FolderLock,
-    in_progress,
-    lock_holder,
-    staged_folder,
-    verify_folder,
-)
+from fault_tolerance.storage import result_folder as results
+from fault_tolerance.storage.folder_lock import FolderLock, in_progress, lock_holder
+from fault_tolerance.storage.result_folder import RECORD, staged_folder, verify_folder
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -144,7 +138,7 @@ def test_verify_checks_only_the_files_asked_for(tmp_path):
 HOLDER = textwrap.dedent(
     """
     import sys, time
-    from fault_tolerance.results import FolderLock
+    from fault_tolerance.storage.result_folder import FolderLock
     with FolderLock(sys.argv[1]):
         print("locked", flush=True)
         time.sleep(60)
@@ -191,7 +185,7 @@ WRITER = textwrap.dedent(
     """
     import sys, time
     from fault_tolerance.errors import FolderLocked
-    from fault_tolerance.results import staged_folder
+    from fault_tolerance.storage.result_folder import staged_folder
     me = sys.argv[2]
     try:
         with staged_folder(sys.argv[1]) as tmp:
@@ -231,7 +225,7 @@ def test_concurrent_writers_never_mix(tmp_path):
 KILLED = textwrap.dedent(
     """
     import sys, time
-    from fault_tolerance.results import staged_folder
+    from fault_tolerance.storage.result_folder import staged_folder
     with staged_folder(sys.argv[1]) as tmp:
         (tmp / "a").write_text("new")
         print("writing", flush=True)

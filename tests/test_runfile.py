@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from fault_tolerance.errors import InvalidInput
-from fault_tolerance.runfile import SHAPES, read_run_file
+from fault_tolerance.storage.run_file import SHAPES, read_run_file
 
 REQUIRED = tuple(k for k in SHAPES if k != "qd_cmd")
 K, N, M, F = 6, 3, 2, 3

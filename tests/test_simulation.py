@@ -8,10 +8,12 @@ import numpy as np
 import pytest
 
 import fault_tolerance as ft
-from fault_tolerance.loading import arm_from_meta
-from fault_tolerance.posture import initial_posture
-from fault_tolerance.simulation import ARRAYS, FLAG_LOCKED, Run, ServoModel, simulate
-from fault_tolerance.trajectories import CirclePath
+from fault_tolerance.model.loading import arm_from_meta
+from fault_tolerance.planning.posture import initial_posture
+from fault_tolerance.simulation.paths import CirclePath
+from fault_tolerance.simulation.run import ARRAYS, FLAG_LOCKED, Run
+from fault_tolerance.simulation.setup import ServoModel
+from fault_tolerance.simulation.simulate import simulate
 
 
 @pytest.fixture(scope="module")

@@ -14,17 +14,23 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import fault_tolerance as ft
-from fault_tolerance.indices import RCN_MAX, post_failure_rates
-from fault_tolerance.linalg import PIVOT_DAMPING, PIVOT_EPS, SIGMA_EPS, damped_pivots, projection
-from fault_tolerance.planner import MDA_MAX_STEP
-from fault_tolerance.simulation import (
+from fault_tolerance.numerics.linalg import (
+    PIVOT_DAMPING,
+    PIVOT_EPS,
+    SIGMA_EPS,
+    damped_pivots,
+    projection,
+)
+from fault_tolerance.resolution.indices import RCN_MAX, post_failure_rates
+from fault_tolerance.resolution.resolvers import MDA_MAX_STEP
+from fault_tolerance.simulation.paths import CirclePath, FunctionPath
+from fault_tolerance.simulation.run import (
     FLAG_NEAR_INTOLERABLE,
     FLAG_NEAR_SINGULAR,
     FLAG_OVER_SPEED,
     FLAG_STEP_LIMITED,
-    simulate,
 )
-from fault_tolerance.trajectories import CirclePath, FunctionPath
+from fault_tolerance.simulation.simulate import simulate
 
 PROPS = settings(max_examples=25, deadline=None, derandomize=True, database=None)
 ALGS = ("lnva", "jvja", "mda")

@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 
 import fault_tolerance as ft
-from fault_tolerance import sample_linalg as sl
-from fault_tolerance import small_eigen as se
-from fault_tolerance.indices import RCN_MAX
+from fault_tolerance.numerics.fast import sample_dense as sl
+from fault_tolerance.numerics.fast import small_eigen as se
+from fault_tolerance.resolution.indices import RCN_MAX
 
 
 def _eigenvalues(A, fn=se.symmetric_eigenvalues):

@@ -6,10 +6,10 @@ import numpy as np
 import pytest
 
 import fault_tolerance as ft
-from fault_tolerance import start as st
-from fault_tolerance.linalg import projection
-from fault_tolerance.posture import lockable_scenarios
-from fault_tolerance.simulation import FLAG_NEAR_SINGULAR
+from fault_tolerance.numerics.linalg import projection
+from fault_tolerance.planning import start_checks as st
+from fault_tolerance.planning.posture import lockable_scenarios
+from fault_tolerance.simulation.run import FLAG_NEAR_SINGULAR
 
 
 def _assert_good_start(arm, choice, lockable=None):
@@ -79,7 +79,7 @@ def test_no_start_is_a_clear_error():
 
 def test_path_too_large_is_refused_with_reason():
     """A task that leaves the workspace from every candidate is refused, with the last reason."""
-    from fault_tolerance.trajectories import CirclePath
+    from fault_tolerance.simulation.paths import CirclePath
 
     arm = ft.load_arm("planar_3r")
     big = lambda x0: CirclePath(x0, 2.0, 2 * np.pi, 1.0)  # noqa: E731

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 import fault_tolerance as ft
-from fault_tolerance.trajectories import CirclePath, FunctionPath, SampledPath, load_csv
+from fault_tolerance.simulation.paths import CirclePath, FunctionPath, SampledPath, load_csv
 
 
 def test_fig2_circle_velocity_matches_the_paper():

@@ -6,10 +6,11 @@ import numpy as np
 import pytest
 
 import fault_tolerance as ft
-from fault_tolerance.run import Run
-from fault_tolerance.simulation import simulate
-from fault_tolerance.task_errors import error_norms
-from fault_tolerance.trajectories import CirclePath
+from fault_tolerance.model.task_errors import error_norms
+from fault_tolerance.planning.posture import initial_posture
+from fault_tolerance.simulation.paths import CirclePath
+from fault_tolerance.simulation.run import Run
+from fault_tolerance.simulation.simulate import simulate
 
 
 @pytest.fixture(scope="module")
@@ -52,7 +53,7 @@ def test_planar_run_has_no_orientation_error():
     """Planar and position tasks have only the position error (summary keys unchanged)."""
     arm = ft.load_arm("planar_3r")
     path = CirclePath([0.35, 0.0], 0.1, 2 * np.pi, 0.02)
-    q0 = ft.posture.initial_posture(arm, path.x0).q
+    q0 = initial_posture(arm, path.x0).q
     run = simulate(arm, path, "lnva", q0=q0)
     assert run.orientation_error is None and "orientation_error_max" not in run.summary()
 
@@ -66,7 +67,7 @@ def test_error_norms_never_add_metres_and_radians():
 
 def test_lock_plot_has_an_orientation_panel_for_pose_tasks(pose_run):
     """plot_lock draws the orientation error [mrad] in a panel of its own for pose tasks."""
-    from fault_tolerance import plots
+    from fault_tolerance.figures import runs as plots
 
     _, run = pose_run
     fig = plots.plot_lock({"run": run})
@@ -76,7 +77,7 @@ def test_lock_plot_has_an_orientation_panel_for_pose_tasks(pose_run):
 
 def test_report_tables_give_lambda_in_its_unit():
     """REPORT.md's λ and δ table headers carry (rad/s)²."""
-    from fault_tolerance.report import write_report
+    from fault_tolerance.paper.report import write_report
 
     algs = {a: {"jvj_mean": 1.0, "jvj_max": 2.0, "rcn_mean": 3.0, "rcn_max": 4.0} for a in
             ("lnva", "jvja", "mda")}  # fmt: skip

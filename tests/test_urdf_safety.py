@@ -25,9 +25,10 @@ import pinocchio as pin
 import pytest
 
 import fault_tolerance as ft
-from fault_tolerance import urdf as urdf_mod
-from fault_tolerance.inspection import inspect_text
-from fault_tolerance.urdf import check_urdf_file, read_urdf
+from fault_tolerance.analysis.inspection import inspect_text
+from fault_tolerance.model.formats import urdf as urdf_mod
+from fault_tolerance.model.formats.urdf import read_urdf
+from fault_tolerance.model.formats.xml_safety import MAX_URDF_BYTES, check_urdf_file
 
 SECRET = "TOPSECRET-4242"
 LIMIT = '<limit lower="-3" upper="3" effort="10" velocity="2"/>'
@@ -231,7 +232,7 @@ def test_huge_file_is_refused_before_it_is_read(tmp_path, monkeypatch):
     """A file over MAX_URDF_BYTES is refused from its size alone (sparse file, nothing read)."""
     path = tmp_path / "huge.urdf"
     with path.open("wb") as fh:
-        fh.truncate(urdf_mod.MAX_URDF_BYTES + 1)
+        fh.truncate(MAX_URDF_BYTES + 1)
     monkeypatch.setattr(Path, "read_bytes", lambda self: pytest.fail("the huge file was read"))
     with pytest.raises(ft.URDFError, match="larger than"):
         check_urdf_file(path)
@@ -574,7 +575,7 @@ def test_same_name_on_two_non_link_frames_is_ambiguous():
     AmbiguousFrame (a FrameNotFound) naming both, instead of silently taking the first."""
     import pinocchio as pin
 
-    from fault_tolerance.chains import frame_id
+    from fault_tolerance.model.chains import frame_id
 
     model = pin.buildSampleModelManipulator()
     for joint_id, kind in ((1, pin.FrameType.OP_FRAME), (2, pin.FrameType.SENSOR)):
@@ -628,7 +629,7 @@ def test_bad_joint_limits_are_refused_naming_the_joint(limit, message, tmp_path)
 
 def test_urdf_bytes_are_checked_like_a_file(tmp_path):
     """read_urdf(name, data) checks the given bytes (DTDs, structure) and never opens ``name``."""
-    from fault_tolerance.urdf import read_urdf
+    from fault_tolerance.model.formats.urdf import read_urdf
 
     desc = read_urdf(tmp_path / "not_there.urdf", robot(*chain3()).encode())
     assert "joint1" in desc.joint_types
@@ -652,7 +653,7 @@ def long_chain(n: int) -> str:
 def test_too_many_active_joints_are_refused_before_pinocchio_allocates(tmp_path):
     """A 1000-joint chain (inside the file limit) as one arm: refused naming the limit (Pinocchio's
     data would need ~60 GB); the same file with a tip near the base loads."""
-    from fault_tolerance.arm import MAX_ACTIVE_JOINTS
+    from fault_tolerance.model.arm import MAX_ACTIVE_JOINTS
 
     path = tmp_path / "chain1000.urdf"
     path.write_text(long_chain(1000))

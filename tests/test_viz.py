@@ -24,9 +24,10 @@ import pytest
 
 import fault_tolerance as ft
 from fault_tolerance.errors import InvalidInput
-from fault_tolerance.posture import initial_posture
-from fault_tolerance.simulation import Run, simulate
-from fault_tolerance.trajectories import CirclePath
+from fault_tolerance.planning.posture import initial_posture
+from fault_tolerance.simulation.paths import CirclePath
+from fault_tolerance.simulation.run import Run
+from fault_tolerance.simulation.simulate import simulate
 
 viz = pytest.importorskip("fault_tolerance.viz")
 
@@ -213,7 +214,7 @@ def test_export_is_atomic(planar, tmp_path, monkeypatch):
     def fail(src, dst):
         raise OSError("disk full")
 
-    monkeypatch.setattr("fault_tolerance.files.os.replace", fail)
+    monkeypatch.setattr("fault_tolerance.storage.atomic.os.replace", fail)
     with pytest.raises(OSError, match="disk full"):
         viz.export_html(run, target, arm)
     assert target.read_text() == "previous replay"

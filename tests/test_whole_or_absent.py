@@ -18,7 +18,8 @@ from pathlib import Path
 
 import pytest
 
-from fault_tolerance.results import RECORD, lock_holder, verify_folder
+from fault_tolerance.storage.folder_lock import lock_holder
+from fault_tolerance.storage.result_folder import RECORD, verify_folder
 
 ROOT = Path(__file__).resolve().parents[1]
 SIM = ["simulate", "--robot", "planar_3r", "--no-progress"]
@@ -64,7 +65,7 @@ def run_folders(out: Path) -> list[Path]:
 
 def assert_whole(folder: Path) -> None:
     """The folder verifies against its record, loads, and replays (exit 0)."""
-    from fault_tolerance.run import Run
+    from fault_tolerance.simulation.run import Run
 
     verify_folder(folder)
     Run.load(folder)
@@ -198,7 +199,7 @@ def test_workspace_and_design_refuse_a_second_writer(tmp_path, command):
     """workspace / design --out DIR while another process writes DIR: exit 2 naming its pid."""
     out = tmp_path / "ws"
     holder = subprocess.Popen(
-        [sys.executable, "-c", "import sys, time\nfrom fault_tolerance.results import FolderLock\n"
+        [sys.executable, "-c", "import sys, time\nfrom fault_tolerance.storage.result_folder import FolderLock\n"
          "with FolderLock(sys.argv[1]):\n    print('locked', flush=True)\n    time.sleep(60)",
          str(out)],
         stdout=subprocess.PIPE, text=True, cwd=ROOT,

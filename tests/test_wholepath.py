@@ -6,19 +6,24 @@ import pytest
 
 import fault_tolerance as ft
 from fault_tolerance.errors import InvalidInput
-from fault_tolerance.experiments import CASES
-from fault_tolerance.posture import inverse_kinematics
-from fault_tolerance.trajectories import CirclePath
-from fault_tolerance.wholepath import build_problem, plan_path, rollout
-from fault_tolerance.wholepath.dp import (
+from fault_tolerance.paper.cases import CASES
+from fault_tolerance.planning.posture import inverse_kinematics
+from fault_tolerance.planning.wholepath.dp import (
     brute_force,
     node_data,
     solve_banded,
     stage_edges,
     trace_stages,
 )
-from fault_tolerance.wholepath.problem import kinematics, projections
-from fault_tolerance.wholepath.scp import scp
+from fault_tolerance.planning.wholepath.plan import plan_path
+from fault_tolerance.planning.wholepath.problem import (
+    build_problem,
+    kinematics,
+    projections,
+    rollout,
+)
+from fault_tolerance.planning.wholepath.scp import scp
+from fault_tolerance.simulation.paths import CirclePath
 
 #: A dexterous start of Fig. 7 (on the self-motion of its x0).
 FIG7_Q0 = np.array([0.2574, 1.2106, -0.9513, 1.9333])
@@ -198,7 +203,7 @@ def test_bad_options_are_refused():
 @pytest.mark.parametrize("key", sorted(CASES))
 def test_paper_cases_global_not_above_local(key):
     """On each paper case, from the minimum-RCN start, mean λ(global) ≤ LNVA's and JVJA's."""
-    from fault_tolerance.posture import initial_posture
+    from fault_tolerance.planning.posture import initial_posture
 
     case = CASES[key]
     arm = ft.load_arm(case.robot)
@@ -240,7 +245,7 @@ def test_example_robot_arms_global_not_above_local(robot, task):
 
 def test_simulate_global_is_a_run_like_the_others():
     """simulate(arm, path, "global") tracks the path as LNVA does and its mean jump is not above theirs."""
-    from fault_tolerance.simulation import simulate
+    from fault_tolerance.simulation.simulate import simulate
 
     arm, path, q0, lockable = _fig7(0.3)
     runs = {a: simulate(arm, path, a, q0=q0, lockable=lockable) for a in ("lnva", "jvja", "global")}
@@ -248,7 +253,9 @@ def test_simulate_global_is_a_run_like_the_others():
     assert g.meta["algorithm"] == "global" and g.meta["global"]["method"]
     assert np.array_equal(g.q[0], q0)
     assert g.summary()["jvj_mean"] <= min(r.summary()["jvj_mean"] for r in runs.values())
-    assert g.summary()["tracking_error_max"] < 2 * runs["lnva"].summary()["tracking_error_max"] + 1e-6
+    assert (
+        g.summary()["tracking_error_max"] < 2 * runs["lnva"].summary()["tracking_error_max"] + 1e-6
+    )
     J = np.array([arm.jacobian(q) for q in g.q])
     xd = np.array([path.xdot(t) for t in g.t])
     assert np.max(np.abs(np.einsum("kmn,kn->km", J, g.qd) - xd)) < 1e-9
@@ -256,7 +263,7 @@ def test_simulate_global_is_a_run_like_the_others():
 
 def test_simulate_global_free_start_and_lock():
     """Without q0 the global plan picks its start at the path's first point; a lock run works too."""
-    from fault_tolerance.simulation import simulate
+    from fault_tolerance.simulation.simulate import simulate
 
     arm, path, q0, lockable = _fig7(0.2)
     free = simulate(arm, path, "global", lockable=lockable)
@@ -270,7 +277,7 @@ def test_simulate_global_free_start_and_lock():
 
 def test_simulate_refuses_plan_options_elsewhere_and_a_missing_q0():
     """plan_options only with global; q0 required for the local planners; unknown options refused."""
-    from fault_tolerance.simulation import simulate
+    from fault_tolerance.simulation.simulate import simulate
 
     arm, path, q0, lockable = _fig7(0.05)
     with pytest.raises(InvalidInput, match="plan_options"):
@@ -292,4 +299,6 @@ def test_cli_simulate_global(tmp_path, capsys):
     assert rc == 0
     assert (tmp_path / "global" / "run.npz").is_file()
     assert "global" in capsys.readouterr().out
-    assert main(["simulate", "--robot", "spatial_4r", "--algorithms", "gloabl", "--no-progress"]) == 2
+    assert (
+        main(["simulate", "--robot", "spatial_4r", "--algorithms", "gloabl", "--no-progress"]) == 2
+    )

@@ -10,14 +10,14 @@ from conftest import ROOT
 from scipy.optimize import least_squares
 
 import fault_tolerance as ft
-from fault_tolerance import sweep
-from fault_tolerance.errors import InvalidInput
-from fault_tolerance.workspace import (
+from fault_tolerance.analysis import sweep
+from fault_tolerance.analysis.workspace.closed_form import (
     failure_tolerant_workspace,
     planar_chunk,
     radius_layout,
     workspace_spec,
 )
+from fault_tolerance.errors import InvalidInput
 
 
 def scaled_urdf(tmp_path, factor, limit=3.14159, name="planar_3r.urdf"):

@@ -7,12 +7,13 @@ from __future__ import annotations
 
 import pytest
 
-from fault_tolerance import bench, workspace_bench
+from fault_tolerance.bench import command as bench_command
+from fault_tolerance.bench import workspace as workspace_bench
 
 
 def test_bad_grid_exits_2(capsys):
     """``--workspace 1`` is refused with a one-line message."""
-    assert bench.main(["--robots", "planar_3r", "--workspace", "1"]) == 2
+    assert bench_command.main(["--robots", "planar_3r", "--workspace", "1"]) == 2
     err = capsys.readouterr().err.strip()
     assert "\n" not in err and "--workspace GRID must be >= 2" in err
 

@@ -3,13 +3,13 @@
 For each arm it times, in one process and after a warm-up, single calls of
 
 * ``jacobian``: the task Jacobian (Pinocchio ``computeFrameJacobian``);
-* ``lnva``, ``jvja``, ``rcn``, ``mda``: the :class:`~fault_tolerance.realtime.Controller` steps
+* ``lnva``, ``jvja``, ``rcn``, ``mda``: the :class:`~fault_tolerance.control.controller.Controller` steps
   (Jacobian included), with the default backend, and ``lnva_<backend>`` / ``jvja_<backend>`` for
   the other backends installed;
 * ``lnva_resolve``, ``jvja_resolve``, ``mda_resolve``, ``rcn_resolve``: ``arm.jacobian`` and the
   plain :func:`fault_tolerance.resolve` / :func:`fault_tolerance.rcn`;
 * ``jvja_explicit``: the Jacobian and eq. (5) the explicit way, one pseudo-inverse per scenario for
-  eq. (2) (:func:`fault_tolerance.planner.jvja_explicit`);
+  eq. (2) (:func:`fault_tolerance.resolution.resolvers.jvja_explicit`);
 * ``jvja_qp`` / ``jvja_slsqp``: the Jacobian, eq. (2) per scenario, then the minimisation
   (3)-(4), ``min Σ_S w_S ½‖ˢq̇' - q̇‖²`` s.t. ``J q̇ = ẋ``, handed to a generic solver: the
   dense active-set QP solver ``quadprog`` (if installed) and SciPy's SLSQP (if installed).
@@ -32,51 +32,3 @@ timed), :mod:`.routes` (the generic-solver routes), :mod:`.targets` (the issue's
 """
 
 from __future__ import annotations
-
-from .cases import ARMS, DEFAULT_ARMS, DESCRIPTIONS, GROUPS, POOL, SEED, Case, bench_arm
-from .command import DEFAULT_STEPS, DEFAULT_WARMUP, add_arguments, main, run
-from .machine import machine_info
-from .report import SCHEMA, compare, format_compare, format_table, format_targets, write_json
-from .routes import _installed, installed, jvja_qp, jvja_slsqp
-from .targets import (
-    EXPLICIT_TARGET_ARMS,
-    MAX_JVJA_OVER_LNVA,
-    MAX_JVJA_P99_US,
-    MIN_EXPLICIT_OVER_JVJA,
-    targets,
-)
-from .timing import BLOCK_WARMUP, ROUNDS
-
-__all__ = [
-    "ARMS",
-    "BLOCK_WARMUP",
-    "Case",
-    "DEFAULT_ARMS",
-    "DEFAULT_STEPS",
-    "DEFAULT_WARMUP",
-    "DESCRIPTIONS",
-    "EXPLICIT_TARGET_ARMS",
-    "GROUPS",
-    "MAX_JVJA_OVER_LNVA",
-    "MAX_JVJA_P99_US",
-    "MIN_EXPLICIT_OVER_JVJA",
-    "POOL",
-    "ROUNDS",
-    "SCHEMA",
-    "SEED",
-    "_installed",
-    "add_arguments",
-    "bench_arm",
-    "compare",
-    "format_compare",
-    "format_table",
-    "format_targets",
-    "installed",
-    "jvja_qp",
-    "jvja_slsqp",
-    "machine_info",
-    "main",
-    "run",
-    "targets",
-    "write_json",
-]

@@ -12,9 +12,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..errors import InvalidInput
-from .routes import installed, jvja_qp, jvja_slsqp, post_failure_rates_explicit
-from .timing import Row, stats, time_rows
+from fault_tolerance.bench.routes import installed, jvja_qp, jvja_slsqp, post_failure_rates_explicit
+from fault_tolerance.bench.timing import Row, stats, time_rows
+from fault_tolerance.errors import InvalidInput
 
 #: The benchmark's arms: robot, task and lockable set.
 ARMS: dict[str, dict] = {
@@ -94,8 +94,8 @@ def _pool(arm, sc, rng: np.random.Generator, size: int) -> tuple[list, list]:
     Full-turn joints are wrapped into their limits; σ_min(J) ≥ 0.01 and every scenario pivot
     ≥ 1e-4.
     """
-    from ..limits import wrap_into_limits
-    from ..linalg import min_pivot, projection
+    from fault_tolerance.model.joint_limits import wrap_into_limits
+    from fault_tolerance.numerics.linalg import min_pivot, projection
 
     qs, xds = [], []
     for _ in range(200 * size):
@@ -113,17 +113,16 @@ def _pool(arm, sc, rng: np.random.Generator, size: int) -> tuple[list, list]:
 
 def make_case(key: str, backend: str = "auto") -> Case:
     """The arm ``key`` of :data:`ARMS` with its controller and pool."""
-    import fault_tolerance as ft
-
-    from ..realtime import Controller
+    from fault_tolerance.control.controller import Controller
+    from fault_tolerance.model.loading import load_arm
 
     spec = ARMS[key]
     if "chain" in spec:
-        from .chain import synthetic_chain
+        from fault_tolerance.bench.chain import synthetic_chain
 
         arm = synthetic_chain(spec["chain"], spec["task"])
     else:
-        arm = ft.load_arm(spec["robot"], **({"task": spec["task"]} if spec["task"] else {}))
+        arm = load_arm(spec["robot"], **({"task": spec["task"]} if spec["task"] else {}))
     ctrl = Controller(arm, spec["lockable"], backend=backend, limits=False)  # the paper's step
     qs, xds = _pool(arm, ctrl.scenarios, np.random.default_rng(SEED), POOL)
     return Case(key, spec, arm, ctrl, qs, xds, np.empty(arm.n))
@@ -134,7 +133,7 @@ def make_case(key: str, backend: str = "auto") -> Case:
 
 def fast_rows(case: Case) -> dict[str, Row]:
     """The controller's steps, and LNVA / JVJA with every other installed backend."""
-    from ..realtime import Controller, available_backends
+    from fault_tolerance.control.controller import Controller, available_backends
 
     ctrl, qxo = case.ctrl, case.qxo
     rows: dict[str, Row] = {
@@ -160,7 +159,7 @@ def floor_rows(case: Case) -> dict[str, Row]:
     """The floor of a step: Pinocchio's Jacobian and a compiled least-norm solve, nothing else."""
     import pinocchio as pin
 
-    from ..single_kernel import compiled_kernel
+    from fault_tolerance.control.fast.step import compiled_kernel
 
     ctrl, m = case.ctrl, case.arm.m
     kernel, cfj, lwa = compiled_kernel("floor"), pin.computeFrameJacobian, pin.LOCAL_WORLD_ALIGNED
@@ -180,9 +179,9 @@ def simulated_rows(case: Case) -> dict[str, Row]:
     The paper's sample (no limits) and JVJA's under the joint limits (simulate's default), each
     sample of one run in order.
     """
-    from .. import simulation as sim
-    from ..sampler import Sampler, covers
-    from ..trajectories import CirclePath
+    from fault_tolerance.simulation import simulate as sim
+    from fault_tolerance.simulation.fast.sampler import Sampler, covers
+    from fault_tolerance.simulation.paths import CirclePath
 
     arm, sc = case.arm, case.sc
     if covers(sc, "jvja", "least_norm") is not None:
@@ -215,15 +214,15 @@ def simulated_rows(case: Case) -> dict[str, Row]:
 
 def reference_rows(case: Case) -> dict[str, Row]:
     """The plain planner (``ft.resolve``, ``ft.rcn``), the explicit route and quadprog."""
-    import fault_tolerance as ft
-
-    from ..planner import jvja_explicit
+    from fault_tolerance.resolution.api import resolve
+    from fault_tolerance.resolution.indices import rcn
+    from fault_tolerance.resolution.resolvers import jvja_explicit
 
     arm, ctrl, sc, qx = case.arm, case.ctrl, case.sc, case.qx
     rows: dict[str, Row] = {
-        "lnva_resolve": (lambda q, xd: ft.resolve("lnva", arm.jacobian(q), xd), qx),
-        "jvja_resolve": (lambda q, xd: ft.resolve("jvja", arm.jacobian(q), xd, lockable=sc), qx),
-        "rcn_resolve": (lambda q: ft.rcn(arm.jacobian(q), sc), [(q,) for q in case.qs]),
+        "lnva_resolve": (lambda q, xd: resolve("lnva", arm.jacobian(q), xd), qx),
+        "jvja_resolve": (lambda q, xd: resolve("jvja", arm.jacobian(q), xd, lockable=sc), qx),
+        "rcn_resolve": (lambda q: rcn(arm.jacobian(q), sc), [(q,) for q in case.qs]),
         "jvja_explicit": (lambda q, xd: jvja_explicit(ctrl.jacobian(q), xd, sc), qx),
     }
     if installed("quadprog"):
@@ -241,12 +240,12 @@ def reference_rows(case: Case) -> dict[str, Row]:
 
 def slow_rows(case: Case) -> dict[str, Row]:
     """The slowest routes (timed with a tenth of the calls): MDA by the planner, SLSQP."""
-    import fault_tolerance as ft
+    from fault_tolerance.resolution.api import resolve
 
     arm, ctrl, sc, qx = case.arm, case.ctrl, case.sc, case.qx
 
     def mda_resolve(q, xd):
-        return ft.resolve("mda", arm.jacobian(q), xd, lockable=sc, arm=arm, q=q)
+        return resolve("mda", arm.jacobian(q), xd, lockable=sc, arm=arm, q=q)
 
     rows: dict[str, Row] = {"mda_resolve": (mda_resolve, qx)}
     if installed("scipy"):
@@ -257,7 +256,7 @@ def slow_rows(case: Case) -> dict[str, Row]:
 #: ``(label, builder, divisor)``, timed in this order; a group's rows get ``--steps // divisor``
 #: calls (at least 5) after ``--warmup // divisor`` (at least 2) warm-up calls.
 def _limits_rows(case: Case) -> dict[str, Row]:
-    from .limits_rows import limits_rows
+    from fault_tolerance.bench.limits_rows import limits_rows
 
     return limits_rows(case)
 

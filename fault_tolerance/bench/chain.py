@@ -16,13 +16,13 @@ from __future__ import annotations
 import numpy as np
 import pinocchio as pin
 
-from ..arm import Arm
+from fault_tolerance.model.arm import Arm
 
 _AXES = (pin.JointModelRZ, pin.JointModelRY, pin.JointModelRX)
 
 
 def synthetic_chain(n: int, task: str = "pose") -> Arm:
-    """The ``n``-joint chain as an :class:`~fault_tolerance.arm.Arm` (task ``pose`` by default)."""
+    """The ``n``-joint chain as an :class:`~fault_tolerance.model.arm.Arm` (task ``pose`` by default)."""
     model = pin.Model()
     model.name = f"chain_{n}"
     link = 1.0 / n

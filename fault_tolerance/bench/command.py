@@ -10,12 +10,20 @@ import time
 from collections.abc import Sequence
 from datetime import datetime, timezone
 
-from ..errors import FaultToleranceError, InvalidInput
-from .cases import ARMS, DEFAULT_ARMS, POOL, SEED, bench_arm
-from .machine import machine_info
-from .report import SCHEMA, compare, format_compare, format_table, format_targets, load, write_json
-from .targets import targets
-from .timing import BLOCK_WARMUP, ROUNDS, timer_overhead_ns
+from fault_tolerance.bench.cases import ARMS, DEFAULT_ARMS, POOL, SEED, bench_arm
+from fault_tolerance.bench.machine import machine_info
+from fault_tolerance.bench.report import (
+    SCHEMA,
+    compare,
+    format_compare,
+    format_table,
+    format_targets,
+    load,
+    write_json,
+)
+from fault_tolerance.bench.targets import targets
+from fault_tolerance.bench.timing import BLOCK_WARMUP, ROUNDS, timer_overhead_ns
+from fault_tolerance.errors import FaultToleranceError, InvalidInput
 
 #: Default number of timed calls per row (the whole default bench takes well under a minute).
 DEFAULT_STEPS = 5000
@@ -158,7 +166,7 @@ def _check(args: argparse.Namespace) -> list[str]:
             f"--steps must be >= 1 and --warmup >= 0, got {args.steps} and {args.warmup}"
         )
     keys = _arm_keys(args.robots)
-    from ..realtime import available_backends
+    from fault_tolerance.control.controller import available_backends
 
     if args.backend != "auto" and args.backend not in available_backends():
         raise InvalidInput(
@@ -185,14 +193,14 @@ def _run(args: argparse.Namespace) -> int:
     items = targets(results)
     batch = None
     if args.batch_configurations:
-        from ..batch_bench import bench_batch, target_item
+        from fault_tolerance.bench.batch import bench_batch, target_item
 
         progress(f"batched API ({args.batch_configurations} configurations)")
         batch = bench_batch(args.batch_configurations)
         items.append(target_item(batch))
     sweep = None
     if args.workspace is not None:
-        from ..workspace_bench import bench_workspace, target_items
+        from fault_tolerance.bench.workspace import bench_workspace, target_items
 
         sweep = bench_workspace(args.workspace, progress)
         items += target_items(sweep)
@@ -217,7 +225,7 @@ def _run(args: argparse.Namespace) -> int:
             f"us per configuration"
         )
     if sweep:
-        from ..workspace_bench import format_workspace
+        from fault_tolerance.bench.workspace import format_workspace
 
         print("\n" + format_workspace(sweep))
     print("\ntargets (medians; p99 for the latency bound)")
@@ -231,7 +239,7 @@ def _run(args: argparse.Namespace) -> int:
 
 def _run_plan(args: argparse.Namespace) -> int:
     """``--plan``: the whole-path planner's cases (``--robots`` picks among them)."""
-    from .plan import PLAN_CASES, bench_plan, format_plan_table
+    from fault_tolerance.bench.plan import PLAN_CASES, bench_plan, format_plan_table
 
     keys = list(PLAN_CASES)
     if args.robots:

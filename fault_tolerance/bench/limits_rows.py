@@ -13,8 +13,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..errors import FaultToleranceError
-from .routes import installed
+from fault_tolerance.bench.routes import installed
+from fault_tolerance.errors import FaultToleranceError
 
 DESCRIPTIONS = {
     "jvja_bounded_free": "JVJA step with joint limits on, no bound active (fast step + box check)",
@@ -67,14 +67,15 @@ def _pools(case, ctrl):
 
 def _two_bound_case(arm, sc, ctrl, q, xs, h):
     """``(q2, ẋ)`` with two joints next to the limit they move towards, or ``None``."""
-    import fault_tolerance as ft
+    from fault_tolerance.resolution.api import resolve
+    from fault_tolerance.resolution.bounded import resolve_bounded
 
-    qd = ft.resolve("jvja", arm.jacobian(q), xs, sc)
+    qd = resolve("jvja", arm.jacobian(q), xs, sc)
     top = np.argsort(-np.abs(qd))[:2]
     q2 = q.copy()
     for j in top:  # two joints next to the limit they move towards ...
         q2[j] = (arm.upper[j] - 0.002) if qd[j] > 0 else (arm.lower[j] + 0.002)
-    qd2 = ft.resolve("jvja", arm.jacobian(q2), xs, sc)
+    qd2 = resolve("jvja", arm.jacobian(q2), xs, sc)
     for j in top:  # ... where the box allows 30 % of their unbounded rate
         limit = arm.upper[j] if qd2[j] > 0 else arm.lower[j]
         q2[j] = limit - 0.3 * qd2[j] * h
@@ -83,7 +84,7 @@ def _two_bound_case(arm, sc, ctrl, q, xs, h):
     q2 = np.ascontiguousarray(q2)
     if not _undamped(arm.jacobian(q2), sc):
         return None
-    res = ft.resolve_bounded("jvja", arm.jacobian(q2), xs, sc, bounds=arm.rate_bounds(q2, h))
+    res = resolve_bounded("jvja", arm.jacobian(q2), xs, sc, bounds=arm.rate_bounds(q2, h))
     before = ctrl.bounded_steps
     ctrl.jvja(q2, xs)
     if ctrl.bounded_steps == before or res.scale < 1.0 or np.any(res.reduced_scale < 1.0):
@@ -103,7 +104,7 @@ def _undamped(J, sc) -> bool:
     ``s = 1``): not the bounded problem this row times. The test is the problem's, so the pool is
     the same whether quadprog is installed or not (it refused those problems as inconsistent).
     """
-    from ..linalg import SIGMA_EPS
+    from fault_tolerance.numerics.linalg import SIGMA_EPS
 
     mats = [J] + [np.delete(J, list(S), axis=1) for S in sc.sets]
     return all(np.linalg.svd(M, compute_uv=False)[-1] >= 2.0 * SIGMA_EPS for M in mats)
@@ -111,7 +112,7 @@ def _undamped(J, sc) -> bool:
 
 def limits_rows(case) -> dict:
     """The rows above (``jvja_bounded_2*`` only where two-bound configurations were found)."""
-    from ..realtime import Controller
+    from fault_tolerance.control.controller import Controller
 
     ctrl = Controller(case.arm, case.spec["lockable"], backend=case.ctrl.backend)
     free, two = _pools(case, ctrl)

@@ -84,7 +84,7 @@ def machine_info() -> dict:
     """CPU, library versions, BLAS build and threads, BLAS-related environment, load."""
     import pinocchio as pin
 
-    from .. import __version__
+    from fault_tolerance.version import __version__
 
     info: dict = {
         "cpu": _cpu_model(),

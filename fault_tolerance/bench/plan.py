@@ -1,6 +1,6 @@
 """``fault-tolerance bench --plan``: wall time and memory of the whole-path planner (issue 13).
 
-One planning call (:func:`fault_tolerance.wholepath.plan_path`) per case, timed with
+One planning call (:func:`fault_tolerance.planning.wholepath.plan.plan_path`) per case, timed with
 ``time.perf_counter``; memory is the peak of Python allocations during a second, traced call
 (``tracemalloc``; slower, so not timed) and the process's maximum resident size. Targets: planar 3R
 and spatial 4R 1 s paths (1000 steps) within 10 s and 20 s, a Panda pose path (r = 1) within 60 s,
@@ -26,13 +26,13 @@ PANDA_Q0 = np.array([0.0, -0.4, 0.0, -2.0, 0.0, 1.8, 0.8])
 
 
 def _problem(key: str):
-    import fault_tolerance as ft
-    from fault_tolerance.experiments import CASES
-    from fault_tolerance.posture import initial_posture
-    from fault_tolerance.trajectories import CirclePath
+    from fault_tolerance.model.loading import load_arm
+    from fault_tolerance.paper.cases import CASES
+    from fault_tolerance.planning.posture import initial_posture
+    from fault_tolerance.simulation.paths import CirclePath
 
     robot, task, _ = PLAN_CASES[key]
-    arm = ft.load_arm(robot, task=task)
+    arm = load_arm(robot, task=task)
     if robot == "panda":
         return arm, CirclePath(arm.fk(PANDA_Q0), 0.05, 2 * np.pi, 1.0, rows=(0, 1)), PANDA_Q0, None
     case = CASES["fig2" if robot == "planar_3r" else "fig7"]
@@ -42,7 +42,7 @@ def _problem(key: str):
 
 def bench_plan(key: str, memory: bool = True) -> dict:
     """Seconds, method, objective and memory of one planning call."""
-    from fault_tolerance.wholepath import plan_path
+    from fault_tolerance.planning.wholepath.plan import plan_path
 
     arm, path, q0, lock = _problem(key)
     t0 = time.perf_counter()

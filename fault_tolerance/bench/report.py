@@ -5,8 +5,8 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from ..errors import InvalidInput
-from ..files import write_atomic
+from fault_tolerance.errors import InvalidInput
+from fault_tolerance.storage.atomic import write_atomic
 
 SCHEMA = "fault_tolerance.bench/1"
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..linalg import reduced_rates_explicit
+from fault_tolerance.numerics.linalg import reduced_rates_explicit
 
 
 def post_failure_rates_explicit(J: np.ndarray, xdot: np.ndarray, sc) -> np.ndarray:

@@ -14,30 +14,26 @@ import argparse
 import sys
 import textwrap
 
-from .. import __version__
-from . import bench, design, inspect, lock, replay, reproduce, robots, simulate, workspace
-from .common import (
-    FORMATTER,
-    add_path_options,
-    add_robot_options,
-    load_robot,
-    lockable_of,
-    state_defaults,
+from fault_tolerance.cli import (
+    bench,
+    design,
+    inspect,
+    lock,
+    replay,
+    reproduce,
+    robots,
+    simulate,
+    workspace,
 )
-from .runner import Parser, run_command
-from .start_options import choose_start, start_and_path
+from fault_tolerance.cli.common import FORMATTER, state_defaults
+from fault_tolerance.cli.runner import Parser, run_command
+from fault_tolerance.version import __version__
 
 __all__ = [
     "COMMANDS",
     "EXAMPLES",
-    "add_path_options",
-    "add_robot_options",
     "build_parser",
-    "choose_start",
-    "load_robot",
-    "lockable_of",
     "main",
-    "start_and_path",
 ]
 
 #: The sub-command modules, in the order of ``fault-tolerance --help``.

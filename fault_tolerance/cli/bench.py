@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from .common import FORMATTER, epilog
+from fault_tolerance.cli.common import FORMATTER, epilog
 
 NAME = "bench"
 HELP = "the performance benchmark"
@@ -17,7 +17,7 @@ EXAMPLE = (
 
 def add_parser(sub) -> argparse.ArgumentParser:
     """The ``bench`` sub-command."""
-    from .. import bench
+    from fault_tolerance.bench import command as bench
 
     s = sub.add_parser(NAME, help=HELP, epilog=epilog(EXAMPLE), formatter_class=FORMATTER)
     bench.add_arguments(s)
@@ -27,6 +27,6 @@ def add_parser(sub) -> argparse.ArgumentParser:
 
 def run(args) -> int:
     """The performance benchmark."""
-    from .. import bench
+    from fault_tolerance.bench import command as bench
 
     return bench.run(args)

@@ -14,7 +14,7 @@ import sys
 
 import numpy as np
 
-from ..errors import InvalidInput, RobotNotFound
+from fault_tolerance.errors import InvalidInput, RobotNotFound
 
 EXIT_OK = 0
 EXIT_FAILURE = 1
@@ -102,14 +102,14 @@ def add_source_options(g) -> None:
 
 def load_robot(args) -> object:
     """The arm the robot options describe."""
-    from ..loading import load_arm
-    from ..sources import parse_xacro_args
+    from fault_tolerance.model.formats.xacro import parse_xacro_args
+    from fault_tolerance.model.loading import load_arm
 
     if args.robot is None and args.urdf is None:
         raise InvalidInput(
             "name a robot with --robot NAME or --urdf PATH (see `fault-tolerance robots`)"
         )
-    from .suits import robot_not_found
+    from fault_tolerance.cli.suits import robot_not_found
 
     try:
         return load_arm(
@@ -152,7 +152,9 @@ def lockable_of(args, arm, none_ok: bool = False):
     for tok in names(args.lockable) or []:
         items.append(tuple(tok.split("+")) if "+" in tok else tok)
     if not items:
-        raise InvalidInput("--lockable is empty; use 'all', 'none' or joint names like joint2,joint3")
+        raise InvalidInput(
+            "--lockable is empty; use 'all', 'none' or joint names like joint2,joint3"
+        )
     return items
 
 
@@ -184,8 +186,10 @@ def add_path_options(p: argparse.ArgumentParser) -> None:
         "--omega", type=float, default=None, help="circle angular rate [rad/s] (default 2π)"
     )
     g.add_argument(
-        "--rows", default=None, help="the two task rows the circle lies in, e.g. x,y or y,z (default: the "
-        "catalog's for a shipped arm, else the first two task rows)"
+        "--rows",
+        default=None,
+        help="the two task rows the circle lies in, e.g. x,y or y,z (default: the "
+        "catalog's for a shipped arm, else the first two task rows)",
     )
     g.add_argument("--dt", type=float, default=1e-3, help="time step [s] (default 0.001)")
     g.add_argument(
@@ -204,7 +208,7 @@ def add_path_options(p: argparse.ArgumentParser) -> None:
         choices=["least_norm", "continuation"],
         help="post-failure response of the reduced robot (docs/MATH.md, G3)",
     )
-    from ..planner import MDA_GAIN
+    from fault_tolerance.resolution.resolvers import MDA_GAIN
 
     g.add_argument("--gain", type=float, default=None, help=f"MDA gain α (default: {MDA_GAIN:g})")
     g.add_argument(
@@ -293,33 +297,13 @@ def close_bars() -> None:
 
 
 def report_warnings(command: str, label: str, run_, arm) -> list[dict]:
-    """Print one line on stderr per problem :mod:`~fault_tolerance.diagnostics` finds in ``run_``.
+    """Print one line on stderr per problem :mod:`~fault_tolerance.simulation.diagnostics` finds in ``run_``.
 
     Returns the warnings as dicts for summary.json (``Run.save(..., warnings=...)``).
     """
-    from ..diagnostics import check_run, warning_lines
+    from fault_tolerance.simulation.diagnostics import check_run, warning_lines
 
     found = check_run(run_, arm)
     for line in warning_lines(label, found):
         print(f"fault-tolerance {command}: {line}", file=sys.stderr)
     return [w.as_dict() for w in found]
-
-
-#: Names that moved to :mod:`.runner` (#11), still importable from here.
-_IN_RUNNER = ("NEGATIVE_NUMBERS", "Parser", "one_line", "run_command")
-
-
-def __getattr__(name: str):
-    """Forward names that moved (old import paths kept).
-
-    ``start_and_path`` is in :mod:`.start_options`; the parser and ``run_command`` in :mod:`.runner`.
-    """
-    if name == "start_and_path":
-        from .start_options import start_and_path
-
-        return start_and_path
-    if name in _IN_RUNNER:
-        from . import runner
-
-        return getattr(runner, name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

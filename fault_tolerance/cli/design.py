@@ -6,9 +6,16 @@ import argparse
 
 import numpy as np
 
-from ..errors import InvalidInput
-from .common import FORMATTER, add_robot_options, epilog, floats, load_robot, lockable_of
-from .workspace import DASK_HELP, add_dask_options, singletons
+from fault_tolerance.cli.common import (
+    FORMATTER,
+    add_robot_options,
+    epilog,
+    floats,
+    load_robot,
+    lockable_of,
+)
+from fault_tolerance.cli.workspace import DASK_HELP, add_dask_options, singletons
+from fault_tolerance.errors import InvalidInput
 
 NAME = "design"
 HELP = "artificial limits (and links) of a planar 3R for fault tolerance"
@@ -53,7 +60,7 @@ def add_parser(sub) -> argparse.ArgumentParser:
 
 
 def _task(args, arm):
-    from ..design import Task, default_task
+    from fault_tolerance.analysis.design.planar import Task, default_task
 
     task = default_task(arm) if arm.n == 3 else None
     if task is None or (args.x0 is None and args.radius is None):
@@ -67,14 +74,14 @@ def _task(args, arm):
 
 def run(args) -> int:
     """Design search into ``--out``: design.json and design.png."""
-    from ..results import FolderLock
+    from fault_tolerance.storage.folder_lock import FolderLock
 
     with FolderLock(args.out):  # a second writer of --out exits 2 naming this one
         return _run(args)
 
 
 def _run(args) -> int:
-    from ..design_search import design
+    from fault_tolerance.analysis.design.search import design
 
     if args.task not in (None, "circle", "planar"):  # design's --task names the task path
         raise InvalidInput(
@@ -99,7 +106,9 @@ def _run(args) -> int:
         folder=args.out,
         progress=not args.no_progress,
     )
-    d.save(args.out)
+    from fault_tolerance.figures.design import plot_design
+
+    d.save(args.out, draw=plot_design)
     r = d.record
 
     def num(v):

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from .common import FORMATTER, add_source_options, epilog, names
+from fault_tolerance.cli.common import FORMATTER, add_source_options, epilog, names
 
 NAME = "inspect"
 HELP = "kinematic tree, chosen chain and task, intolerable joints"
@@ -25,7 +25,9 @@ def add_parser(sub) -> argparse.ArgumentParser:
         "the other commands)",
     )
     src = s.add_mutually_exclusive_group()
-    src.add_argument("--robot", default=None, help="the same as TARGET, a robot name (default: none)")
+    src.add_argument(
+        "--robot", default=None, help="the same as TARGET, a robot name (default: none)"
+    )
     src.add_argument("--urdf", default=None, help="the same as TARGET, a file (default: none)")
     s.add_argument(
         "--tip",
@@ -52,10 +54,10 @@ def add_parser(sub) -> argparse.ArgumentParser:
 
 def run(args) -> int:
     """Print the kinematic tree, the chosen chain and task, and intolerable joints."""
-    from ..errors import InvalidInput, RobotNotFound
-    from ..inspection import inspect_text
-    from ..sources import parse_xacro_args
-    from .suits import robot_not_found
+    from fault_tolerance.analysis.inspection import inspect_text
+    from fault_tolerance.cli.suits import robot_not_found
+    from fault_tolerance.errors import InvalidInput, RobotNotFound
+    from fault_tolerance.model.formats.xacro import parse_xacro_args
 
     given = [t for t in (args.target, args.robot, args.urdf) if t is not None]
     if len(given) != 1:

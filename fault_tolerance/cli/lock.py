@@ -7,8 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import InvalidInput
-from .common import (
+from fault_tolerance.cli.common import (
     FORMATTER,
     add_path_options,
     add_robot_options,
@@ -19,7 +18,8 @@ from .common import (
     load_robot,
     report_warnings,
 )
-from .start_options import choose_start
+from fault_tolerance.cli.start_options import choose_start
+from fault_tolerance.errors import InvalidInput
 
 NAME = "lock"
 HELP = "a run in which a joint locks (servo model on)"
@@ -68,8 +68,8 @@ def _lock_time(args, arm, path, q0, joint: str, duration: float, gain: dict):
 
     Returns ``(t_lock, planned)``; ``planned`` is the run without a lock (``None`` for a time).
     """
-    from ..plots import planned_jump
-    from ..simulation import simulate
+    from fault_tolerance.figures.runs import planned_jump
+    from fault_tolerance.simulation.simulate import simulate
 
     if args.at not in ("max", "min"):
         return float(floats(args.at, "--at")[0]), None
@@ -96,8 +96,10 @@ def _lock_time(args, arm, path, q0, joint: str, duration: float, gain: dict):
 
 def run(args) -> int:
     """A run in which a joint locks; ``--out`` is locked while written and appears whole."""
-    from ..results import FolderLock, check_path_names, check_target
-    from ..run import RUN_FILES
+    from fault_tolerance.simulation.run import RUN_FILES
+    from fault_tolerance.storage.folder_io import check_path_names
+    from fault_tolerance.storage.folder_lock import FolderLock
+    from fault_tolerance.storage.result_folder import check_target
 
     if not args.out:
         return _run(args)
@@ -108,7 +110,8 @@ def run(args) -> int:
 
 
 def _run(args) -> int:
-    from ..simulation import ServoModel, simulate
+    from fault_tolerance.simulation.setup import ServoModel
+    from fault_tolerance.simulation.simulate import simulate
 
     arm = load_robot(args)
     joint = arm.joint_names[arm.joint_index(args.joint)]
@@ -174,14 +177,14 @@ def _run(args) -> int:
 
 
 def _write(run_, arm, joint: str, t_lock: float, out: Path, html: bool, found, planned) -> None:
-    from .. import plots
+    from fault_tolerance.figures import runs as plots
 
     def extras(folder: Path) -> None:  # written with the run, in its staging folder
         title = f"{joint} locks at {t_lock:.2f} s"
         plots.save_figure(plots.plot_lock({title: run_}, planned=planned), folder / "lock")
         plots.save_figure(plots.plot_run(run_), folder / "run")
         if html:
-            from ..viz import export_html
+            from fault_tolerance.viz.page import export_html
 
             export_html(run_, folder / "replay.html", arm=arm)
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from .common import FORMATTER, epilog
+from fault_tolerance.cli.common import FORMATTER, epilog
 
 NAME = "replay"
 HELP = "meshcat replay of a saved run"
@@ -35,7 +35,7 @@ def add_parser(sub) -> argparse.ArgumentParser:
 
 def run(args) -> int:
     """Meshcat replay of a saved run."""
-    from ..viz import replay_main
+    from fault_tolerance.viz import replay_main
 
     return replay_main(
         args.run,

@@ -6,8 +6,8 @@ import argparse
 import sys
 from pathlib import Path
 
-from ..errors import InvalidInput
-from .common import EXIT_INTERRUPTED, FORMATTER, epilog, names
+from fault_tolerance.cli.common import EXIT_INTERRUPTED, FORMATTER, epilog, names
+from fault_tolerance.errors import InvalidInput
 
 NAME = "reproduce"
 HELP = "every case of the paper: figures, summary.json, REPORT.md"
@@ -38,7 +38,7 @@ def add_parser(sub) -> argparse.ArgumentParser:
 
 def run(args) -> int:
     """Every case of the paper into --out."""
-    from ..experiments import reproduce
+    from fault_tolerance.paper.reproduce import reproduce
 
     cases = names(args.cases)
     if cases == []:

@@ -5,8 +5,8 @@ from __future__ import annotations
 import argparse
 import textwrap
 
-from ..errors import FaultToleranceError
-from .common import FORMATTER, epilog
+from fault_tolerance.cli.common import FORMATTER, epilog
+from fault_tolerance.errors import FaultToleranceError
 
 NAME = "robots"
 HELP = "list shipped and example-robot-data arms"
@@ -32,8 +32,8 @@ def _row(name: str, source: str, arm, description: str) -> tuple:
 
 def run(args) -> int:
     """List shipped and example-robot-data arms."""
-    from ..catalog import EXAMPLE_ROBOTS, catalog
-    from ..loading import load_arm
+    from fault_tolerance.model.catalog import EXAMPLE_ROBOTS, catalog
+    from fault_tolerance.model.loading import load_arm
 
     rows = [
         _row(name, "shipped", load_arm(name), e["description"]) for name, e in catalog().items()
@@ -53,7 +53,7 @@ def run(args) -> int:
         "\nAny other example-robot-data name or a URDF path works too (--robot NAME | --urdf PATH)."
     )
     if args.all:
-        from ..catalog import example_robot_names
+        from fault_tolerance.model.catalog import example_robot_names
 
         others = [n for n in example_robot_names() if n not in EXAMPLE_ROBOTS]
         print(f"\nexample-robot-data models without a preset ({len(others)}):")

@@ -14,8 +14,8 @@ import sys
 import warnings
 from collections.abc import Callable
 
-from ..errors import FaultToleranceError
-from .common import EXIT_BAD_INPUT, EXIT_FAILURE, EXIT_INTERRUPTED, close_bars
+from fault_tolerance.cli.common import EXIT_BAD_INPUT, EXIT_FAILURE, EXIT_INTERRUPTED, close_bars
+from fault_tolerance.errors import FaultToleranceError
 
 #: Option values that begin with ``-`` and are numbers, not options: ``-0.21``, ``-1e-3``,
 #: ``-0.21,0.20,0.35``, ``-1.5:1.5,-2:2``. argparse's own pattern takes only a single plain number,

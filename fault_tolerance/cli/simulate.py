@@ -6,8 +6,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from ..errors import InvalidInput
-from .common import (
+from fault_tolerance.cli.common import (
     EXIT_INTERRUPTED,
     FORMATTER,
     add_path_options,
@@ -19,7 +18,8 @@ from .common import (
     names,
     report_warnings,
 )
-from .start_options import choose_start
+from fault_tolerance.cli.start_options import choose_start
+from fault_tolerance.errors import InvalidInput
 
 NAME = "simulate"
 HELP = "one task run with one or several algorithms"
@@ -77,7 +77,7 @@ def add_plan_options(s) -> None:
 
 
 def _algorithms(args) -> list[str]:
-    from ..simulation import ALGORITHMS
+    from fault_tolerance.simulation.setup import ALGORITHMS
 
     algs = names(args.algorithms) or []
     bad = [a for a in algs if a not in ALGORITHMS]
@@ -101,7 +101,8 @@ def _global_start(alg: str, args) -> dict:
 
 def run(args) -> int:
     """One task run per algorithm; files into --out (locked while written, each run whole)."""
-    from ..results import FolderLock, check_path_names
+    from fault_tolerance.storage.folder_io import check_path_names
+    from fault_tolerance.storage.folder_lock import FolderLock
 
     if not args.out:
         return _run(args, None)
@@ -111,12 +112,12 @@ def run(args) -> int:
 
 
 def _run(args, out: Path | None) -> int:
-    from ..budget import check_run
-    from ..diagnostics import check_run as check
-    from ..failures import scenarios
-    from ..planner import MDA_GAIN
-    from ..run import output_folder
-    from ..simulation import simulate
+    from fault_tolerance.resolution.resolvers import MDA_GAIN
+    from fault_tolerance.resolution.scenarios import scenarios
+    from fault_tolerance.simulation.diagnostics import check_run as check
+    from fault_tolerance.simulation.simulate import simulate
+    from fault_tolerance.storage.atomic import output_folder
+    from fault_tolerance.storage.budget import check_run
 
     arm = load_robot(args)
     algs = _algorithms(args)
@@ -180,7 +181,7 @@ def _run(args, out: Path | None) -> int:
         report_warnings(NAME, alg, run_, arm)
         print(f"{alg}: {limits_line(run_)}")
     if out:
-        from .. import plots
+        from fault_tolerance.figures import runs as plots
 
         title = f"{arm.name}: {', '.join(algs)}"
         plots.save_figure(plots.plot_comparison(runs, title), out / "comparison")
@@ -192,11 +193,11 @@ def _extras(run_, arm, html: bool):
     """What :meth:`Run.save` adds to a run's folder: its plot, and its replay page if asked."""
 
     def write(folder: Path) -> None:
-        from .. import plots
+        from fault_tolerance.figures import runs as plots
 
         plots.save_figure(plots.plot_run(run_), folder / "run")
         if html:
-            from ..viz import export_html
+            from fault_tolerance.viz.page import export_html
 
             export_html(run_, folder / "replay.html", arm=arm)
 

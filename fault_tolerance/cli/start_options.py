@@ -3,7 +3,7 @@
 :func:`choose_start` is shared by ``simulate`` and ``lock``. A given start (``--q0``, ``--x0`` or
 the first point of a ``--csv`` path) is used as given or through the posture search, and a
 lockable joint intolerable there is refused with an error that says whether it is structural or
-proposes a start that works. Without one, :func:`~fault_tolerance.start.default_start` chooses the
+proposes a start that works. Without one, :func:`~fault_tolerance.planning.default_start.default_start` chooses the
 start (docs/MATH.md, "The default start") and one line says which and why.
 """
 
@@ -11,8 +11,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..errors import InvalidInput
-from .common import floats, lockable_of, names
+from fault_tolerance.cli.common import floats, lockable_of, names
+from fault_tolerance.errors import InvalidInput
 
 
 def _none_ok(algorithms) -> bool:
@@ -29,11 +29,11 @@ def choose_start(args, arm, algorithms=("jvja",), extra_lockable=(), **sim_optio
     once its inputs are all checked, so bad input still gives nothing on stdout. ``extra_lockable``: joints that must be tolerable
     at the start as well (``lock --joint``).
     """
-    from ..budget import run_samples
-    from ..catalog import catalog
-    from ..posture import initial_posture, lockable_scenarios
-    from ..start import check_start, default_start
-    from ..trajectories import load_csv
+    from fault_tolerance.model.catalog import catalog
+    from fault_tolerance.planning.default_start import check_start, default_start
+    from fault_tolerance.planning.posture import initial_posture, lockable_scenarios
+    from fault_tolerance.simulation.paths import load_csv
+    from fault_tolerance.storage.budget import run_samples
 
     entry = catalog().get(arm.name) if arm.source == arm.name else None
     if not (np.isfinite(args.dt) and args.dt > 0):
@@ -91,7 +91,7 @@ def _with_joints(arm, lockable, joints) -> list:
 
 def _circle_maker(args, arm, entry):
     """A callable ``x0 -> CirclePath`` from ``--radius/--omega/--rows/--duration`` and the catalog."""
-    from ..trajectories import CirclePath
+    from fault_tolerance.simulation.paths import CirclePath
 
     spec = (entry or {}).get("path", {})
     if args.rows:

@@ -7,7 +7,7 @@ needs a planar 3R. The arms are loaded to check (only on this error path).
 
 from __future__ import annotations
 
-from ..errors import FaultToleranceError, RobotNotFound
+from fault_tolerance.errors import FaultToleranceError, RobotNotFound
 
 
 def _workspace(arm) -> bool:
@@ -16,7 +16,7 @@ def _workspace(arm) -> bool:
 
 
 def _design(arm) -> bool:
-    from ..planar import planar_chain
+    from fault_tolerance.model.planar import planar_chain
 
     return arm.n == 3 and planar_chain(arm) is not None
 
@@ -26,8 +26,8 @@ CHECKS = {"workspace": _workspace, "design": _design}
 
 def suited_arms(command: str | None) -> list[str]:
     """The preset arms (``fault-tolerance robots``) that ``command`` can run as they load."""
-    from ..catalog import preset_names
-    from ..loading import load_arm
+    from fault_tolerance.model.catalog import preset_names
+    from fault_tolerance.model.loading import load_arm
 
     check = CHECKS.get(command or "")
     if check is None:

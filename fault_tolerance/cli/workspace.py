@@ -5,8 +5,8 @@ from __future__ import annotations
 import argparse
 import time
 
-from ..errors import InvalidInput
-from .common import FORMATTER, add_robot_options, epilog, load_robot, lockable_of
+from fault_tolerance.cli.common import FORMATTER, add_robot_options, epilog, load_robot, lockable_of
+from fault_tolerance.errors import InvalidInput
 
 NAME = "workspace"
 HELP = "failure-tolerant workspace map (areas/volumes, jump and RCN maps)"
@@ -100,14 +100,14 @@ def add_parser(sub) -> argparse.ArgumentParser:
 
 def run(args) -> int:
     """Failure-tolerant workspace of one arm into ``--out``."""
-    from ..results import FolderLock
+    from fault_tolerance.storage.folder_lock import FolderLock
 
     with FolderLock(args.out):  # a second writer of --out exits 2 naming this one
         return _run(args)
 
 
 def _run(args) -> int:
-    from ..workspace import failure_tolerant_workspace
+    from fault_tolerance.analysis.workspace.closed_form import failure_tolerant_workspace
 
     arm = load_robot(args)
     keys = ("grid", "samples", "theta_samples", "chunks")
@@ -124,7 +124,9 @@ def _run(args) -> int:
         progress=not args.no_progress,
         **opts,
     )
-    ws.save(args.out)
+    from fault_tolerance.figures.workspace import plot_workspace
+
+    ws.save(args.out, draw=plot_workspace)
     unit, kind = ("m³", "volume") if ws.spatial else ("m²", "area")
     print(
         f"{arm.name}: {kind} before a failure {ws.size_pre:.4g} {unit}, failure tolerant "

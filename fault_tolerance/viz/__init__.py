@@ -40,21 +40,12 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import IO, Any, NamedTuple
 
-from ..arm import Arm
-from ..errors import FaultToleranceError, InvalidInput
-from ..files import write_atomic
-from .collect import describe_runs, run_folders
-from .geometry import (  # noqa: F401 - public constants, importable as fault_tolerance.viz.X
-    BACKGROUND,
-    CAMERA_FOV,
-    LOCK_COLOR,
-    PATH_COLOR,
-    PATH_POINTS,
-    TRACE_COLOR,
-    TUBE_SIDES,
-)
-from .page import _build_page, _page_html, embed, export_html, scene_commands
-from .server import LOCALHOST, ReplayServer, _serve_page, serve
+from fault_tolerance.errors import FaultToleranceError, InvalidInput
+from fault_tolerance.model.arm import Arm
+from fault_tolerance.storage.atomic import write_atomic
+from fault_tolerance.viz.collect import describe_runs, run_folders
+from fault_tolerance.viz.page import _build_page, _page_html
+from fault_tolerance.viz.server import ReplayServer, _serve_page
 
 
 class Replay(NamedTuple):
@@ -84,7 +75,7 @@ def replay(
         run: A Run, the folder it was saved to, a folder of run folders (one command's runs,
             shown together), a list or dict of runs, an array q (K, n) with ``dt``, or ``(t, q)``.
         arm: The arm (default: rebuilt from each run's carried URDF text, meshes only from
-            ``package_dirs`` and installed robot data; :mod:`~fault_tolerance.carried`).
+            ``package_dirs`` and installed robot data; :mod:`~fault_tolerance.model.arm_record`).
         speed: Replay speed factor (1: real time).
         fps: Animation frames per replay second.
         open: Start a live meshcat server on 127.0.0.1 (stop it with ``result.server.close()``).
@@ -189,13 +180,7 @@ def replay_main(
 
 
 __all__ = [
-    "LOCALHOST",
     "Replay",
-    "ReplayServer",
-    "embed",
-    "export_html",
     "replay",
     "replay_main",
-    "scene_commands",
-    "serve",
 ]

@@ -24,11 +24,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .svg import (  # noqa: F401 - LOG_DECADES, nice_ticks and use_log are part of this API
+from fault_tolerance.viz.svg import (
     BOTTOM,
     HEIGHT,
     LEFT,
-    LOG_DECADES,
     RIGHT,
     TOP,
     WIDTH,
@@ -36,7 +35,6 @@ from .svg import (  # noqa: F401 - LOG_DECADES, nice_ticks and use_log are part 
     _frame,
     _polyline,
     _range,
-    nice_ticks,
     use_log,
 )
 

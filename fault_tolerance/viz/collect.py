@@ -13,8 +13,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import InvalidInput
-from ..run import Run
+from fault_tolerance.errors import InvalidInput
+from fault_tolerance.simulation.run import Run
 
 
 def run_folders(folder: str | Path) -> list[Path]:

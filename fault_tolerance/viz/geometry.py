@@ -12,7 +12,7 @@ from collections.abc import Sequence
 import numpy as np
 import pinocchio as pin
 
-from ..arm import Arm
+from fault_tolerance.model.arm import Arm
 
 # Colours (RGB in [0, 1]), chosen apart in hue from the shipped arms' red, orange, green, blue and
 # yellow links so a reader (and the browser test) can tell them apart.

@@ -1,6 +1,6 @@
 """What is replayed: a run's joint positions over time, checked, and the frames that show them.
 
-A run comes as a :class:`~fault_tolerance.simulation.Run`, the folder it was saved to, an array of
+A run comes as a :class:`~fault_tolerance.simulation.run.Run`, the folder it was saved to, an array of
 joint positions (K, n) with a time step, or a pair ``(t, q)``; :func:`_load_motion` turns each into
 a :class:`_Motion`. The replay shows it every ``1/fps`` replay seconds, ``speed`` run seconds per
 replay second (:func:`_frame_times`), interpolating between the run's samples.
@@ -15,11 +15,11 @@ from pathlib import Path
 
 import numpy as np
 
-from ..arm import Arm
-from ..budget import check_frames
-from ..carried import arm_of_run
-from ..errors import InvalidInput
-from ..run import Run
+from fault_tolerance.errors import InvalidInput
+from fault_tolerance.model.arm import Arm
+from fault_tolerance.model.arm_record import arm_of_run
+from fault_tolerance.simulation.run import Run
+from fault_tolerance.storage.budget import check_frames
 
 
 @dataclass

@@ -14,14 +14,14 @@ import json
 from dataclasses import dataclass
 from pathlib import Path
 
-from ..arm import Arm
-from ..errors import FaultToleranceError
-from ..simulation import write_atomic
-from .charts import chart_data, plots_html, run_color
-from .collect import collect_runs
-from .geometry import LOCK_COLOR, PATH_COLOR, TRACE_COLOR
-from .scene import _build_scene, _require_meshcat, _Scene
-from .template import PAGE as _PAGE
+from fault_tolerance.errors import FaultToleranceError
+from fault_tolerance.model.arm import Arm
+from fault_tolerance.storage.atomic import write_atomic
+from fault_tolerance.viz.charts import chart_data, plots_html, run_color
+from fault_tolerance.viz.collect import collect_runs
+from fault_tolerance.viz.geometry import LOCK_COLOR, PATH_COLOR, TRACE_COLOR
+from fault_tolerance.viz.scene import _build_scene, _require_meshcat, _Scene
+from fault_tolerance.viz.template import PAGE as _PAGE
 
 
 def _viewer_js() -> str:
@@ -75,8 +75,8 @@ class _Page:
 
 def _warnings_of(run, arm: Arm | None) -> list[str]:
     """The diagnostics' warnings of a run (none for bare joint positions)."""
-    from ..diagnostics import check_run
-    from ..simulation import Run
+    from fault_tolerance.simulation.diagnostics import check_run
+    from fault_tolerance.simulation.run import Run
 
     if not isinstance(run, Run):
         return []
@@ -121,7 +121,7 @@ def _encode(commands) -> list[str]:
 
 def _page_html(page: _Page, *, live: bool = False) -> str:
     """The page's HTML; ``live``: scene 0 comes from the meshcat server's websocket."""
-    from .. import __version__
+    from fault_tolerance.version import __version__
 
     first = page.scenes[0]
     title, heading, legend = _legend(first.info)
@@ -190,7 +190,7 @@ def export_html(
     runs) share one page: their λ and K are overlaid and a selector switches the arm shown.
 
     Args:
-        run: A :class:`~fault_tolerance.simulation.Run`, a folder it was saved to (or a folder of
+        run: A :class:`~fault_tolerance.simulation.run.Run`, a folder it was saved to (or a folder of
             such folders, e.g. ``simulate --out``'s), a list or dict of runs, joint positions of
             shape (K, n) (with ``dt``) or a pair ``(t, q)``.
         path: The HTML file to write (atomically: a reader never sees half a file).

@@ -15,9 +15,9 @@ from dataclasses import dataclass
 import numpy as np
 import pinocchio as pin
 
-from ..arm import Arm
-from ..errors import InvalidInput
-from .geometry import (
+from fault_tolerance.errors import InvalidInput
+from fault_tolerance.model.arm import Arm
+from fault_tolerance.viz.geometry import (
     BACKGROUND,
     LOCK_COLOR,
     PATH_COLOR,
@@ -36,7 +36,13 @@ from .geometry import (
     _translation,
     _tube,
 )
-from .motion import _check_rate, _frame_times, _interp_rows, _load_motion, _Motion
+from fault_tolerance.viz.motion import (
+    _check_rate,
+    _frame_times,
+    _interp_rows,
+    _load_motion,
+    _Motion,
+)
 
 
 def _require_meshcat():
@@ -187,7 +193,9 @@ def _build_scene(
     lock_tau, locked_names = None, set()
     if lock is not None:
         lock_tau = float(np.clip((lock["time"] - motion.t[0]) / speed, 0.0, tau[-1]))
-        locked_names, clips = _lock_ghost(vis, arm, geom, motion.q[0], q_frames, tau, lock, lock_tau)
+        locked_names, clips = _lock_ghost(
+            vis, arm, geom, motion.q[0], q_frames, tau, lock, lock_tau
+        )
         animations += clips
     for i, g in enumerate(geom.geometryObjects):
         node = vis[viz.getViewerNodeName(g, pin.GeometryType.VISUAL)].path.lower()

@@ -25,10 +25,10 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import IO
 
-from ..arm import Arm
-from ..errors import FaultToleranceError, InvalidInput
-from .page import _build_page, _Page, _page_html
-from .scene import _require_meshcat, _Scene
+from fault_tolerance.errors import FaultToleranceError, InvalidInput
+from fault_tolerance.model.arm import Arm
+from fault_tolerance.viz.page import _build_page, _Page, _page_html
+from fault_tolerance.viz.scene import _require_meshcat, _Scene
 
 #: The only interface the live server listens on.
 LOCALHOST = "127.0.0.1"
@@ -307,7 +307,7 @@ def serve(
 ) -> tuple[str, ReplayServer]:
     """Serve the replay of ``run`` live: a meshcat server on 127.0.0.1, scene and animation loaded.
 
-    The page at the URL is the replay page of :func:`~fault_tolerance.viz.export_html` (plots
+    The page at the URL is the replay page of :func:`~fault_tolerance.viz.page.export_html` (plots
     in ``#ft-plots``, synced with the animation), connected to the server's websocket, so scene
     commands sent later (``server.send``) show too. ``run`` may be several runs (a folder of run
     folders, a list or a dict): the server holds the first; the page switches between them.

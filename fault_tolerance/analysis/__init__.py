@@ -1,0 +1,1 @@
+"""Analyses over many configurations: the batched API, sweeps, workspaces, designs, inspection."""

@@ -1,0 +1,381 @@
+"""Batched analysis: the scalar API (``ft.resolve``, ``ft.jvj``, ``ft.rcn``) over B configurations.
+
+Every function takes stacks of Jacobians ``Js`` (B, m, n) and works in chunks of at most
+:data:`CHUNK` rows, so the temporaries stay bounded for any B (the output is allocated once).
+The linear algebra is the scalar one (:mod:`.linalg`: one eigendecomposition of ``J Jᵀ`` per
+row, damped near singularities; (G1)/(G2) for the reduced rates), done by NumPy's stacked
+``eigh``/``solve``, so the results equal the scalar API's to rounding (tests: 1e-9 relative).
+
+Example:
+    >>> import numpy as np, fault_tolerance as ft
+    >>> from fault_tolerance import batch
+    >>> arm = ft.load_arm("planar_3r")
+    >>> Q = np.random.default_rng(0).uniform(-2, 2, (100, 3))
+    >>> Js = batch.jacobians(arm, Q)                      # (100, 2, 3), Pinocchio per row
+    >>> xd = np.tile([0.1, 0.0], (100, 1))
+    >>> qd = batch.resolve("jvja", Js, xd, lockable=[1, 2], intolerable="nan")
+    >>> lam = batch.jvj(Js, xd, qd, lockable=[1, 2], intolerable="nan")
+    >>> k = batch.rcn(Js, lockable=[1, 2])                # (100, 2)
+    >>> bool(np.allclose(np.einsum("bmn,bn->bm", Js, qd)[np.isfinite(lam)], xd[np.isfinite(lam)]))
+    True
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+
+from fault_tolerance.analysis.fast import batch as batch_kernel
+from fault_tolerance.errors import IntolerableFailure, InvalidInput
+from fault_tolerance.numerics.linalg import DAMPING, PIVOT_TOL, RANK_RTOL, SIGMA_EPS
+from fault_tolerance.resolution.indices import RCN_MAX, RESPONSES
+from fault_tolerance.resolution.scenarios import Scenarios, scenarios
+
+#: Rows per chunk: temporaries are O(CHUNK · n²) floats, whatever B is.
+CHUNK = 4096
+#: What to do where a scenario is intolerable (N[S, S] singular): raise like the scalar API, or
+#: put NaN in that row of the output.
+INTOLERABLE = ("raise", "nan")
+
+
+def jacobians(arm, Q: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+    """Task Jacobians of ``arm`` at the rows of ``Q`` (B, n) from Pinocchio, shape (B, m, n).
+
+    One output array is allocated (or ``out`` is filled); Pinocchio computes each row.
+    """
+    Q = np.ascontiguousarray(Q, dtype=float)
+    if Q.ndim != 2 or Q.shape[1] != arm.n:
+        raise InvalidInput(f"Q must have shape (B, {arm.n}) for {arm.name}, got {Q.shape}")
+    if not np.all(np.isfinite(Q)):
+        raise InvalidInput("Q must be finite")
+    B = Q.shape[0]
+    if out is None:
+        out = np.empty((B, arm.m, arm.n))
+    elif out.shape != (B, arm.m, arm.n):
+        raise InvalidInput(f"out must have shape {(B, arm.m, arm.n)}, got {out.shape}")
+    for b in range(B):
+        out[b] = arm.jacobian_unchecked(Q[b])
+    return out
+
+
+def _check(Js, *vectors) -> tuple[np.ndarray, ...]:
+    Js = np.asarray(Js, dtype=float)
+    if Js.ndim != 3:
+        raise InvalidInput(f"Js must have shape (B, m, n), got {Js.shape}")
+    B, m, n = Js.shape
+    outs = [Js]
+    for name, v, size in vectors:
+        v = np.asarray(v, dtype=float)
+        if v.shape != (B, size):
+            raise InvalidInput(f"{name} must have shape ({B}, {size}), got {v.shape}")
+        outs.append(v)
+    if not all(np.all(np.isfinite(a)) for a in outs):
+        raise InvalidInput("Js and the rate arrays must be finite")
+    return tuple(outs)
+
+
+def _scenarios(Js: np.ndarray, lockable, weights, joint_names) -> Scenarios:
+    _, m, n = Js.shape
+    return scenarios(lockable, n, r=n - m, weights=weights, joint_names=joint_names)
+
+
+def _option(intolerable: str) -> str:
+    if intolerable not in INTOLERABLE:
+        raise InvalidInput(f"intolerable={intolerable!r} is not one of {INTOLERABLE}")
+    return intolerable
+
+
+def projections(Js: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``J⁺`` (B, n, m) and ``N`` (B, n, n) of every row, as :func:`.linalg.projection` does it."""
+    B, m, n = Js.shape
+    lam, V = np.linalg.eigh(Js @ Js.transpose(0, 2, 1))  # ascending, lam = σ²
+    lam = np.maximum(lam, 0.0)
+    smin = np.sqrt(lam[:, 0])
+    mu2 = np.where(smin < SIGMA_EPS, DAMPING**2 * (1.0 - (smin / SIGMA_EPS) ** 2), 0.0)
+    d = lam + mu2[:, None]
+    Jpinv = Js.transpose(0, 2, 1) @ ((V / (d + (d == 0.0))[:, None, :]) @ V.transpose(0, 2, 1))
+    keep = lam > (RANK_RTOL**2) * np.maximum(lam[:, -1:], 1e-300)
+    w = np.where(keep, 1.0 / np.sqrt(np.where(keep, lam, 1.0)), 0.0)
+    U = Js.transpose(0, 2, 1) @ (V * w[:, None, :])  # (B, n, m), zero columns where dropped
+    N = np.eye(n)[None] - U @ U.transpose(0, 2, 1)
+    return Jpinv, N
+
+
+def _pivots(N: np.ndarray, sc: Scenarios) -> np.ndarray:
+    """Smallest eigenvalue of ``N[S, S]`` per row and scenario, shape (B, f)."""
+    if sc.singletons:
+        c = sc.columns
+        return N[:, c, c]
+    return np.stack([np.linalg.eigvalsh(N[:, S][:, :, S])[:, 0] for S in map(list, sc.sets)], 1)
+
+
+def _tolerable(N: np.ndarray, sc: Scenarios, intolerable: str) -> np.ndarray:
+    """Rows whose every scenario is tolerable; raise on the first bad one when asked to."""
+    piv = _pivots(N, sc)
+    good = np.all(piv >= PIVOT_TOL, axis=1)
+    if intolerable == "raise" and not good.all():
+        b = int(np.argmin(good))
+        k = int(np.argmin(piv[b]))
+        raise IntolerableFailure(sc.name(sc.sets[k]), float(piv[b, k]))
+    return good
+
+
+def _reduced(base: np.ndarray, N: np.ndarray, S: list[int], good: np.ndarray) -> np.ndarray:
+    """(G1) ``base − N[:, S] N[S, S]⁻¹ base[S]`` per row, zero in S, shape (B, n)."""
+    if len(S) == 1:
+        i = S[0]
+        piv = np.where(good, N[:, i, i], 1.0)
+        out = base - (base[:, i] / piv)[:, None] * N[:, :, i]
+    else:
+        M = N[:, S][:, :, S]
+        M = np.where(good[:, None, None], M, np.eye(len(S)))
+        z = np.linalg.solve(M, base[:, S][:, :, None])[:, :, 0]
+        out = base - np.einsum("bns,bs->bn", N[:, :, S], z)
+    out[:, S] = 0.0
+    return out
+
+
+def _jvja_rows(a, N, sc: Scenarios, good, response: str) -> np.ndarray:
+    """JVJA (5) from ``a = J⁺ẋ`` and ``N`` per row; weights over the largest (no overflow)."""
+    weights = sc.weights / sc.weights.max()
+    W = weights.sum()
+    if response == "least_norm":
+        if sc.singletons:
+            c = np.zeros_like(a)
+            cols = sc.columns
+            piv = np.where(good[:, None], N[:, cols, cols], 1.0)
+            c[:, cols] = weights * a[:, cols] / piv
+            return a - np.einsum("bij,bj->bi", N, c) / W
+        shift = sum(
+            w * (a - _reduced(a, N, list(S), good)) for S, w in zip(sc.sets, weights, strict=True)
+        )
+        return a - shift / W
+    Wm = np.zeros_like(N)
+    for S, w in zip(sc.sets, weights, strict=True):
+        S = list(S)
+        M = np.where(good[:, None, None], N[:, S][:, :, S], np.eye(len(S)))
+        Wm[np.ix_(np.arange(len(N)), S, S)] += w * np.linalg.inv(M)
+    NWN = N @ Wm @ N
+    rhs = np.einsum("bij,bj->bi", N @ Wm, a)
+    z = -np.einsum("bij,bj->bi", np.linalg.pinv(NWN, rcond=1e-10, hermitian=True), rhs)
+    return a + np.einsum("bij,bj->bi", N, z)
+
+
+def resolve(
+    name: str,
+    Js: np.ndarray,
+    xdots: np.ndarray,
+    lockable=None,
+    *,
+    weights: Sequence[float] | None = None,
+    response: str = "least_norm",
+    joint_names: Sequence[str] = (),
+    intolerable: str = "raise",
+    chunk: int = CHUNK,
+) -> np.ndarray:
+    """Rates of resolver ``name`` (``"lnva"`` or ``"jvja"``) for every row, shape (B, n).
+
+    Row b equals ``ft.resolve(name, Js[b], xdots[b], lockable, ...)``. ``intolerable="nan"``
+    fills rows with an intolerable scenario with NaN (jvja) instead of raising. MDA needs the
+    configurations and Jacobian derivatives; it is not batched (use :func:`ft.resolve` per row).
+
+    With numba, LNVA and least-norm single-joint JVJA run the Controller's compiled step on
+    every row (:mod:`.batch_kernel`); the rows it refuses (near a singularity, a small pivot, an
+    ill-conditioned ``J Jᵀ``), multi-joint scenarios and the continuation response take
+    :func:`resolve_stacked`, the stacked NumPy code.
+    """
+    Js, xdots, sc = _resolve_input(
+        name, Js, xdots, lockable, weights, response, intolerable, joint_names
+    )
+    if not _compiled(Js, sc, response):
+        return _stacked(Js, xdots, sc, response, intolerable, chunk)
+    out, status = batch_kernel.rates(Js, xdots, sc)
+    redo = np.flatnonzero(status)
+    if redo.size:
+        out[redo] = _stacked(Js[redo], xdots[redo], sc, response, intolerable, chunk)
+    return out
+
+
+def _compiled(Js: np.ndarray, sc: Scenarios | None, response: str) -> bool:
+    """Whether :func:`resolve` runs the compiled step (LNVA, least-norm single-joint JVJA)."""
+    if not (batch_kernel.COMPILED and Js.shape[0] and Js.shape[1]):
+        return False
+    return sc is None or (sc.singletons and response == "least_norm")
+
+
+def resolve_stacked(
+    name: str,
+    Js: np.ndarray,
+    xdots: np.ndarray,
+    lockable=None,
+    *,
+    weights: Sequence[float] | None = None,
+    response: str = "least_norm",
+    joint_names: Sequence[str] = (),
+    intolerable: str = "raise",
+    chunk: int = CHUNK,
+) -> np.ndarray:
+    """:func:`resolve` by stacked NumPy alone (the path without numba, and its reference)."""
+    Js, xdots, sc = _resolve_input(
+        name, Js, xdots, lockable, weights, response, intolerable, joint_names
+    )
+    return _stacked(Js, xdots, sc, response, intolerable, chunk)
+
+
+def _resolve_input(name, Js, xdots, lockable, weights, response, intolerable, joint_names):
+    """Validated ``Js``, ``xdots`` and the scenarios (None for LNVA) of :func:`resolve`."""
+    if name not in ("lnva", "jvja"):
+        raise InvalidInput(f"batched resolver '{name}' is not one of ['jvja', 'lnva']")
+    if response not in RESPONSES:
+        raise InvalidInput(f"response {response!r} is not one of {RESPONSES}")
+    _option(intolerable)
+    Js, xdots = _check(Js, ("xdots", xdots, np.shape(Js)[1]))
+    sc = _scenarios(Js, lockable, weights, joint_names) if name == "jvja" else None
+    return Js, xdots, sc
+
+
+def _stacked(Js, xdots, sc: Scenarios | None, response, intolerable, chunk) -> np.ndarray:
+    """LNVA (``sc=None``) or JVJA rates of every row by stacked NumPy, in chunks."""
+    B, m, n = Js.shape
+    out = np.empty((B, n))
+    for s in range(0, B, max(int(chunk), 1)):
+        e = min(s + max(int(chunk), 1), B)
+        Jpinv, N = projections(Js[s:e])
+        a = np.einsum("bnm,bm->bn", Jpinv, xdots[s:e])
+        if sc is None:
+            out[s:e] = a
+            continue
+        good = _tolerable(N, sc, intolerable)
+        out[s:e] = _jvja_rows(a, N, sc, good, response)
+        out[s:e][~good] = np.nan
+    return out
+
+
+# Eqn. (9), (10)
+def jvj(
+    Js: np.ndarray,
+    xdots: np.ndarray,
+    qds: np.ndarray,
+    lockable=None,
+    *,
+    weights: Sequence[float] | None = None,
+    response: str = "least_norm",
+    joint_names: Sequence[str] = (),
+    intolerable: str = "raise",
+    chunk: int = CHUNK,
+) -> np.ndarray:
+    """Square-sum joint velocity jump of rates ``qds`` for every row [(rad/s)²], shape (B,).
+
+    Row b equals ``ft.jvj(Js[b], xdots[b], qds[b], lockable, ...)``; NaN where a scenario is
+    intolerable and ``intolerable="nan"``.
+    """
+    if response not in RESPONSES:
+        raise InvalidInput(f"response {response!r} is not one of {RESPONSES}")
+    intolerable = _option(intolerable)
+    m = np.shape(Js)[1] if np.ndim(Js) == 3 else 0
+    n = np.shape(Js)[2] if np.ndim(Js) == 3 else 0
+    Js, xdots, qds = _check(Js, ("xdots", xdots, m), ("qds", qds, n))
+    sc = _scenarios(Js, lockable, weights, joint_names)
+    B = Js.shape[0]
+    out = np.empty(B)
+    step = max(int(chunk), 1)
+    for s in range(0, B, step):
+        e = min(s + step, B)
+        Jpinv, N = projections(Js[s:e])
+        good = _tolerable(N, sc, intolerable)
+        qd = qds[s:e]
+        base = np.einsum("bnm,bm->bn", Jpinv, xdots[s:e]) if response == "least_norm" else qd
+        lam = np.zeros(e - s)
+        for S, w in zip(sc.sets, sc.weights, strict=True):
+            d = _reduced(base, N, list(S), good) - qd
+            lam += w * np.einsum("bn,bn->b", d, d)
+        lam[~good] = np.nan
+        out[s:e] = lam
+    return out
+
+
+# Eqn. (15)
+def rcn(
+    Js: np.ndarray, lockable=None, *, joint_names: Sequence[str] = (), chunk: int = CHUNK
+) -> np.ndarray:
+    """Reduced condition numbers ``k_S`` of every row, shape (B, f), as :func:`ft.rcn`.
+
+    ``J_S J_Sᵀ = J Jᵀ − J[:, S] J[:, S]ᵀ``: one stacked ``eigvalsh`` of (B, f, m, m) per chunk
+    (:func:`rcn_stacked`). With numba, single-joint scenarios take the compiled sample's spectra
+    per row (:func:`.batch_kernel.reduced_condition_numbers`); rows with a large ``k_S`` (where
+    the two routes could differ by more than ~1e-10) are redone the stacked way.
+    """
+    (Js,) = _check(Js)
+    sc = _scenarios(Js, lockable, None, joint_names)
+    if not (batch_kernel.COMPILED and sc.singletons and Js.shape[0] and Js.shape[1]):
+        return _rcn_stacked(Js, sc, chunk)
+    out, status = batch_kernel.reduced_condition_numbers(Js, sc)
+    redo = np.flatnonzero(status)
+    if redo.size:
+        out[redo] = _rcn_stacked(Js[redo], sc, chunk)
+    return out
+
+
+def rcn_stacked(
+    Js: np.ndarray, lockable=None, *, joint_names: Sequence[str] = (), chunk: int = CHUNK
+) -> np.ndarray:
+    """:func:`rcn` by stacked NumPy alone (the path without numba, and its reference)."""
+    (Js,) = _check(Js)
+    return _rcn_stacked(Js, _scenarios(Js, lockable, None, joint_names), chunk)
+
+
+def _rcn_stacked(Js: np.ndarray, sc: Scenarios, chunk: int) -> np.ndarray:
+    B, m, n = Js.shape
+    out = np.empty((B, sc.f))
+    step = max(int(chunk), 1)
+    for s in range(0, B, step):
+        e = min(s + step, B)
+        J = Js[s:e]
+        G = J @ J.transpose(0, 2, 1)  # (b, m, m)
+        stack = np.empty((e - s, sc.f, m, m))
+        for k, S in enumerate(sc.sets):
+            C = J[:, :, list(S)]
+            stack[:, k] = G - C @ C.transpose(0, 2, 1)
+        sigma = np.sqrt(np.maximum(np.linalg.eigvalsh(stack), 0.0))
+        out[s:e] = _condition(sigma)
+    return out
+
+
+def _condition(sigma: np.ndarray) -> np.ndarray:
+    """``σ_max/σ_min`` of ascending singular values, capped at RCN_MAX (as the scalar API)."""
+    smax = sigma[..., -1]
+    smin = np.maximum(sigma[..., 0], smax / RCN_MAX)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        k = np.where(smax > 0, smax / np.where(smin > 0, smin, 1.0), RCN_MAX)
+    return np.minimum(k, RCN_MAX)
+
+
+def square_sum_rcn(Js: np.ndarray, lockable=None, **options) -> np.ndarray:
+    """``K = Σ_S k_S²`` of every row, shape (B,)."""
+    k = rcn(Js, lockable, **options)
+    return np.einsum("bf,bf->b", k, k)
+
+
+def mean_jump(
+    Js: np.ndarray, lockable=None, *, weights=None, intolerable: str = "nan", chunk: int = CHUNK
+) -> np.ndarray:
+    r"""JVJA's square-sum jump averaged over unit task directions, shape (B,) [(rad/s)² per (unit)²].
+
+    JVJA's rates and the reduced rates are linear in ``ẋ``, so :math:`\lambda(\dot x) = \dot x^T Q
+    \dot x` and its mean over the unit sphere of Rᵐ is :math:`\mathrm{tr}(Q)/m = \frac1m\sum_k
+    \lambda(e_k)` (exact, no direction sampling).
+    """
+    Js = np.asarray(Js, dtype=float)
+    B, m, _ = Js.shape
+    total = np.zeros(B)
+    for k in range(m):
+        e = np.zeros((B, m))
+        e[:, k] = 1.0
+        opts = dict(weights=weights, intolerable=intolerable, chunk=chunk)
+        qd = resolve("jvja", Js, e, lockable, **opts)
+        if intolerable == "nan":
+            qd = np.where(np.isfinite(qd), qd, 0.0)
+        lam = jvj(Js, e, qd, lockable, **opts)
+        total += lam
+    return total / m

@@ -1,0 +1,1 @@
+"""Design of arms for fault tolerance: the design problem and its search."""

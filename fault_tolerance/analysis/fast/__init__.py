@@ -1,0 +1,1 @@
+"""Compiled (numba) row loops of the batched API."""

@@ -1,0 +1,122 @@
+"""The result of a workspace sweep: masks, maps, areas or volumes, and how it is saved."""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+DEFINITION = (
+    "FTW(A) = W(A) ∩ ⋂_{i∈F} ⋂_{θ∈[lo_i,hi_i]} W_i(θ): reachable with q in the artificial limits "
+    "A, and after joint i of F locks at any θ in [lo_i, hi_i] still reachable by the other joints "
+    "within their physical (URDF) limits"
+)
+
+
+@dataclass(frozen=True)
+class Workspace:
+    """Masks and maps on a grid of task points (axes: one array per task coordinate).
+
+    ``pre`` is W(A), ``ftw`` the failure-tolerant workspace, ``locks[k]`` the points that survive
+    any lock of the k-th lockable joint; ``jump`` [(rad/s)² per (m/s)²] and ``rcn`` are the smallest
+    direction-averaged JVJA jump and square-sum RCN on the self-motion (NaN outside W(A)).
+    ``cell`` is the area [m²] or volume [m³] of one grid cell.
+    """
+
+    spec: dict
+    axes: tuple
+    pre: np.ndarray
+    ftw: np.ndarray
+    locks: np.ndarray
+    jump: np.ndarray
+    rcn: np.ndarray
+    cell: float
+    definition: str
+    error: str
+
+    @property
+    def spatial(self) -> bool:
+        """True for a 3-D (position task) grid."""
+        return len(self.axes) == 3
+
+    @property
+    def size_pre(self) -> float:
+        """Area [m²] or volume [m³] of W(A)."""
+        return float(self.pre.sum() * self.cell)
+
+    @property
+    def size_ftw(self) -> float:
+        """Area [m²] or volume [m³] of the failure-tolerant workspace."""
+        return float(self.ftw.sum() * self.cell)
+
+    @property
+    def area_pre(self) -> float:
+        """Area of W(A) [m²] (planar tasks)."""
+        return self.size_pre
+
+    @property
+    def area_ftw(self) -> float:
+        """Area of the failure-tolerant workspace [m²] (planar tasks)."""
+        return self.size_ftw
+
+    def summary(self) -> dict:
+        """The ``workspace.json`` record."""
+        s = self.spec
+        unit = "volume" if self.spatial else "area"
+        out = {
+            "robot": s["robot"]["source"],
+            "tip": s["robot"]["tip"],
+            "task": s["robot"]["task"],
+            "joints": s["robot"]["joints"],
+            "lockable": s["lockable"],
+            "limits": s["limits"],
+            "grid": s["grid"],
+            "method": s["method"],
+            f"{unit}_pre": self.size_pre,
+            f"{unit}_ftw": self.size_ftw,
+            f"{unit}_unit": "m^3" if self.spatial else "m^2",
+            "cell": self.cell,
+            f"{unit}_tolerant_per_joint": {
+                j: float((self.pre & self.locks[k]).sum() * self.cell)
+                for k, j in enumerate(s["lockable"])
+            },
+            "jump_min": _nanmin(self.jump[self.pre]),
+            "rcn_min": _nanmin(self.rcn[self.pre]),
+            "definition": self.definition,
+            "resolution": self.error,
+            "spec": s,
+        }
+        return out
+
+    def save(
+        self, folder: str | Path, draw: Callable[[Workspace, Path], None] | None = None
+    ) -> Path:
+        """Write ``workspace.json``, ``workspace.npz``, and ``workspace.png`` with ``draw``.
+
+        ``draw`` is :func:`fault_tolerance.figures.workspace.plot_workspace` for the usual figure
+        (figures sit above the analyses, so the caller passes it).
+        """
+        folder = Path(folder)
+        folder.mkdir(parents=True, exist_ok=True)
+        names = "xyz"[: len(self.axes)]
+        np.savez_compressed(
+            folder / "workspace.npz",
+            **{n: a for n, a in zip(names, self.axes, strict=True)},
+            pre=self.pre,
+            ftw=self.ftw,
+            locks=self.locks,
+            jump=self.jump,
+            rcn=self.rcn,
+        )
+        (folder / "workspace.json").write_text(json.dumps(self.summary(), indent=2) + "\n")
+        if draw is not None:
+            draw(self, folder / "workspace.png")
+        return folder
+
+
+def _nanmin(a: np.ndarray) -> float | None:
+    a = a[np.isfinite(a)]
+    return float(a.min()) if a.size else None

@@ -1,0 +1,1 @@
+"""The Controller's compiled (numba) steps; each tested against the reference resolvers."""

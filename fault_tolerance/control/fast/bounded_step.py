@@ -1,0 +1,130 @@
+"""The Controller's bounded step with the numba backend: one compiled call per step.
+
+:func:`compiled_bounded_step` builds the step around :func:`fault_tolerance.control.fast.bounded_solve.bounded_kernel`:
+the Jacobian from Pinocchio, then one call that takes the unbounded step, checks it against the
+rate box (L1) and, only when a bound is met, solves the bounded problem (L2)-(L4) compiled. No
+closure layers, no allocation (with ``out=``). What the kernel refuses (near a singularity of
+``J`` or of a reduced Jacobian, an intolerable scenario, an empty box, inputs of other types) takes
+the reference route of :mod:`fault_tolerance.control.bounded_step`, counted in ``bounded_reference_steps``
+when it solves a bounded problem.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import numpy as np
+import pinocchio as pin
+
+from fault_tolerance.errors import FaultToleranceError
+
+_LWA = pin.LOCAL_WORLD_ALIGNED
+_F64 = np.dtype(np.float64)
+_MODES = {"lnva": 0, "jvja": 1, "mda": 2}
+_ERRORS = (ValueError, TypeError, RuntimeError, AttributeError, IndexError)
+
+
+def _workspace(ctrl):
+    """One float workspace per controller (its three steps share the scratch and the state)."""
+    from fault_tolerance.control.fast.bounded_solve import workspace
+    from fault_tolerance.control.lapack_steps import TRACE_MAX
+
+    if getattr(ctrl, "_box_ws", None) is None:
+        sc, n = ctrl.scenarios, ctrl.n
+        smax = max(len(S) for S in sc.sets)
+        sets = -np.ones((sc.f, smax), dtype=np.int64)
+        for k, S in enumerate(sc.sets):
+            sets[k, : len(S)] = S
+        cols = sc.columns if ctrl._singletons else np.zeros(0, dtype=np.int64)
+        F, Iw, views = workspace(n, ctrl.m, sets, cols, 0)
+        views["fw"][:] = ctrl._fw
+        views["p4"][:] = TRACE_MAX, ctrl._pivot_threshold, ctrl._rank_coef, ctrl._alpha
+        views["p3"][:] = TRACE_MAX, ctrl._pivot_threshold, ctrl._rank_coef
+        views["wrel"][:] = sc.weights / sc.weights.sum()
+        views["state"][:] = ctrl._box_state
+        ctrl._box_state = views["state"]  # last_scale / last_active read it
+        ctrl._box_ws = (F, Iw, views)
+    return ctrl._box_ws
+
+
+def compiled_bounded_step(ctrl, name: str, inner: Callable, reference: Callable, lim, prm):
+    """``step(q, xdot, out=None)`` of method ``name`` inside the box, compiled (see module doc).
+
+    ``inner`` is the unbounded fast step, ``reference`` the reference route (same signature);
+    ``lim`` (3, n) the position and velocity limits, ``prm = [1/h, alpha]``.
+    """
+    from fault_tolerance.control.fast.bounded_solve import JVJA_MULTI, bounded_kernel
+
+    F, I0, views = _workspace(ctrl)
+    views["lim"][:] = lim
+    views["prm"][:] = prm
+    Iw = I0.copy()  # its own mode; the int scratch of the copy is its own too
+    Iw[4] = JVJA_MULTI if (name == "jvja" and not ctrl._singletons) else _MODES[name]
+    n, m = ctrl.n, ctrl.m
+    model, data, fid, rows = ctrl.model, ctrl.data, ctrl.frame_id, ctrl._rows
+    cfj, empty, ndarray = pin.computeFrameJacobian, np.empty, np.ndarray
+    # Compile for this arm's Jacobian layout (here, not in the loop), then freeze the dispatcher
+    # (as the unbounded step does): an argument of another type or layout raises TypeError (then
+    # the reference route) instead of compiling, so the step needs no type checks of its own.
+    J0 = cfj(model, data, pin.neutral(model), fid, _LWA)[rows]
+    bounded_kernel.disable_compile(False)
+    bounded_kernel(J0, np.zeros(n + 1), np.zeros(m), np.zeros(n), F, Iw)  # refused: sizes
+    bounded_kernel.disable_compile(True)
+
+    def retry(q, xdot, out):
+        """Other types or layouts: contiguous float64 copies once, else the reference route."""
+        try:
+            q2, x2 = np.ascontiguousarray(q, dtype=float), np.ascontiguousarray(xdot, dtype=float)
+            if type(out) is ndarray and out.dtype == _F64 and out.flags.c_contiguous:
+                if q2.shape == (n,) and x2.shape == (m,) and (q2 is not q or x2 is not xdot):
+                    return step(q2, x2, out)
+        except (TypeError, ValueError):
+            pass
+        return reference(q, xdot, out)  # converts, or says what is wrong
+
+    if name == "mda":
+        return _mda_step(ctrl, inner, reference, F, Iw)
+
+    def step(q: np.ndarray, xdot: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+        if out is None:
+            out = empty(n)
+        try:  # the kernel checks the sizes (status 2), numba the types and layouts (TypeError)
+            status = bounded_kernel(cfj(model, data, q, fid, _LWA)[rows], q, xdot, out, F, Iw)
+        except FaultToleranceError:
+            raise
+        except _ERRORS:
+            return retry(q, xdot, out)
+        if status == 1:
+            ctrl.bounded_steps += 1
+        elif status:
+            return reference(q, xdot, out)
+        return out
+
+    step.__name__ = name
+    step.__doc__ = f"{name} inside the rate box of the joint limits; compiled."
+    return step
+
+
+def _mda_step(ctrl, inner: Callable, reference: Callable, F, Iw) -> Callable:
+    """MDA: its unbounded rates by ``inner`` (LAPACK), then the compiled box check and solve."""
+    from fault_tolerance.control.fast.bounded_solve import bounded_kernel
+
+    slow, finish = reference.slow, reference.finish
+
+    def mda(q: np.ndarray, xdot: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+        before = ctrl.fallbacks
+        out = inner(q, xdot, out)
+        if ctrl.fallbacks != before:  # the planner's damped rates: the reference route
+            return finish(q, np.asarray(xdot, dtype=float), out)
+        try:
+            status = bounded_kernel(ctrl.jacobian(q), q, xdot, out, F, Iw)
+        except _ERRORS:  # other types or layouts
+            return finish(q, np.asarray(xdot, dtype=float), out)
+        if status == 1:
+            ctrl.bounded_steps += 1
+        elif status:
+            return slow(q, xdot, out)  # out still holds the unbounded rates
+        return out
+
+    mda.__doc__ = "mda inside the rate box of the joint limits; compiled."
+    return mda

@@ -1,0 +1,124 @@
+"""The box check (L1) of the Controller's bounded step: is the fast step inside the rate box?
+
+:func:`box_status` (compiled by numba, also inside :mod:`fault_tolerance.control.fast.bounded_solve` and the
+simulated sample's kernel) and :func:`box_status_numpy` (the lapack and numpy backends). Re-exported
+by :mod:`fault_tolerance.control.bounded_step`.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import numpy as np
+
+from fault_tolerance.resolution.box_qp import BOX_TOL
+
+
+def box_status(q, lim, prm, buf, out, P, Q, c, cols, jv):  # pragma: no cover - numba
+    """Box (L1) at ``q`` into ``buf[0], buf[1]``; 0 when ``out`` (and, ``jv``, each (G1) rate) is inside.
+
+    ``lim`` rows: lower, upper position limits, velocity limits; ``prm = [1/h, alpha]``; ``out =
+    a + alpha N c`` is the JVJA step (``c`` its pivot ratios) with ``N = I - PᵀQ`` (the kernels
+    never form N: ``P = Q = Y = L⁻¹J`` compiled, ``P = J, Q = G⁻¹J`` with LAPACK), so ``N[:, i] =
+    e_i - Pᵀ Q[:, i]``; ``buf[2]`` and ``buf[3]`` (n each) are scratch. Plain Python with scalar
+    loops (compiled by numba with the numba backend). Returns 1 when ``out`` leaves the box, 2 when
+    a reduced robot's rates do.
+    """
+    n = q.shape[0]
+    m = P.shape[0]
+    lower, upper, vmax = lim[0], lim[1], lim[2]
+    lo, hi, a, y = buf[0], buf[1], buf[2], buf[3]
+    ih, alpha = prm[0], prm[1]
+    bad = 0
+    for j in range(n):
+        lj = (lower[j] - q[j]) * ih
+        hj = (upper[j] - q[j]) * ih
+        v = vmax[j]
+        lj = -v if lj < -v else (v if lj > v else lj)
+        hj = -v if hj < -v else (v if hj > v else hj)
+        lo[j] = lj
+        hi[j] = hj
+        if out[j] < lj - BOX_TOL or out[j] > hj + BOX_TOL:
+            bad = 1
+    if bad or not jv:
+        return bad
+    for r in range(m):  # N c = c - Pᵀ (Q c), N never formed
+        s = 0.0
+        for k in range(n):
+            s += Q[r, k] * c[k]
+        y[r] = s
+    for j in range(n):  # the loops over j run along the rows of P (vectorised)
+        a[j] = c[j]
+    for r in range(m):
+        yr = y[r]
+        for j in range(n):
+            a[j] -= P[r, j] * yr
+    for j in range(n):
+        a[j] = out[j] - alpha * a[j]
+    col = y  # y is spent: N[:, i] of each scenario, accumulated along the rows of P
+    for t in range(cols.shape[0]):
+        i = cols[t]
+        nii = 1.0
+        for r in range(m):
+            nii -= P[r, i] * Q[r, i]
+        ratio = a[i] / nii
+        q0 = Q[0, i]
+        for j in range(n):  # N[j, i] = -P_jᵀ Q_i: the same sum as entry by entry, row by row of P
+            col[j] = 0.0 - P[0, j] * q0
+        for r in range(1, m):
+            qri = Q[r, i]
+            for j in range(n):
+                col[j] -= P[r, j] * qri
+        out_of_box = False  # all j first (vectorised), then without j = i if that fails
+        for j in range(n):
+            p = a[j] - ratio * col[j]
+            out_of_box |= (p < lo[j] - BOX_TOL) | (p > hi[j] + BOX_TOL)
+        if out_of_box:
+            for j in range(n):
+                p = a[j] - ratio * col[j]
+                if j != i and (p < lo[j] - BOX_TOL or p > hi[j] + BOX_TOL):
+                    return 2
+    return 0
+
+
+def box_status_numpy(q, lim, prm, buf, out, P, Q, c, cols, jv):
+    """:func:`box_status` with NumPy array operations (the lapack and numpy backends)."""
+    lower, upper, vmax = lim[0], lim[1], lim[2]
+    lo, hi, a = buf[0], buf[1], buf[2]
+    ih, alpha = prm[0], prm[1]
+    np.subtract(lower, q, out=lo)
+    np.multiply(lo, ih, out=lo)
+    np.clip(lo, -vmax, vmax, out=lo)
+    np.subtract(upper, q, out=hi)
+    np.multiply(hi, ih, out=hi)
+    np.clip(hi, -vmax, vmax, out=hi)
+    if (out < lo - BOX_TOL).any() or (out > hi + BOX_TOL).any():
+        return 1
+    if not jv:
+        return 0
+    np.subtract(c, P.T @ (Q @ c), out=a)  # N c = c - Pᵀ (Q c)
+    np.multiply(a, -alpha, out=a)
+    np.add(a, out, out=a)
+    k = np.arange(len(cols))
+    Ncols = -(P.T @ Q[:, cols]).T  # row t: N[cols[t], :] (N symmetric)
+    Ncols[k, cols] += 1.0
+    post = a - (a[cols] / Ncols[k, cols])[:, None] * Ncols
+    post[k, cols] = 0.0
+    if (post < lo - BOX_TOL).any() or (post > hi + BOX_TOL).any():
+        return 2
+    return 0
+
+
+_COMPILED: dict[str, Callable] = {}
+
+
+def compiled_box_status() -> Callable:
+    """:func:`box_status` compiled by numba (once per process; cached on disk)."""
+    if "box" not in _COMPILED:
+        import numba
+
+        _COMPILED["box"] = numba.njit(cache=True, nogil=True, error_model="numpy")(box_status)
+    return _COMPILED["box"]
+
+
+__all__ = ["box_status", "box_status_numpy", "compiled_box_status"]

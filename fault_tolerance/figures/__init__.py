@@ -1,0 +1,1 @@
+"""Matplotlib figures of runs, workspaces and designs (matplotlib is imported only here)."""

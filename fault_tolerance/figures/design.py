@@ -1,0 +1,67 @@
+"""Figure of a design: the chosen design's workspace and the search (Pareto front for jvj/rcn)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+
+def plot_design(d, path: str | Path) -> Path:
+    """Two panels: W(A)/FTW of the chosen design; candidates (mean λ vs mean K, or area)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.colors import ListedColormap
+
+    rec, seen, ws = d.record, d.evaluated, d.workspace
+    fig, (a, b) = plt.subplots(1, 2, figsize=(11, 4.6))
+    x, y = ws.axes
+    img = np.where(ws.ftw, 2, np.where(ws.pre, 1, 0)).T
+    cmap = ListedColormap(["white", "#9ecae1", "#08519c"])
+    a.imshow(img, origin="lower", extent=[x[0], x[-1], y[0], y[-1]], cmap=cmap, vmin=0, vmax=2)
+    a.set_title(f"chosen: W(A) {ws.area_pre:.3g} m², FTW {ws.area_ftw:.3g} m²")
+    t = rec["task"]
+    ang = np.linspace(0, 2 * np.pi, 200)
+    cx, cy = t["x0"][0] + t["sign"] * t["radius"], t["x0"][1]
+    a.plot(cx - t["sign"] * t["radius"] * np.cos(ang), cy + t["radius"] * np.sin(ang), "r-", lw=1)
+    a.set_xlabel("x [m]")
+    a.set_ylabel("y [m]")
+    a.set_aspect("equal")
+    if rec["objective"] == "ftw-area":
+        b.plot(-seen["score"], ".", ms=3)
+        b.axhline(rec["area_ftw"], color="k", lw=0.8)
+        b.set_xlabel("evaluation")
+        b.set_ylabel("FTW area [m²] (search grid)")
+        b.set_title(f"{rec['evaluations']} designs evaluated")
+    else:
+        ok = seen["feasible"]
+        met = np.isfinite(seen["score"])
+        b.loglog(
+            seen["jvj"][~ok], seen["rcn"][~ok], ".", color="0.75", ms=3, label="leaves its limits"
+        )
+        b.loglog(
+            seen["jvj"][ok & ~met],
+            seen["rcn"][ok & ~met],
+            ".",
+            color="orange",
+            ms=4,
+            label="over the RCN requirement",
+        )
+        b.loglog(seen["jvj"][met], seen["rcn"][met], ".", ms=4, label="feasible")
+        fr = sorted((p["jvj"], p["rcn"]) for p in rec["pareto"])
+        if fr:
+            b.loglog(*zip(*fr, strict=True), "k-", lw=1, label="Pareto front")
+        b.loglog([rec["jvj"]], [rec["rcn"]], "r*", ms=12, label="chosen")
+        if "jvj" in rec["baseline"]:
+            b.loglog([rec["baseline"]["jvj"]], [rec["baseline"]["rcn"]], "ks", label="no limits")
+        b.set_xlabel("mean JVJ λ [(rad/s)²]")
+        b.set_ylabel("mean K")
+        b.legend(fontsize=8)
+        b.set_title(f"{rec['evaluations']} designs, objective {rec['objective']}")
+    fig.suptitle(f"{rec['robot']}: design ({rec['vary']})")
+    fig.tight_layout()
+    fig.savefig(path, dpi=90)
+    plt.close(fig)
+    return Path(path)

@@ -1,0 +1,200 @@
+"""Where a description comes from: URDF and xacro files, and the ROS package folders they name.
+
+Real descriptions live in ROS packages: meshes are ``package://pkg/meshes/...`` and xacro files
+include ``$(find pkg)/urdf/...``. Both resolve here through the package folders the user passes
+(``package_dirs`` / ``--package-dir DIR``, repeatable), without ROS: a folder ``DIR`` serves
+package ``pkg`` if ``DIR/pkg`` is a folder or if ``DIR/package.xml`` names ``pkg``.
+
+xacro files (``.xacro``, ``.urdf.xacro``) are expanded with the ``xacro`` package from PyPI,
+imported only for them. Every file xacro reads passes the same byte checks as a URDF (size,
+UTF-8, no DTD or entities), and the expanded text then goes through :func:`~.urdf.read_urdf`
+like any URDF. xacro's own errors become :class:`~.errors.URDFError` naming the missing package
+or argument; no xacro traceback reaches the user.
+
+Example:
+    >>> from pathlib import Path
+    >>> is_xacro(Path("ur5e.urdf.xacro")), is_xacro(Path("ur5e.urdf"))
+    (True, False)
+    >>> parse_xacro_args(["prefix:=left_", "hand:=true"])
+    {'prefix': 'left_', 'hand': 'true'}
+"""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import os
+import re
+import threading
+from collections.abc import Iterator, Mapping, Sequence
+from functools import lru_cache
+from pathlib import Path
+
+from fault_tolerance.errors import InvalidInput, PackageNotFound, URDFError
+
+#: What ``package_dirs`` may be: one folder or several.
+PackageDirs = Sequence[str | os.PathLike] | None
+
+_XACRO_LOCK = threading.Lock()  # xacro keeps its state in module globals
+
+
+def is_xacro(path: Path) -> bool:
+    """True for ``.xacro`` and ``.urdf.xacro`` files."""
+    return path.name.lower().endswith(".xacro")
+
+
+def parse_xacro_args(items: Sequence[str] | None) -> dict[str, str]:
+    """``["name:=value", ...]`` (``--xacro-arg``) as a dict; a malformed item raises."""
+    out: dict[str, str] = {}
+    for item in items or []:
+        name, sep, value = item.partition(":=")
+        if not sep or not name.strip():
+            raise InvalidInput(f"xacro argument {item!r} is not name:=value (e.g. prefix:=left_)")
+        out[name.strip()] = value
+    return out
+
+
+@lru_cache(maxsize=256)
+def _package_name(folder: str) -> str | None:
+    """The ``<name>`` in ``folder/package.xml``, or None."""
+    xml = Path(folder) / "package.xml"
+    if not xml.is_file():
+        return None
+    match = re.search(rb"<name>\s*([^<\s]+)\s*</name>", xml.read_bytes()[:100_000])
+    return match.group(1).decode("utf-8", "replace") if match else None
+
+
+def find_package(package: str, package_dirs: PackageDirs, where: str = "") -> Path:
+    """The folder of ROS package ``package``: ``DIR/package`` or a ``DIR`` whose package.xml names it.
+
+    Raises:
+        PackageNotFound: naming the package and the folders searched.
+    """
+    dirs = [Path(d).expanduser().absolute() for d in (package_dirs or [])]
+    for d in dirs:
+        if _package_name(str(d)) == package:
+            return d
+        if (d / package).is_dir():
+            return d / package
+    raise PackageNotFound(package, [str(d) for d in dirs], where)
+
+
+def resolve_uri(uri: str, package_dirs: PackageDirs, base: Path) -> Path:
+    """File path of a mesh ``filename``: ``package://pkg/...``, ``file://...``, absolute or relative."""
+    if uri.startswith("package://"):
+        package, _, rest = uri[len("package://") :].partition("/")
+        return find_package(package, package_dirs) / rest
+    if uri.startswith("file://"):
+        return Path(uri[len("file://") :])
+    path = Path(uri)
+    return path if path.is_absolute() else base / path
+
+
+# -- xacro ------------------------------------------------------------------------------------
+
+
+def expand_xacro(
+    path: Path, package_dirs: PackageDirs = None, xacro_args: Mapping[str, str] | None = None
+) -> tuple[bytes, list[str]]:
+    """The URDF text of a xacro file, and the notices xacro printed.
+
+    Raises:
+        URDFError: xacro is not installed, a package or argument is missing, a file it reads is
+            refused by the URDF byte checks, or the xacro is malformed.
+    """
+    try:
+        import xacro
+        import xacro.substitution_args  # noqa: F401 - patched while expanding
+    except ImportError as err:  # pragma: no cover - xacro is a dependency
+        raise URDFError(
+            f"{path}: reading xacro files needs the 'xacro' package (pip install xacro)"
+        ) from err
+    args = {str(k): str(v) for k, v in (xacro_args or {}).items()}
+    notices: list[str] = []
+    with _XACRO_LOCK, _patched(xacro, package_dirs, notices), _quiet() as said:
+        try:
+            doc = xacro.process_file(str(path.absolute()), mappings=args)
+            text = doc.toxml()
+        except URDFError:
+            raise
+        except Exception as err:  # xacro raises many kinds; none may reach the user raw
+            raise _xacro_error(path, err, args) from None
+        finally:
+            xacro.substitution_args_context["arg"] = {}
+    notices += [s for s in said.getvalue().splitlines() if s.strip()]
+    return text.encode("utf-8"), notices
+
+
+def declared_xacro_args(path: Path) -> list[str]:
+    """Names of the ``<xacro:arg name=...>`` of a file (for error messages)."""
+    with contextlib.suppress(OSError):
+        return re.findall(rb'<xacro:arg\s+name="([^"]+)"', path.read_bytes()[:2_000_000])
+    return []
+
+
+def _xacro_error(path: Path, err: Exception, args: Mapping[str, str]) -> URDFError:
+    """A one-line :class:`URDFError` for what xacro raised."""
+    import xacro
+
+    inner = getattr(err, "exc", None)
+    if isinstance(err, xacro.substitution_args.ArgException) or isinstance(
+        inner, xacro.substitution_args.ArgException
+    ):
+        name = str(inner or err).strip("'\"")
+        declared = [a.decode() for a in declared_xacro_args(path)]
+        return URDFError(
+            f"{path}: xacro argument '{name}' is not set and has no default; pass it with "
+            f"xacro_args={{'{name}': ...}} (--xacro-arg {name}:=VALUE)"
+            + (f"; the file declares {declared}" if declared else "")
+            + (f"; given {sorted(args)}" if args else "")
+        )
+    if isinstance(inner, PackageNotFound):
+        return inner
+    reason = " ".join(str(err).split()) or type(err).__name__
+    return URDFError(f"{path}: xacro could not expand it: {reason}")
+
+
+@contextlib.contextmanager
+def _quiet() -> Iterator[io.StringIO]:
+    """Collect what xacro prints (warnings, locations) instead of letting it reach the terminal."""
+    buf = io.StringIO()
+    with contextlib.redirect_stderr(buf), contextlib.redirect_stdout(buf):
+        yield buf
+
+
+@contextlib.contextmanager
+def _patched(xacro, package_dirs: PackageDirs, notices: list[str]) -> Iterator[None]:
+    """Xacro with ``$(find)`` from our package folders, checked file reads and collected warnings."""
+    from fault_tolerance.model.formats.xml_safety import check_bytes, prefix_notice
+
+    subst = xacro.substitution_args
+    saved = (subst._eval_find, subst._eval_dict["find"], xacro.parse, xacro.warning)
+    original_parse = xacro.parse
+
+    def find(package: str) -> str:
+        return str(find_package(package, package_dirs, "xacro $(find)"))
+
+    def parse(inp, filename=None):
+        if inp is None:  # xacro opens a file (the top one or an include): check its bytes first
+            file = Path(os.path.join(xacro.root_dir, filename))
+            try:
+                data = file.read_bytes()
+            except OSError as err:
+                xacro.filestack.pop()
+                raise xacro.XacroException(f"{err.strerror}: {file}", exc=err) from None
+            data, prefixes = check_bytes(data, str(file), require_robot=False)
+            if prefixes:
+                notices.append(prefix_notice(str(file), prefixes))
+            inp = data.decode("utf-8")
+        return original_parse(inp, filename)
+
+    def warning(*parts, **_):
+        notices.append(" ".join(str(p) for p in parts))
+
+    subst._eval_find = find
+    subst._eval_dict["find"] = find
+    xacro.parse, xacro.warning = parse, warning
+    try:
+        yield
+    finally:
+        subst._eval_find, subst._eval_dict["find"], xacro.parse, xacro.warning = saved

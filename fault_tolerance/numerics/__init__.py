@@ -1,0 +1,1 @@
+"""Numerical building blocks: pseudo-inverses, projectors and small dense factorisations."""

@@ -1,0 +1,300 @@
+"""Extreme eigenvalues of ``G − v vᵀ`` from the eigenpairs of ``G``: the k_S of all scenarios at once.
+
+Every scenario's ``W_S = J_S J_Sᵀ = G − J_i J_iᵀ`` (eq. 15) is a rank-one downdate of the same
+``G = J Jᵀ``. With ``G = V diag(d) Vᵀ`` (``d`` ascending; :func:`eigenpairs`, once per
+sample) and ``u = Vᵀ J_i``, the eigenvalues of ``W_S`` are those of ``diag(d) − u uᵀ``: the roots
+``μ`` of the secular equation ``1 = Σ_k u_k² / (d_k − μ)``. They interlace, ``μ_1 ≤ d_1 ≤ μ_2 ≤
+… ≤ μ_m ≤ d_m``, so
+
+* ``λ_min(W) = d_1 − τ`` with ``τ ∈ [0, ‖u‖²]`` the root of the convex
+  ``F(τ) = τ − Σ_{k>1} u_k² τ / (d_k − d_1 + τ) − u_1²`` (:func:`lowest_root`);
+* ``λ_max(W) = max(d_m − τ, d_{m−1})`` with ``τ`` the root of the convex increasing
+  ``F(τ) = τ + Σ_{k<m} u_k² τ / (d_m − d_k − τ) − u_m²`` before its first pole
+  (:func:`highest_root`, measured from the nearer end of its interval).
+
+Each step solves a model of ``F`` that keeps the pole at the root's end of the interval and the
+nearest other pole exactly and matches the other poles' value and slope (as LAPACK's ``dlaed4``
+does for the divide-and-conquer eigensolver): a quadratic, quadratically convergent, 3-5 steps
+of ``O(m)`` each. A scenario costs ``m²`` for ``u`` and those steps, instead of a tridiagonal
+reduction and a QL iteration. The iterations keep a bracket (a step that leaves it
+bisects it) and report failure after :data:`MAX_STEPS` (seen only for a numerically singular ``G``); the caller then uses
+:mod:`fault_tolerance.numerics.fast.small_eigen` on ``W_S`` itself. The roots are accurate to a few ``ε ‖G‖``
+(the signs of ``F`` are exact for a nearby ``d`` and ``u``), as the eigenvalues of ``W_S`` by any
+backward-stable method.
+
+Example::
+
+    >>> import numpy as np
+    >>> from fault_tolerance.numerics.fast.rank_one_eigen import eigenpairs
+    >>> A, V, d = np.array([[2.0, 1.0], [1.0, 2.0]]), np.empty((2, 2)), np.empty(2)
+    >>> eigenpairs(A, 2, V, d, np.empty(4)), np.round(d, 12).tolist()
+    (True, [1.0, 3.0])
+"""
+
+from __future__ import annotations
+
+import math
+
+from fault_tolerance.numerics.fast.small_eigen import EPS, _in_range, njit, tridiagonalize
+
+#: Steps of a secular root before reporting failure.
+MAX_STEPS = 100
+#: A root is taken when the next (quadratically convergent) step is below this fraction of it,
+#: or ``F`` is 0: rounding makes ``F``'s root uncertain by a few ulps, the step never smaller.
+TOL = 64.0 * EPS
+
+
+@njit
+def _householder_basis(A, m, V) -> None:  # pragma: no cover - numba
+    """``V = Q = H_0 H_1 … H_{m−2}`` from the reflectors :func:`.tridiagonalize` left in ``A``."""
+    for r in range(m):
+        for c in range(m):
+            V[r, c] = 1.0 if r == c else 0.0
+    for k in range(m - 2, -1, -1):
+        tau = A[k, k + 1]
+        if tau == 0.0:
+            continue
+        for c in range(k + 1, m):  # V[k+1:, c] ← H_k V[k+1:, c]
+            s = 0.0
+            for r in range(k + 1, m):
+                s += A[r, k] * V[r, c]
+            s *= tau
+            for r in range(k + 1, m):
+                V[r, c] -= s * A[r, k]
+
+
+@njit
+def _ql_vectors_sweep(d, e, lo, j, V, m) -> None:  # pragma: no cover - numba
+    """One implicit QL step with Wilkinson's shift on the block ``lo..j``; ``V ← V R`` (tql2)."""
+    g = (d[lo + 1] - d[lo]) / (2.0 * e[lo])
+    r = math.hypot(g, 1.0)
+    g = d[j] - d[lo] + e[lo] / (g + math.copysign(r, g))
+    s, c, p = 1.0, 1.0, 0.0
+    for i in range(j - 1, lo - 1, -1):
+        f, b = s * e[i], c * e[i]
+        r = math.hypot(f, g)
+        e[i + 1] = r
+        if r == 0.0:  # underflow: the block splits here
+            d[i + 1] -= p
+            e[j] = 0.0
+            return
+        s, c = f / r, g / r
+        g = d[i + 1] - p
+        r = (d[i] - g) * s + 2.0 * c * b
+        p = s * r
+        d[i + 1] = g + p
+        g = c * r - b
+        for k in range(m):
+            t = V[k, i + 1]
+            V[k, i + 1] = s * V[k, i] + c * t
+            V[k, i] = c * V[k, i] - s * t
+    d[lo] -= p
+    e[lo] = g
+    e[j] = 0.0
+
+
+@njit
+def _ql_vectors(d, e, m, V) -> bool:  # pragma: no cover - numba
+    """Eigenvalues of ``T`` (``d``, ``e``) into ``d`` and ``V ← V Z``; False after 30 m sweeps."""
+    e[m - 1] = 0.0
+    budget = 30 * m
+    for lo in range(m):
+        while True:
+            j = lo
+            while j < m - 1 and abs(e[j]) > EPS * (abs(d[j]) + abs(d[j + 1])):
+                j += 1
+            if j == lo:
+                break
+            if budget == 0:
+                return False
+            budget -= 1
+            _ql_vectors_sweep(d, e, lo, j, V, m)
+    return True
+
+
+@njit
+def _sort_pairs(V, m, d) -> None:  # pragma: no cover - numba
+    """``d`` ascending, the columns of ``V`` in the same order."""
+    for j in range(1, m):
+        k = j
+        while k > 0 and d[k] < d[k - 1]:
+            d[k], d[k - 1] = d[k - 1], d[k]
+            for r in range(m):
+                V[r, k], V[r, k - 1] = V[r, k - 1], V[r, k]
+            k -= 1
+
+
+@njit
+def eigenpairs(A, m, V, d, work) -> bool:  # pragma: no cover - numba
+    """``A[:m, :m] = V diag(d) Vᵀ``, ``d`` ascending (lower triangle read, ``A`` overwritten).
+
+    Householder tridiagonalisation (:func:`.tridiagonalize`), the reflectors accumulated, and
+    the implicit QL iteration with the rotations applied to ``V`` (EISPACK's ``tql2``).
+    ``work`` holds ``2 m`` numbers. False when a number is not finite or out of range, or after
+    ``30 m`` sweeps.
+    """
+    e, w = work[0:m], work[m : 2 * m]
+    tridiagonalize(A, m, d, e, w)
+    if not _in_range(d, e, m):
+        return False
+    _householder_basis(A, m, V)
+    if not _ql_vectors(d, e, m, V):
+        return False
+    for j in range(m):
+        if not abs(d[j]) < math.inf:
+            return False
+    _sort_pairs(V, m, d)
+    return True
+
+
+@njit
+def project(V, J, i, m, u2) -> float:  # pragma: no cover - numba
+    """``u2 = (Vᵀ J_i)²`` entry by entry; returns ``‖u‖²``."""
+    total = 0.0
+    for k in range(m):
+        s = 0.0
+        for r in range(m):
+            s += V[r, k] * J[r, i]
+        u2[k] = s * s
+        total += u2[k]
+    return total
+
+
+@njit
+def _lowest_model(d, u2, m, q, tau):  # pragma: no cover - numba
+    """``F`` of :func:`lowest_root` at ``τ`` and the root of its model, NaN if it has none.
+
+    The poles beyond ``q`` (the nearest one, at ``τ = −δ_q``) become ``a + b / (δ_q + τ)``,
+    matching their value and slope at ``τ``; the model ``τ (1 − a − b / (δ_q + τ)) = u_1²`` is a
+    quadratic with one positive root when ``1 − a > 0`` (always so right of the root).
+    """
+    dq = d[q] - d[0]
+    r0, r1 = 0.0, 0.0
+    for k in range(q + 1, m):
+        r = 1.0 / ((d[k] - d[0]) + tau)
+        r0 += u2[k] * r
+        r1 += u2[k] * r * r
+    rq = 1.0 / (dq + tau)
+    F = tau * (1.0 - r0 - u2[q] * rq) - u2[0]
+    P = 1.0 - r0 + r1 * (dq + tau)  # 1 − a
+    b = u2[q] + r1 * (dq + tau) * (dq + tau)
+    B, C = P * dq - b - u2[0], u2[0] * dq  # P τ² + B τ − C = 0
+    if not P > 0.0:
+        return F, math.nan
+    D = math.sqrt(B * B + 4.0 * P * C)
+    return F, (D - B) / (2.0 * P) if B <= 0.0 else 2.0 * C / (B + D)
+
+
+@njit
+def lowest_root(d, u2, m, total):  # pragma: no cover - numba
+    """``(λ_min(diag(d) − u uᵀ), ok)``, ``d`` ascending, ``u2 = u²``, ``total = ‖u‖²``.
+
+    The modelled root of :func:`_lowest_model` from ``τ = ‖u‖²`` (where ``F ≥ 0``), inside the
+    bracket ``[0, ‖u‖²]``; ``d_1 − u_1²`` when ``u`` has no other component.
+    """
+    q = 1
+    while q < m and u2[q] == 0.0:
+        q += 1
+    if q == m:
+        return d[0] - u2[0], True
+    lo, hi = 0.0, total
+    tau = min(total, max(d[0], 0.0)) if d[0] > 0.0 else total  # λ_min(W) ≥ 0 when W ⪰ 0
+    floor = EPS * abs(d[m - 1])  # F is uncertain by rounding: its root by a few ε ‖G‖
+    for _ in range(MAX_STEPS):
+        F, new = _lowest_model(d, u2, m, q, tau)
+        if F != F:  # NaN in d or u: no bracket to keep
+            break
+        if F <= 0.0:
+            lo = tau
+        else:
+            hi = tau
+        if F == 0.0:
+            return d[0] - tau, True
+        if abs(new - tau) <= TOL * tau + floor or hi - lo <= TOL * hi + floor:
+            return d[0] - min(max(new, lo), hi), True
+        tau = new if lo <= new <= hi else 0.5 * (lo + hi)  # outside the bracket (or NaN): bisect
+    return math.nan, False
+
+
+@njit
+def _first_pole(d, u2, m) -> int:  # pragma: no cover - numba
+    """Largest ``p < m − 1`` with ``u_p ≠ 0`` (the nearest pole below ``d_m``), -1 if none."""
+    for p in range(m - 2, -1, -1):
+        if u2[p] > 0.0:
+            return p
+    return -1
+
+
+@njit
+def _highest_model(d, u2, m, p, x, at_pole):  # pragma: no cover - numba
+    """``F`` of :func:`highest_root` at ``x`` and the root of its model, in the same variable.
+
+    ``x = τ`` (the distance from ``d_m``), or ``x = σ = Δ_p − τ`` (from the pole ``d_p``) when
+    ``at_pole``: the distances to the poles are then formed from the nearer one, without
+    cancellation. The poles beyond ``p`` become ``a + b / σ``, matching their value and slope at
+    ``x``; the model ``τ (1 + a + b / σ) = u_m²`` is a quadratic with one root in the interval.
+    """
+    top, dp = d[m - 1], d[m - 1] - d[p]
+    tau, sig = (dp - x, x) if at_pole else (x, dp - x)
+    r0, r1 = 0.0, 0.0
+    for k in range(p):
+        r = 1.0 / ((d[p] - d[k]) + sig) if at_pole else 1.0 / ((top - d[k]) - tau)
+        r0 += u2[k] * r
+        r1 += u2[k] * r * r
+    um = u2[m - 1]
+    F = tau * (1.0 + r0 + u2[p] / sig) - um
+    A = 1.0 + r0 - r1 * sig  # 1 + a
+    b = u2[p] + r1 * sig * sig
+    if not at_pole:  # A τ² − B τ + C = 0, the smaller root
+        B, C = A * dp + b + um, um * dp
+        return F, 2.0 * C / (B + math.sqrt(max(B * B - 4.0 * A * C, 0.0)))
+    B = A * dp - b - um  # A σ² − B σ − b Δ_p = 0, the positive root
+    D = math.sqrt(B * B + 4.0 * A * b * dp)
+    return F, (B + D) / (2.0 * A) if B >= 0.0 else 2.0 * b * dp / (D - B)
+
+
+@njit
+def highest_root(d, u2, m):  # pragma: no cover - numba
+    """``(λ_max(diag(d) − u uᵀ), ok)``, ``d`` ascending, ``u2 = u²``; ``m ≥ 2``.
+
+    No pole below ``d_m`` (``u`` only along its eigenvector): ``d_m − u_m²``; otherwise the
+    modelled root of :func:`_highest_model` inside a bracket, measured from the nearer end of
+    ``(d_p, d_m)`` (the sign of ``F`` at the middle tells which).
+    """
+    top, below = d[m - 1], d[m - 2]
+    if u2[m - 1] == 0.0 or top == below:
+        return top, True
+    p = _first_pole(d, u2, m)
+    if p < 0:
+        return max(top - u2[m - 1], below), True
+    half = 0.5 * (top - d[p])
+    at_pole = _highest_model(d, u2, m, p, half, False)[0] <= 0.0
+    lo, hi = 0.0, half if at_pole else min(half, u2[m - 1])
+    x = half if at_pole else 0.0
+    floor = EPS * abs(top)
+    for _ in range(MAX_STEPS):
+        F, new = _highest_model(d, u2, m, p, x, at_pole)
+        if F != F:
+            break
+        if (F >= 0.0) == at_pole:  # F grows with τ, falls with σ
+            lo = x
+        else:
+            hi = x
+        if F == 0.0 or abs(new - x) <= TOL * x + floor or hi - lo <= TOL * hi + floor:
+            x = x if F == 0.0 else min(max(new, lo), hi)
+            return max(d[p] + x if at_pole else top - x, below), True
+        x = new if lo <= new <= hi else 0.5 * (lo + hi)
+    return math.nan, False
+
+
+@njit
+def downdate_extremes(V, d, J, i, m, u2):  # pragma: no cover - numba
+    """``(λ_min, λ_max, ok)`` of ``G − J_i J_iᵀ`` from ``G = V diag(d) Vᵀ`` (``u2``: m scratch)."""
+    total = project(V, J, i, m, u2)
+    lo, ok = lowest_root(d, u2, m, total)
+    if not ok:
+        return math.nan, math.nan, False
+    if m == 1:
+        return lo, lo, True
+    hi, ok = highest_root(d, u2, m)
+    return lo, hi, ok

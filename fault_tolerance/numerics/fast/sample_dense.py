@@ -1,0 +1,172 @@
+"""The small dense linear algebra of one simulated sample, compiled: Cholesky, solves, ``N v``.
+
+Used by :func:`fault_tolerance.simulation.fast.sample.sample_kernel`. ``G = J Jᵀ`` is factored once
+(``G = L Lᵀ``), ``B = G⁻¹J`` is kept, and the projector ``N = I - JᵀB`` is never formed: only its
+pivots ``N_ii`` and its products with vectors. Plain Python loops, valid without numba; compiled
+by numba when it is installed (cached on disk).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from fault_tolerance.numerics.fast.dense import chol_solve, cholesky_into, trace_inverse
+from fault_tolerance.numerics.fast.rank_one_eigen import downdate_extremes, eigenpairs
+from fault_tolerance.numerics.fast.small_eigen import extreme_eigenvalues
+
+try:  # compiled when numba is there (lazily, on first call; cached on disk)
+    import numba
+
+    njit = numba.njit(cache=True, nogil=True, error_model="numpy")
+except ImportError:  # pragma: no cover - numba is a core dependency
+
+    def njit(fn):
+        """Without numba: the plain function."""
+        return fn
+
+
+#: Indices into ``params`` (shared with :mod:`fault_tolerance.simulation.fast.sample`).
+P_TRACE, P_PIVOT, P_RANK, P_WSUM, P_GAIN, P_MAXSTEP, P_RCN_MAX, P_CONT, P_LOCK = range(9)
+P_DT, P_DECAY, P_ACCEL, P_BOUNDED = 9, 10, 11, 12
+N_PARAMS = 13
+
+
+_cholesky = cholesky_into  # G = L Lᵀ into L, G kept (compiled_linalg)
+_trace_inverse = trace_inverse
+
+
+@njit
+def _null_times(J, B, v, out, y) -> None:  # pragma: no cover - numba
+    """``out = N v = v - Jᵀ (B v)``, ``B = G⁻¹J``: O(mn), N never formed."""
+    m, n = J.shape
+    for i in range(m):
+        s = 0.0
+        for j in range(n):
+            s += B[i, j] * v[j]
+        y[i] = s
+    for j in range(n):
+        s = v[j]
+        for i in range(m):
+            s -= J[i, j] * y[i]
+        out[j] = s
+
+
+@njit
+def _downdate(G, J, i, W) -> None:  # pragma: no cover - numba
+    """``W = G − J_i J_iᵀ = J_S J_Sᵀ`` of the scenario locking joint ``i``."""
+    m = G.shape[0]
+    for r in range(m):
+        for c in range(m):
+            W[r, c] = G[r, c] - J[r, i] * J[c, i]
+
+
+@njit
+def _reduced_extremes(G, J, i, W, t):  # pragma: no cover - numba
+    """``(λ_min, λ_max)`` of ``J_S J_Sᵀ`` (scenario ``i``): :mod:`.small_eigen`, else LAPACK's."""
+    m = G.shape[0]
+    _downdate(G, J, i, W)
+    lo, hi, ok = extreme_eigenvalues(W, m, t)
+    if ok:
+        return lo, hi
+    _downdate(G, J, i, W)  # W was overwritten
+    lam = np.linalg.eigvalsh(W)
+    return lam[0], lam[m - 1]
+
+
+@njit
+def _sigma_min(G, W, t) -> float:  # pragma: no cover - numba
+    """``σ_min(J) = √λ_min(G)``: :mod:`.small_eigen` on a copy in ``W``, else LAPACK's."""
+    m = G.shape[0]
+    for r in range(m):
+        for c in range(m):
+            W[r, c] = G[r, c]
+    lo, hi, ok = extreme_eigenvalues(W, m, t)
+    if not ok:
+        lo = np.linalg.eigvalsh(G)[0]
+    return math.sqrt(max(lo, 0.0))
+
+
+@njit
+def _capped_k(lo, hi, rcn_max) -> float:  # pragma: no cover - numba
+    """``k = σ_max / σ_min`` from ``λ_min, λ_max`` of ``J_S J_Sᵀ``, capped at ``rcn_max``."""
+    smax = math.sqrt(max(hi, 0.0))
+    smin = max(math.sqrt(max(lo, 0.0)), smax / rcn_max)
+    k = smax / smin if smax > 0.0 else rcn_max  # smin >= smax / rcn_max > 0 then
+    return min(k, rcn_max)
+
+
+# Eq. (15)
+@njit
+def _spectra(G, J, cols, ks, W, rcn_max, scratch):  # pragma: no cover - numba
+    """``k_S`` of every scenario into ``ks``; ``(K, σ_min(J))``, from one eigenbasis of ``G``.
+
+    ``G = V diag(d) Vᵀ`` once (:func:`.rank_one_eigen.eigenpairs`); each ``J_S J_Sᵀ = G − J_i
+    J_iᵀ`` by its secular equation (:func:`.rank_one_eigen.downdate_extremes`). A scenario whose
+    roots fail, or all when the eigenbasis fails, takes :func:`_reduced_extremes` (QL, then
+    LAPACK); ``W`` (m, m) and ``scratch`` (``m² + 5 m``: ``V``, ``d``, ``u²``, 3 m) are scratch.
+    """
+    m = G.shape[0]
+    V = scratch[0 : m * m].reshape((m, m))
+    d, u2, t = (
+        scratch[m * m : m * m + m],
+        scratch[m * m + m : m * m + 2 * m],
+        scratch[m * m + 2 * m :],
+    )
+    for r in range(m):
+        for c in range(m):
+            W[r, c] = G[r, c]
+    basis = eigenpairs(W, m, V, d, t)
+    K = 0.0
+    for s in range(cols.shape[0]):
+        ok = False
+        if basis:
+            lo, hi, ok = downdate_extremes(V, d, J, cols[s], m, u2)
+        if not ok:
+            lo, hi = _reduced_extremes(G, J, cols[s], W, t)
+        ks[s] = _capped_k(lo, hi, rcn_max)
+        K += ks[s] * ks[s]
+    smin = math.sqrt(max(d[0], 0.0)) if basis else _sigma_min(G, W, t)
+    return K, smin
+
+
+@njit
+def _factor(J, xd, cols, params, G, L, B, a, piv, y, z) -> bool:  # pragma: no cover - numba
+    """Cholesky of ``G = J Jᵀ`` with its certificate, ``B = G⁻¹J``, ``a = J⁺ẋ``, pivots ``N_ii``.
+
+    False when the reference must do the sample (no certificate, or a pivot below PIVOT_EPS).
+    """
+    m, n = J.shape
+    if not _cholesky(G, L, m):
+        return False
+    tr = _trace_inverse(L, z, m)
+    if not tr <= params[P_TRACE]:
+        return False
+    if params[P_RANK] > 0.0:
+        s = 0.0
+        for i in range(m):
+            for c in range(n):
+                s += J[i, c] * J[i, c]
+        if not params[P_RANK] * s * tr < 1.0:
+            return False
+    for c in range(n):  # B = G⁻¹ J column by column
+        for i in range(m):
+            y[i] = J[i, c]
+        chol_solve(L, m, y)
+        for i in range(m):
+            B[i, c] = y[i]
+    for c in range(n):
+        s = 0.0
+        for i in range(m):
+            s += B[i, c] * xd[i]
+        a[c] = s
+    for k in range(cols.shape[0]):  # pivots N_ii = 1 - J_iᵀ B_i of the lockable columns
+        i = cols[k]
+        d = 1.0
+        for r in range(m):
+            d -= J[r, i] * B[r, i]
+        if not d >= params[P_PIVOT]:
+            return False
+        piv[k] = d
+    return True

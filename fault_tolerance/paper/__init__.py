@@ -1,0 +1,1 @@
+"""The paper's cases, the reproduce pipeline and REPORT.md."""

@@ -1,0 +1,387 @@
+"""The default start: a configuration that works on any arm when neither ``q0`` nor ``x0`` is given.
+
+``q = 0`` and a description's reference posture are often singular, at a joint limit, or a
+configuration where a lockable joint is intolerable (a UR5 at ``q = 0`` is stretched out and
+cannot lose its shoulder pan joint; a Panda at its reference posture cannot lose ``panda_joint2``). :func:`default_start` picks the start
+the way docs/MATH.md ("The default start") describes:
+
+1. seeds: the mid-range configuration, then configurations drawn from the central half of every
+   joint's range (seeded);
+2. a seed is used if it is regular: inside the limits with a margin, ``σ_min(J)`` well above zero,
+   every lockable scenario tolerable with a margin;
+3. ``x0 = x(seed)``; the posture search of :mod:`.posture` (minimum square-sum RCN on the
+   self-motion through ``x0``) gives candidates, best first; those outside the limits or not
+   regular are dropped, and the seed itself is the last candidate;
+4. each candidate runs the default task (a small circle at ``x0``, or the caller's path) with the
+   caller's algorithms; it is accepted when every sample stays inside the limits, none is
+   near-singular or near-intolerable, and the task error stays below :data:`ERROR_TOL`.
+   Among accepted candidates one whose reduced condition numbers stay below
+   :data:`~.posture.RCN_THRESHOLD` is preferred (step iii of the paper's planning loop).
+
+:func:`explain_intolerable` turns an intolerable scenario at a given start into an error that says
+whether the scenario is intolerable structurally (at every sampled configuration) or only at this
+start, and then proposes a start that works.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from fault_tolerance.errors import (
+    FaultToleranceError,
+    IntolerableAtStart,
+    IntolerableFailure,
+    InvalidInput,
+    StructurallyIntolerable,
+)
+from fault_tolerance.model.arm import Arm
+from fault_tolerance.numerics.linalg import projection
+from fault_tolerance.planning.posture import initial_posture, joint_distance, lockable_scenarios
+from fault_tolerance.planning.start_checks import (
+    STRUCTURAL_SAMPLES,
+    intolerable_everywhere,
+    limit_box,
+    run_caveat,
+    run_problem,
+    start_problem,
+)
+from fault_tolerance.resolution.indices import condition_numbers, reduced_singular_values
+from fault_tolerance.resolution.scenarios import Scenarios
+
+#: Radius [m] of the default circle through the start point.
+DEFAULT_RADIUS = 0.05
+#: Seeds tried at most, and candidates checked by simulation per seed.
+MAX_SEEDS = 6
+MAX_CANDIDATES = 3
+#: Configurations near mid-range drawn to find well-conditioned seeds.
+SEED_SAMPLES = 200
+#: Longest stretch of the task [s] a candidate start is checked over.
+CHECK_HORIZON = 2.0
+
+
+@dataclass(frozen=True)
+class StartChoice:
+    """A start chosen by :func:`default_start` and why.
+
+    Attributes:
+        q0: Start configuration [rad], shape (n,).
+        x0: Task coordinates of the tool there, shape (m,).
+        K: Square-sum RCN at ``q0``.
+        rcn_max: Largest reduced condition number at ``q0``.
+        run_rcn_max: Largest reduced condition number along the checked runs.
+        sigma_min: Smallest singular value of J at ``q0``.
+        origin: Where ``x0`` came from (``"mid-range configuration"``, ``"given x0"``, ...).
+        algorithms: Algorithms whose runs were checked (empty: no path was checked).
+        tried: Candidates simulated before this one was accepted (itself included).
+        note: A caveat, e.g. that no candidate kept the RCN below the threshold.
+        checked: Seconds of the task that were checked when that is less than all of it.
+        runs: The checked runs from ``q0`` by algorithm (reuse them instead of simulating again).
+    """
+
+    q0: np.ndarray
+    x0: np.ndarray
+    K: float
+    rcn_max: float
+    run_rcn_max: float
+    sigma_min: float
+    origin: str
+    algorithms: tuple[str, ...]
+    tried: int
+    note: str = ""
+    checked: float | None = None
+    runs: dict = field(default_factory=dict, repr=False, compare=False)
+
+    def reason(self) -> str:
+        """One line: the start and why it was chosen."""
+        checked = (
+            "; the task runs from it"
+            + (f" (its first {self.checked:g} s checked)" if self.checked else "")
+            + f" with {'/'.join(self.algorithms)} inside the limits, "
+            f"regular, largest k_S {self.run_rcn_max:.3g}"
+            if self.algorithms
+            else ""
+        )
+        return (
+            f"start q0 = {np.round(self.q0, 4).tolist()} rad: minimum square-sum RCN K = "
+            f"{self.K:.4g} on the self-motion through x0 = {np.round(self.x0, 4).tolist()} "
+            f"({self.origin}); inside the limits, σ_min(J) = {self.sigma_min:.3g}, every lockable "
+            f"joint tolerable{checked}" + (f"; {self.note}" if self.note else "")
+        )
+
+
+def default_path(arm: Arm, x0: np.ndarray, radius: float = DEFAULT_RADIUS):
+    """The default task at ``x0``: a circle of ``radius`` in the first two task rows, 1 s."""
+    from fault_tolerance.simulation.paths import CirclePath
+
+    if arm.m < 2:
+        return None
+    return CirclePath(np.asarray(x0, dtype=float), radius, 2 * np.pi, 1.0, rows=(0, 1))
+
+
+def _candidates(arm: Arm, x0: np.ndarray, sc: Scenarios, seed_q) -> list[tuple[float, np.ndarray]]:
+    """Posture-search candidates at ``x0`` that are usable starts, best first (then the seed).
+
+    With a seed, only the seed's own self-motion is searched (``r = 1``: its curve; ``r > 1``:
+    descent from it); without one, the global search of :func:`~.posture.initial_posture`.
+    """
+    try:
+        starts = None if seed_q is None else [seed_q]
+        found = initial_posture(arm, x0, sc, starts=starts).candidates
+    except InvalidInput:
+        found = []
+    kept: list[tuple[float, np.ndarray]] = []
+    for K, q in found:
+        if len(kept) == MAX_CANDIDATES:
+            break
+        if start_problem(arm, q, sc) is None and all(
+            joint_distance(arm, q, c) > 0.05 for _, c in kept
+        ):
+            kept.append((K, q))
+    if seed_q is not None and all(joint_distance(arm, seed_q, c) > 0.05 for _, c in kept):
+        k = condition_numbers(reduced_singular_values(arm.jacobian(seed_q), sc))
+        kept.append((float(k @ k), np.asarray(seed_q, dtype=float)))
+    return kept
+
+
+def _seeds(arm: Arm, sc: Scenarios, rng, max_seeds: int):
+    """Regular seeds ``(q, origin)``: mid-range if regular, then the best conditioned near it.
+
+    The others are the best conditioned (smallest largest ``k_S``) of :data:`SEED_SAMPLES`
+    configurations drawn from the central half of every joint's range.
+    """
+    lo, hi = limit_box(arm)
+    mid = (lo + hi) / 2
+    if start_problem(arm, mid, sc) is None:
+        yield mid, "reached from the mid-range configuration"
+        max_seeds -= 1
+    draws = mid + rng.uniform(-1.0, 1.0, (SEED_SAMPLES, arm.n)) * (hi - lo) / 4
+    worst = np.array(
+        [condition_numbers(reduced_singular_values(arm.jacobian(q), sc)).max() for q in draws]
+    )
+    used: list[np.ndarray] = []
+    for i in np.argsort(worst, kind="stable"):
+        if len(used) == max_seeds:
+            return
+        q = draws[i]
+        if start_problem(arm, q, sc) is not None or any(
+            joint_distance(arm, q, u) < 0.1 * np.linalg.norm(hi - lo) for u in used
+        ):
+            continue
+        used.append(q)
+        yield (
+            q,
+            (
+                f"reached from the best conditioned of {SEED_SAMPLES} configurations near mid-range, "
+                f"largest k_S {worst[i]:.3g}"
+            ),
+        )
+
+
+#: Order in which a candidate's runs are checked: cheap resolvers first, so a bad start fails fast.
+_CHEAP_FIRST = ("lnva", "jvja", "mda")
+
+
+def _check(arm, q0, path, algorithms, sc, sim_options):
+    """Simulate ``path`` from ``q0``: ``(problem, caveat, largest k_S, runs)``."""
+    from fault_tolerance.simulation.simulate import simulate
+
+    order = sorted(algorithms, key=lambda a: _CHEAP_FIRST.index(a) if a in _CHEAP_FIRST else 9)
+    worst, caveat, runs = 0.0, None, {}
+    for alg in order:
+        run = simulate(arm, path, alg, q0=q0, lockable=sc, **sim_options)
+        problem = run_problem(arm, run)
+        if problem:
+            return f"{alg}: {problem}", None, worst, {}
+        runs[alg] = run
+        worst = max(worst, float(np.max(run.rcn)))
+        caveat = caveat or (None if run_caveat(run) is None else f"{alg}: {run_caveat(run)}")
+    return None, caveat, worst, runs
+
+
+def default_start(
+    arm: Arm,
+    lockable=None,
+    *,
+    x0: np.ndarray | Sequence[float] | None = None,
+    path: Callable | object | None = None,
+    algorithms: Sequence[str] = ("jvja",),
+    max_seeds: int = MAX_SEEDS,
+    seed: int = 0,
+    horizon: float = CHECK_HORIZON,
+    **sim_options,
+) -> StartChoice:
+    """A start inside the limits, regular, with every lockable joint tolerable, that runs the task.
+
+    See the module doc and docs/MATH.md ("The default start").
+
+    Args:
+        arm: The arm.
+        lockable: Joints that may lock (default: the arm's default lockable joints).
+        x0: Start point; without it one is reached from mid-range configurations.
+        path: The task to check from each candidate: a callable ``path(x0) -> TaskPath`` (or
+            ``None`` for no check), a ``TaskPath`` (then ``x0`` is its start), or ``None`` for
+            :func:`default_path` (a 5 cm circle, 1 s).
+        algorithms: Algorithms whose runs must stay inside the limits and regular.
+        max_seeds: Regular seeds tried at most (without ``x0``).
+        seed: Seed of the random seeds (the choice is reproducible).
+        horizon: Longest stretch of the task checked [s]; a longer task is checked over its
+            first ``horizon`` seconds only (its checked runs are then not kept in ``runs``).
+        **sim_options: Passed to :func:`~.simulation.simulate` (``dt``, ``feedback_gain``, ...).
+
+    Raises:
+        StructurallyIntolerable: a lockable scenario loses the task at every configuration.
+        InvalidInput: no start passed the checks (the message gives the last reason).
+
+    Example:
+        >>> import fault_tolerance as ft
+        >>> arm = ft.load_arm("ur5")
+        >>> start = ft.default_start(arm)
+        >>> bool(ft.start.inside_limits(arm, start.q0, ft.start.LIMIT_MARGIN))
+        True
+    """
+    sc = lockable_scenarios(arm, lockable)
+    _refuse_structural(arm, sc, seed)  # no start can help such a scenario: say so, not search
+    make, x0 = _task_maker(arm, path, x0)
+    sources = _start_points(arm, sc, x0, seed, max_seeds)
+    last, tried, fallback = "no regular configuration found within the joint limits", 0, None
+    for seed_q, point, origin in sources:
+        task = make(point)
+        options, checked = _horizon(task, sim_options, horizon)
+        for _, q in _candidates(arm, point, sc, seed_q):
+            tried += 1
+            problem, caveat, worst, runs = (
+                (None, None, 0.0, {})
+                if task is None
+                else _check(arm, q, task, tuple(algorithms), sc, options)
+            )
+            if problem:
+                last = f"the start {np.round(q, 3).tolist()} {problem}"
+                continue
+            choice = _choice(arm, q, point, sc, worst, origin, task, algorithms, tried, runs)
+            if checked is not None:  # only the first seconds ran: nothing to reuse
+                choice = replace(choice, runs={}, checked=checked)
+            if caveat is None:
+                return choice
+            if fallback is None or worst < fallback.run_rcn_max:
+                fallback = replace(choice, note=f"the best start found has a caveat: {caveat}")
+        if fallback is not None:  # this seed gave a usable start: do not search further
+            return replace(fallback, tried=tried)
+    where = f"at x0 = {np.round(x0, 4).tolist()}" if x0 is not None else "from mid-range seeds"
+    raise InvalidInput(
+        f"no start {where} for {arm.name} passed the checks ({last}); give --q0 or --x0, a smaller "
+        "path (--radius) or fewer lockable joints"
+    )
+
+
+def _task_maker(arm: Arm, path, x0):
+    """``(make, x0)``: ``make(point)`` is the task checked from ``point``; a TaskPath fixes x0."""
+    if hasattr(path, "x") and hasattr(path, "xdot"):  # a ready TaskPath fixes the start point
+        fixed, x0 = path, np.asarray(path.x0, dtype=float)  # type: ignore[union-attr]
+        return (lambda _x0: fixed), x0
+    return (path if path is not None else (lambda p: default_path(arm, p))), x0
+
+
+def _start_points(arm: Arm, sc: Scenarios, x0, seed: int, max_seeds: int):
+    """``(seed q or None, start point, origin)``: the given x0, or points of regular seeds."""
+    if x0 is not None:
+        x0 = np.asarray(x0, dtype=float)
+        if x0.shape != (arm.m,):
+            raise InvalidInput(f"x0 must be {arm.m} numbers for task {'/'.join(arm.task)}")
+        return [(None, x0, "given x0")]
+    rng = np.random.default_rng(seed)
+    return ((q, arm.fk(q), why) for q, why in _seeds(arm, sc, rng, max_seeds))
+
+
+def _refuse_structural(arm: Arm, sc: Scenarios, seed: int) -> None:
+    """Raise :class:`~.errors.StructurallyIntolerable` for a scenario intolerable everywhere."""
+    structural = intolerable_everywhere(arm, sc)
+    if structural:
+        S = structural[0]
+        k = [tuple(sc.name(T)) for T in sc.sets].index(S)
+        J = arm.jacobian(arm.random_q(np.random.default_rng(seed)))
+        raise StructurallyIntolerable(S, float(sc.pivots(projection(J).N)[k]), STRUCTURAL_SAMPLES)
+
+
+def _horizon(task, sim_options: dict, horizon: float) -> tuple[dict, float | None]:
+    """Simulation options that run at most ``horizon`` seconds of ``task``; the cap, if it acts."""
+    if task is None:
+        return sim_options, None
+    duration = sim_options.get("duration") or task.duration
+    if duration <= horizon:
+        return sim_options, None
+    return {**sim_options, "duration": horizon}, float(horizon)
+
+
+def _choice(arm, q, point, sc, worst, origin, task, algorithms, tried, runs) -> StartChoice:
+    J = arm.jacobian(q)
+    k = condition_numbers(reduced_singular_values(J, sc))
+    return StartChoice(
+        q0=np.asarray(q, dtype=float),
+        x0=np.asarray(point, dtype=float),
+        K=float(k @ k),
+        rcn_max=float(k.max()),
+        run_rcn_max=worst if task is not None else float(k.max()),
+        sigma_min=projection(J).sigma_min,
+        origin=origin,
+        algorithms=tuple(algorithms) if task is not None else (),
+        tried=tried,
+        runs=runs,
+    )
+
+
+_EXPLAINING = False
+
+
+def explain_intolerable(
+    arm: Arm, lockable, err: IntolerableFailure, *, x0=None, fallback_path=None, **start_options
+) -> IntolerableFailure:
+    """``err`` (a scenario intolerable at some start) as a structural or an at-this-start error.
+
+    Structural (:class:`~.errors.StructurallyIntolerable`): the scenario is intolerable at every
+    sampled configuration; no start helps. Otherwise (:class:`~.errors.IntolerableAtStart`) a start
+    that works is proposed: :func:`default_start` for the same lockable joints, first at the same
+    start point ``x0`` (other postures on its self-motion), then, if none works there, anywhere
+    (with ``fallback_path``, a callable ``x0 -> TaskPath``, as the task to check). ``start_options``
+    (``path``, ``algorithms``, simulation options) are passed on.
+    """
+    global _EXPLAINING
+    if _EXPLAINING:  # the proposal's own checks never explain again
+        return err
+    joints = tuple(err.joints)
+    if joints in intolerable_everywhere(arm, [joints]):
+        return StructurallyIntolerable(joints, err.pivot, STRUCTURAL_SAMPLES)
+    _EXPLAINING = True
+    choice, where = None, ""
+    try:
+        if x0 is not None:
+            choice, where = _try_start(arm, lockable, x0=x0, **start_options), "same start point"
+        if choice is None:
+            start_options["path"] = fallback_path
+            choice = _try_start(arm, lockable, **start_options)
+            where = "another start point"
+    finally:
+        _EXPLAINING = False
+    why = "" if choice is None else f"{where}, tool at x0 = {np.round(choice.x0, 4).tolist()}"
+    return IntolerableAtStart(joints, err.pivot, None if choice is None else choice.q0, why)
+
+
+def _try_start(arm, lockable, **options) -> StartChoice | None:
+    try:
+        return default_start(arm, lockable, **options)
+    except FaultToleranceError:
+        return None
+
+
+def check_start(arm: Arm, sc: Scenarios, q0: np.ndarray, **explain_options) -> None:
+    """Raise the explained error of :func:`explain_intolerable` if a scenario is intolerable at q0.
+
+    ``explain_options`` go to :func:`explain_intolerable` (``x0``, ``path``, ``fallback_path``,
+    ``algorithms``, simulation options) for the start it proposes.
+    """
+    try:
+        sc.check_tolerable(projection(arm.jacobian(q0)).N)
+    except IntolerableFailure as err:
+        raise explain_intolerable(arm, sc, err, **explain_options) from None

@@ -1,0 +1,84 @@
+"""The joint limits of a compiled simulated sample: the rate box (L1) and the servo's clip.
+
+Used by :func:`fault_tolerance.simulation.fast.sample.sample_kernel` under joint limits: the box at ``q``
+is built, and the planned rates checked against it, by the compiled box check of the
+Controller's bounded step (:func:`fault_tolerance.control.fast.box_check.box_status`); the executed rates are
+clipped at the position limits over one time step as ``reference_step._clip_to_limits``.
+"""
+
+from __future__ import annotations
+
+from fault_tolerance.numerics.fast.sample_dense import njit
+from fault_tolerance.resolution.box_qp import BOX_TOL
+
+try:  # the rate box check of the Controller's bounded step, compiled by numba
+    from fault_tolerance.control.fast.box_check import compiled_box_status
+
+    _box_status = compiled_box_status()
+except ImportError:  # pragma: no cover - numba is a core dependency
+    from fault_tolerance.control.fast.box_check import box_status as _box_status
+
+#: The flag of a clipped servo (``run.FLAG_SERVO_CLIPPED``).
+_FLAG_SERVO_CLIPPED = 256
+
+
+@njit
+def _in_box(q, lim, prm, buf, qd, J, B, v, cols, locked) -> bool:  # pragma: no cover - numba
+    """Box (L1) at ``q`` into ``buf[0], buf[1]`` (``box_status``); whether ``qd`` is inside it.
+
+    Inside, ``qd`` is clipped into the box (``bounded.resolve_bounded`` does so). After a lock the
+    locked joint (rate 0) is not checked: the reduced robot's box has no such joint.
+    """
+    n = qd.shape[0]
+    lock = int(prm[2]) if locked else -1
+    if _box_status(q, lim, prm, buf, qd, J, B, v, cols, False) != 0:
+        if lock < 0:
+            return False
+        for c in range(n):  # the locked joint's own bound does not count
+            if c != lock and (qd[c] < buf[0, c] - BOX_TOL or qd[c] > buf[1, c] + BOX_TOL):
+                return False
+    for c in range(n):
+        if c != lock:
+            qd[c] = min(max(qd[c], buf[0, c]), buf[1, c])
+    return True
+
+
+@njit
+def _servo_clip(q, lim, dt, qd) -> int:  # pragma: no cover - numba
+    """``reference_step._clip_to_limits``: the executed rates kept inside the limits over ``dt``."""
+    flag = 0
+    for c in range(qd.shape[0]):
+        v = lim[2, c]
+        lo = max((lim[0, c] - q[c]) / dt, -v)
+        hi = min((lim[1, c] - q[c]) / dt, v)
+        t = min(max(qd[c], lo), hi)
+        if abs(t - qd[c]) > 1e-12:
+            flag = _FLAG_SERVO_CLIPPED
+        qd[c] = t
+    return flag
+
+
+# Eqn. (G1) / (G3) of every reduced robot from the kernel's factors, checked against the box.
+@njit
+def g1_posts(J, B, base, piv, cols, lo, hi, post, inside) -> int:  # pragma: no cover - numba
+    """``post[t] = base − (base_c / N_cc) N[c, :]`` (``c = cols[t]``, ``N = I − JᵀB``), clipped.
+
+    ``inside[t]`` gets 1 when row ``t`` was inside the box ``[lo, hi]`` (to ``BOX_TOL``) before
+    the clip, else 0; returns how many were not (they need the bounded solve (L4)).
+    """
+    m, n = J.shape
+    out = 0
+    for t in range(cols.shape[0]):
+        c = cols[t]
+        ratio = base[c] / piv[t]
+        ok = True
+        for j in range(n):
+            s = 0.0
+            for i in range(m):
+                s += B[i, c] * J[i, j]
+            v = 0.0 if j == c else base[j] - ratio * (-s)
+            ok = ok and lo[j] - BOX_TOL <= v <= hi[j] + BOX_TOL
+            post[t, j] = min(max(v, lo[j]), hi[j])
+        inside[t] = 1 if ok else 0
+        out += 0 if ok else 1
+    return out

@@ -1,0 +1,283 @@
+"""Runs: integrate a resolver along a task path, with or without a joint locking on the way.
+
+:func:`simulate` returns a :class:`~fault_tolerance.simulation.run.Run` (time histories and metadata; it
+saves to and loads from a folder, see :mod:`fault_tolerance.simulation.run`).
+
+Integration is explicit Euler, ``q ← q + q̇·dt`` (the paper: dt = 1 ms). Optional task-space
+feedback ``ẋ_cmd = ẋ_des + K_p (x_des − x(q))`` keeps the drift bounded. A run flows from its
+validated options (:mod:`fault_tolerance.simulation.setup`) through one sample after another (the compiled
+sample of :mod:`fault_tolerance.simulation.fast.sampler`, or the reference one of
+:mod:`fault_tolerance.simulation.reference_step`) to the :class:`Run` built here.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import replace
+
+import numpy as np
+
+from fault_tolerance.errors import InvalidInput
+from fault_tolerance.model.arm import Arm
+from fault_tolerance.model.arm_record import arm_record
+from fault_tolerance.model.joint_limits import NO_LIMIT, wrap_into_limits
+from fault_tolerance.model.task_errors import angular_mask, error_norms
+from fault_tolerance.numerics.linalg import projection
+from fault_tolerance.resolution.resolvers import MDA_GAIN
+from fault_tolerance.simulation.paths import TaskPath
+from fault_tolerance.simulation.reference_step import _step
+from fault_tolerance.simulation.run import (
+    Run,
+)
+from fault_tolerance.simulation.setup import (
+    GLOBAL,
+    HISTORIES,
+    ServoModel,
+    _allocate,
+    _maybe_lock,
+    _Setup,
+    _setup,
+    _State,
+    sample_path,
+)
+
+#: Values of ``simulate(engine=...)``.
+ENGINES = ("auto", "fast", "reference")
+#: Whole-path planners by algorithm name: ``f(arm, path, *, q0, plan_options, progress, loop, **sim)``
+#: returning a :class:`Run`. The planning layer registers ``"global"``
+#: (:mod:`fault_tolerance.planning.wholepath.run`), which sits above this one.
+PATH_PLANNERS: dict[str, Callable[..., Run]] = {}
+
+
+def simulate(
+    arm: Arm,
+    path: TaskPath,
+    algorithm: str = "jvja",
+    *,
+    q0: np.ndarray | None = None,
+    lockable=None,
+    weights: Sequence[float] | None = None,
+    response: str = "least_norm",
+    dt: float = 1e-3,
+    duration: float | None = None,
+    feedback_gain: float = 0.0,
+    gain: float = MDA_GAIN,
+    lock_joint: str | int | None = None,
+    lock_time: float | None = None,
+    servo: ServoModel | None = None,
+    progress=None,
+    engine: str = "auto",
+    plan_options: dict | None = None,
+    limits: bool = True,
+    horizon: float | None = None,
+) -> Run:
+    """Integrate ``algorithm`` along ``path`` from ``q0``; optionally lock a joint on the way.
+
+    Args:
+        arm: The arm.
+        path: Task path with the arm's ``m`` coordinates.
+        algorithm: ``"lnva"``, ``"jvja"``, ``"mda"`` or ``"global"`` (the whole-path plan of
+            :mod:`fault_tolerance.planning.wholepath`, tracked in the null space, MATH.md (W3)).
+        q0: Initial configuration, shape (n,). Required, except for ``"global"``: without it the
+            global plan chooses its start on the self-motion of the path's first point.
+        lockable: Joints that may lock (default: the arm's default lockable joints).
+        weights: Scenario weights (default 1).
+        response: Post-failure response, ``"least_norm"`` or ``"continuation"`` (MATH.md G3).
+        dt: Time step [s] (paper: 1 ms).
+        duration: Length [s] (default: the path's).
+        feedback_gain: Task-space feedback ``K_p`` [1/s] (0: open loop, as in the paper).
+        gain: MDA gain α.
+        lock_joint: Joint that locks; then the remaining joints track the path (Sec. V).
+        lock_time: When it locks [s].
+        servo: Joint servo model; default perfect rate tracking (``tau = 0``) without a lock and
+            :class:`ServoModel()` with one.
+        progress: A callable ``progress(k, K)`` or a tqdm-like object with ``update``.
+        engine: ``"auto"`` (default): the compiled sample (:mod:`.sampler`) where it applies;
+            ``"fast"``: that or :class:`InvalidInput` saying why not; ``"reference"``: the plain
+            code (:mod:`.reference_step`) at every sample. The numbers agree to 1e-9.
+        plan_options: Options of the global plan (see :func:`fault_tolerance.planning.wholepath.plan.plan_path`);
+            only with ``"global"``.
+        limits: Honour the joint position and velocity limits (default): every step, before and
+            after a lock, stays inside the rate box (L1), the resolvers minimise their objectives
+            inside it and scale the task out of reach (docs/MATH.md "Joint limits"); ``q0`` must
+            be inside the limits. ``False``: the paper's unconstrained formulation.
+        horizon: Horizon of the rate box [s] (default ``bounded.RATE_HORIZON``; at least ``dt``).
+
+    Example:
+        >>> import numpy as np, fault_tolerance as ft
+        >>> from fault_tolerance.simulation.paths import CirclePath
+        >>> arm = ft.load_arm("planar_3r")
+        >>> path = CirclePath(np.array([0.35, 0.0]), 0.1, 2 * np.pi, 0.05)
+        >>> run = simulate(arm, path, "jvja", q0=np.array([0.3, 1.2, 1.0]))
+        >>> ref = simulate(arm, path, "jvja", q0=np.array([0.3, 1.2, 1.0]), engine="reference")
+        >>> bool(np.allclose(run.q, ref.q, rtol=0, atol=1e-12))
+        True
+    """
+    _check_call(engine, algorithm, plan_options, q0)
+    sim = dict(
+        lockable=lockable, weights=weights, response=response, dt=dt, duration=duration,
+        feedback_gain=feedback_gain, gain=gain, lock_joint=lock_joint, lock_time=lock_time,
+        servo=servo, limits=limits, horizon=horizon,
+    )  # fmt: skip
+    if algorithm == GLOBAL:
+        if GLOBAL not in PATH_PLANNERS:
+            raise InvalidInput(
+                f"algorithm '{GLOBAL}' needs the whole-path planner: import fault_tolerance"
+            )
+        return PATH_PLANNERS[GLOBAL](
+            arm, path, q0=q0, plan_options=plan_options, progress=progress, loop=_simulate, **sim
+        )
+    return _simulate(arm, path, algorithm, q0=q0, progress=progress, engine=engine, **sim)
+
+
+def _check_call(engine: str, algorithm: str, plan_options, q0) -> None:
+    """The options of :func:`simulate` that decide the route, checked before any work."""
+    if engine not in ENGINES:
+        raise InvalidInput(f"engine {engine!r} is not one of {list(ENGINES)}")
+    if algorithm == GLOBAL:
+        return
+    if plan_options is not None:
+        raise InvalidInput(f"plan_options are options of algorithm 'global', not of '{algorithm}'")
+    if q0 is None:
+        raise InvalidInput(
+            f"simulate needs q0 for algorithm '{algorithm}' (only 'global' chooses its own start)"
+        )
+
+
+def _simulate(
+    arm: Arm,
+    path: TaskPath,
+    algorithm: str,
+    *,
+    q0: np.ndarray,
+    lockable=None,
+    weights: Sequence[float] | None = None,
+    response: str = "least_norm",
+    dt: float = 1e-3,
+    duration: float | None = None,
+    feedback_gain: float = 0.0,
+    gain: float = MDA_GAIN,
+    lock_joint: str | int | None = None,
+    lock_time: float | None = None,
+    servo: ServoModel | None = None,
+    progress=None,
+    reference: np.ndarray | None = None,
+    engine: str = "auto",
+    limits: bool = True,
+    horizon: float | None = None,
+) -> Run:
+    """The loop of :func:`simulate`; with ``reference`` (the global plan) the rates track it."""
+    setup = _setup(
+        arm, path, "jvja" if reference is not None else algorithm, q0, lockable, weights,
+        response, dt, duration, feedback_gain, gain, lock_joint, lock_time, servo, limits,
+        horizon,
+    )  # fmt: skip
+    if reference is not None:
+        setup = replace(setup, algorithm=algorithm, reference=np.asarray(reference, dtype=float))
+    q = arm.check_q(q0).copy()
+    if setup.limits:  # full-turn joints read modulo 2π: the same posture, inside the limits
+        q = wrap_into_limits(arm, q)
+    # an intolerable scenario is refused before any work; later, a path through a reduced
+    # singularity gets damped pivots and FLAG_NEAR_INTOLERABLE instead of an exception
+    setup.sc.check_tolerable(projection(arm.jacobian(q)).N)
+    K1 = setup.steps + 1
+    rec = _allocate(K1, arm.n, arm.m, setup.sc.f, dt)
+    X, XD = sample_path(path, rec["t"], arm.m)
+    state = _State(q=q, qd=np.zeros(arm.n), keep=np.arange(arm.n))
+    # the compiled sample knows the resolvers, not the tracking of a global plan's reference
+    fast = None if reference is not None else _sampler(setup, rec, engine)
+    for k in range(K1):
+        _maybe_lock(setup, state, k * dt)
+        if fast is None or not fast.step(state, k, X[k], XD[k]):
+            _step(setup, state, k, rec, X[k], XD[k])
+        _tick(progress, k, K1)
+    return _finish(setup, state, rec, rec["q"][0] if setup.limits else q0)
+
+
+def _sampler(s: _Setup, rec: dict, engine: str):
+    """The compiled sample of :mod:`.sampler` for this run, or None for the reference code."""
+    if engine == "reference":
+        return None
+    from fault_tolerance.simulation.fast import sampler
+
+    # under joint limits the compiled sample is the bounded one while no bound is met; a sample
+    # that meets a bound is solved the bounded reference way (bounded.resolve_bounded)
+    why = sampler.covers(s.sc, s.algorithm, s.response, s.limits)
+    if why is None:
+        return sampler.Sampler(s, rec)
+    if engine == "fast":
+        raise InvalidInput(f"engine 'fast' does not cover this run: {why}; use engine='auto'")
+    return None
+
+
+def _finish(s: _Setup, state: _State, rec: dict, q0) -> Run:
+    """The :class:`Run`: time histories and how it was made."""
+    arm, sc = s.arm, s.sc
+    servo_used = s.lock_col is not None or s.servo.tau > 0
+    meta = {
+        "robot": arm.name,
+        "source": arm.source,
+        "package_dirs": arm.package_dirs,
+        "xacro_args": arm.xacro_args,
+        "tip": arm.tip,
+        "task": list(arm.task),
+        "joint_names": arm.joint_names,
+        "algorithm": s.algorithm,
+        "lockable": [[arm.joint_names[i] for i in S] for S in sc.sets],
+        "weights": sc.weights.tolist(),
+        "response": s.response,
+        "dt": s.dt,
+        "duration": s.duration,
+        "feedback_gain": s.feedback_gain,
+        "mda_gain": s.gain if s.algorithm == "mda" else None,
+        "q0": np.asarray(q0, dtype=float).tolist(),
+        "path": s.path.spec(),
+        "servo": s.servo.describe() if servo_used else "perfect rate tracking",
+        "limits": _limits_meta(s),
+    }
+    if s.lock_col is not None:
+        meta["lock"] = {
+            "joint": arm.joint_names[s.lock_col],
+            "index": s.lock_col,
+            "time": float(s.lock_time),
+            "jump": state.lock_jump,
+        }
+    arrays = {k: np.ascontiguousarray(rec[k]) for k in ("t", *HISTORIES)}
+    arrays["flags"] = arrays["flags"].astype(np.int64)
+    qd_cmd = arrays.pop("qd_cmd")
+    if angular_mask(arm.task).any():  # metres and radians apart, never added (docs/MATH.md)
+        err = np.array(
+            [arm.task_error(xd, q) for xd, q in zip(arrays["x_des"], arrays["q"], strict=True)]
+        )
+        arrays["error"], arrays["orientation_error"] = error_norms(arm.task, err)
+    return Run(
+        meta=meta,
+        qd_cmd=qd_cmd if servo_used else None,
+        arm_record=arm_record(arm),
+        **arrays,
+    )
+
+
+def _limits_meta(s: _Setup) -> dict:
+    """What the run knew of the joint limits (JSON: ``None`` where a limit is absent)."""
+    arm = s.arm
+
+    def listed(x):
+        return [float(v) if np.isfinite(v) and abs(v) < NO_LIMIT else None for v in x]
+
+    return {
+        "enabled": s.limits,
+        "horizon": s.horizon,
+        "lower": listed(arm.lower),
+        "upper": listed(arm.upper),
+        "velocity": listed(s.vlimit),
+    }
+
+
+def _tick(progress, k: int, total: int) -> None:
+    if progress is None:
+        return
+    if hasattr(progress, "update"):
+        progress.update(1)
+    else:
+        progress(k, total)
