@@ -152,6 +152,10 @@ class InvalidInput(FaultToleranceError, ValueError):
     """
 
 
+class DynamicsUnavailable(FaultToleranceError):
+    """An arm's description cannot serve dynamics (no usable inertias), or a dynamics option is wrong."""
+
+
 class InfeasibleBounds(FaultToleranceError):
     """No joint rates inside the rate box of the joint limits reach the task, not even scaled to 0."""
 

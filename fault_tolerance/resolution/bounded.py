@@ -144,12 +144,18 @@ def _continuation_metric(N: np.ndarray, sc: Scenarios, tolerate: bool) -> np.nda
     return W + CONTINUATION_EPS * max(float(np.trace(W)) / len(W), 1e-300) * np.eye(len(W))
 
 
-def _continuation(J, xdot, sc, lo, hi, proj, tolerate) -> BoxSolution:
-    """(L2) with the continuation metric H: ``min q̇ᵀHq̇`` s.t. ``J q̇ = s ẋ`` inside the box."""
+def _continuation(J, xdot, sc, lo, hi, proj, tolerate, H=None) -> BoxSolution:
+    """(L2) with the continuation metric H: ``min q̇ᵀHq̇`` s.t. ``J q̇ = s ẋ`` inside the box.
+
+    ``H``: another metric of that form (jvja_inertia's, docs/MATH.md (D3)); default (G3)'s.
+    """
     a = proj.Jpinv @ xdot
     if not tolerate:
         sc.check_tolerable(proj.N)
-    H = _continuation_metric(proj.N, sc, tolerate)
+    if H is None:
+        H = _continuation_metric(proj.N, sc, tolerate)
+    else:
+        H = H + CONTINUATION_EPS * max(float(np.trace(H)) / len(H), 1e-300) * np.eye(len(H))
     Z = _null_basis(proj.N)
     G = Z.T @ H @ Z
     L = np.linalg.cholesky(G)
@@ -200,6 +206,8 @@ def resolve_bounded(name: str, J, xdot, lockable=None, *, bounds, **options) -> 
         return BoundedRates(sol.qd, sol.scale, sol.active, empty)
     names = options.get("joint_names") or (options["arm"].joint_names if options.get("arm") else ())
     sc = _scenarios(J, lockable, options.pop("weights", None), names)
+    if name == "jvja_inertia":
+        return _inertia_bounded(J, xdot, sc, lo, hi, proj, tolerate, options)
     response = options.get("response", "least_norm")
     if response not in RESPONSES:
         raise InvalidInput(f"response {response!r} is not one of {RESPONSES}")
@@ -218,6 +226,20 @@ def resolve_bounded(name: str, J, xdot, lockable=None, *, bounds, **options) -> 
     else:
         _, scales = reduced_under_limits(J, xdot, sc, lo, hi, proj=proj, tolerate=tolerate)
         sol = _continuation(J, xdot, sc, lo, hi, proj, tolerate)
+    return BoundedRates(sol.qd, sol.scale, sol.active, scales)
+
+
+def _inertia_bounded(J, xdot, sc, lo, hi, proj, tolerate, options) -> BoundedRates:
+    """jvja_inertia under the box: (L2) with its kinetic-energy metric H of (D3)."""
+    from fault_tolerance.resolution.inertia_jvja import _inertia, jvja_inertia, kinetic_jump_metric
+
+    opts = {k: options.get(k) for k in ("M", "arm", "q")}
+    qd = jvja_inertia(J, xdot, sc, tolerate=tolerate, proj=proj, **opts)  # the unbounded optimum
+    _, scales = reduced_under_limits(J, xdot, sc, lo, hi, proj=proj, tolerate=tolerate)
+    if _inside(qd, lo, hi):
+        return BoundedRates(np.clip(qd, lo, hi), 1.0, np.zeros(len(qd), dtype=bool), scales)
+    H = kinetic_jump_metric(J, _inertia(opts["M"], opts["arm"], opts["q"], J.shape[1]), sc, tolerate)
+    sol = _continuation(J, xdot, sc, lo, hi, proj, tolerate, H=H)
     return BoundedRates(sol.qd, sol.scale, sol.active, scales)
 
 

@@ -16,6 +16,7 @@ import numpy as np
 from fault_tolerance.errors import InvalidInput
 from fault_tolerance.numerics.linalg import Projection, damped_pivots, pivot_block, projection
 from fault_tolerance.resolution.indices import RESPONSES, jvj, rcn_gradient
+from fault_tolerance.resolution.inertia_jvja import jvja_inertia
 from fault_tolerance.resolution.scenarios import Scenarios, scenarios
 
 #: Default MDA gain α [rad² per unit of K per s]: q̇ = J⁺ẋ − α N ∇K.
@@ -163,7 +164,9 @@ def check_task(J, xdot) -> tuple[np.ndarray, np.ndarray]:
     return J, xdot
 
 
-RESOLVERS: dict[str, Callable[..., np.ndarray]] = {"lnva": lnva, "jvja": jvja, "mda": mda}
+RESOLVERS: dict[str, Callable[..., np.ndarray]] = {
+    "lnva": lnva, "jvja": jvja, "mda": mda, "jvja_inertia": jvja_inertia,
+}  # fmt: skip
 
 #: Keyword options each resolver takes (its signature after ``J, xdot, lockable``).
 RESOLVER_OPTIONS: dict[str, frozenset[str]] = {
@@ -174,7 +177,7 @@ OPTIONS = frozenset().union(*RESOLVER_OPTIONS.values())
 
 
 def resolve(name: str, J: np.ndarray, xdot: np.ndarray, lockable=None, **options) -> np.ndarray:
-    """Joint rates from the resolver ``name`` (``"lnva"``, ``"jvja"`` or ``"mda"``).
+    """Joint rates from the resolver ``name`` (``"lnva"``, ``"jvja"``, ``"mda"``, ``"jvja_inertia"``).
 
     Args:
         name: Resolver name.
@@ -183,7 +186,7 @@ def resolve(name: str, J: np.ndarray, xdot: np.ndarray, lockable=None, **options
         lockable: Joints that may lock: column indices, names (with ``joint_names=``), tuples for
             multi-joint scenarios, ``None``/``"all"`` for every joint, or a :class:`Scenarios`.
         **options: ``weights``, ``response`` (jvja); ``arm``, ``q``, ``gain``, ``dJ``,
-            ``max_step`` (mda); ``proj``, ``tolerate``; ``joint_names`` to name lockable joints
+            ``max_step`` (mda); ``M`` or ``arm`` and ``q`` (jvja_inertia, docs/MATH.md (D3)); ``proj``, ``tolerate``; ``joint_names`` to name lockable joints
             (taken from ``arm`` when it is given). Each resolver gets the options it takes; an
             option no resolver takes raises :class:`InvalidInput`. The joint limits
             (``bounds=``) are :func:`fault_tolerance.resolve`'s (:mod:`fault_tolerance.resolution.api`).

@@ -54,7 +54,7 @@ ARRAYS = (
     "sigma_min",
     "flags",
 )
-OPTIONAL_ARRAYS = ("qd_cmd", "orientation_error")
+OPTIONAL_ARRAYS = ("qd_cmd", "orientation_error", "tau", "tau_cmd")
 #: Files a run folder may hold (an older run's folder with only these may be replaced).
 RUN_FILES = frozenset(
     {"run.npz", "run.csv", "summary.json", "run.png", "run.svg", "lock.png", "lock.svg",
@@ -99,6 +99,8 @@ class Run:
             text, tip, task, joints), so that a replay needs no file named in the run.
         orientation_error: Orientation error of the task's angular rows [rad] (with all three:
             the angle of the remaining rotation), shape (K,); None without angular rows.
+        tau: Applied joint torques [N·m] of a dynamics run (after saturation), shape (K, n).
+        tau_cmd: Commanded torques [N·m] of a dynamics run (before saturation), shape (K, n).
     """
 
     t: np.ndarray
@@ -117,6 +119,8 @@ class Run:
     qd_cmd: np.ndarray | None = None
     arm_record: dict | None = None
     orientation_error: np.ndarray | None = None
+    tau: np.ndarray | None = None
+    tau_cmd: np.ndarray | None = None
 
     # -- summary -----------------------------------------------------------------------------
     def summary(self) -> dict:
@@ -146,7 +150,27 @@ class Run:
                 float(np.max(self.error[before])) if before.any() else 0.0
             )
             s["jump_at_lock"] = lock.get("jump")
+        s.update(self._dynamics_summary())
         return s
+
+    def _dynamics_summary(self) -> dict:
+        """A dynamics run's torque figures (docs/dynamics.md); nothing for a kinematic run."""
+        dyn = self.meta.get("dynamics")
+        if not dyn or self.tau is None:
+            return {}
+        effort = np.array([np.inf if e is None else e for e in dyn["effort"]], dtype=float)
+        ratio = np.abs(self.tau) / effort  # 0 where no limit is given
+        lock = dyn.get("lock") or {}
+        return {
+            "torque_max": float(np.max(np.abs(self.tau))),
+            "torque_peak_ratio": float(np.max(ratio)) if np.isfinite(effort).any() else None,
+            "torque_saturated_samples": int(
+                np.count_nonzero((np.abs(self.tau_cmd) > effort * (1 + 1e-12)).any(axis=1))
+            ),
+            "torque_jump_max": lock.get("torque_jump_max"),
+            "lock_impulse": lock.get("impulse"),
+            "kinetic_energy_jump": lock.get("kinetic_energy_jump"),
+        }
 
     def _orientation_summary(self) -> dict:
         """``orientation_error_max`` / ``_final`` [rad] for tasks with angular rows, else nothing."""

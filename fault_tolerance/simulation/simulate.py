@@ -40,6 +40,7 @@ from fault_tolerance.simulation.setup import (
     _State,
     sample_path,
 )
+from fault_tolerance.simulation.torque import as_model, track
 
 #: Values of ``simulate(engine=...)``.
 ENGINES = ("auto", "fast", "reference")
@@ -70,6 +71,7 @@ def simulate(
     plan_options: dict | None = None,
     limits: bool = True,
     horizon: float | None = None,
+    dynamics=None,
 ) -> Run:
     """Integrate ``algorithm`` along ``path`` from ``q0``; optionally lock a joint on the way.
 
@@ -102,6 +104,9 @@ def simulate(
             inside it and scale the task out of reach (docs/MATH.md "Joint limits"); ``q0`` must
             be inside the limits. ``False``: the paper's unconstrained formulation.
         horizon: Horizon of the rate box [s] (default ``bounded.RATE_HORIZON``; at least ``dt``).
+        dynamics: ``True`` or a :class:`~fault_tolerance.simulation.torque.DynamicsModel`: the
+            plan tracked by computed torques, the lock as a brake (docs/dynamics.md); not with
+            ``servo``. The run adds ``tau`` and ``tau_cmd``.
 
     Example:
         >>> import numpy as np, fault_tolerance as ft
@@ -119,6 +124,14 @@ def simulate(
         feedback_gain=feedback_gain, gain=gain, lock_joint=lock_joint, lock_time=lock_time,
         servo=servo, limits=limits, horizon=horizon,
     )  # fmt: skip
+    model = as_model(dynamics)
+    if model is not None:
+        return _dynamics_run(arm, path, algorithm, model, sim, q0, progress, engine, plan_options)
+    return _route(arm, path, algorithm, sim, q0, progress, engine, plan_options)
+
+
+def _route(arm, path, algorithm, sim, q0, progress, engine, plan_options) -> Run:
+    """A kinematic run: the global plan's planner, or the loop of the resolvers."""
     if algorithm == GLOBAL:
         if GLOBAL not in PATH_PLANNERS:
             raise InvalidInput(
@@ -128,6 +141,18 @@ def simulate(
             arm, path, q0=q0, plan_options=plan_options, progress=progress, loop=_simulate, **sim
         )
     return _simulate(arm, path, algorithm, q0=q0, progress=progress, engine=engine, **sim)
+
+
+def _dynamics_run(arm, path, algorithm, model, sim, q0, progress, engine, plan_options) -> Run:
+    """A torque-level run: the kinematic plan with perfect rate tracking, tracked by torques."""
+    if sim["servo"] is not None:
+        raise InvalidInput(
+            "servo and dynamics exclude each other: a dynamics run models the joints by their "
+            "torques (drop servo=..., or dynamics=...)"
+        )
+    sim = dict(sim, servo=ServoModel(tau=0.0))
+    plan = _route(arm, path, algorithm, sim, q0, progress, engine, plan_options)
+    return track(arm, plan, model)
 
 
 def _check_call(engine: str, algorithm: str, plan_options, q0) -> None:

@@ -35,6 +35,8 @@ SHAPES = {
     "flags": ("K",),
     "qd_cmd": ("K", "n"),
     "orientation_error": ("K",),  # tasks with angular rows [rad]
+    "tau": ("K", "n"),  # dynamics runs: applied joint torques [N·m]
+    "tau_cmd": ("K", "n"),  # dynamics runs: commanded torques before saturation [N·m]
 }
 #: Members that are JSON text (0-d string arrays).
 TEXT_MEMBERS = ("meta", "arm")
