@@ -57,6 +57,8 @@ DESCRIPTIONS = {
     "jvja_bounded_free": "JVJA step with joint limits on, no bound active (fast step + box check)",
     "jvja_bounded_2": "JVJA step with joint limits on, two joints at a binding bound (bounded QPs)",
     "jvja_bounded_2_qp": "the same bounded JVJA problem by quadprog (f reduced QPs + 1)",
+    "dyn_sample": "one dynamics sample: computed-torque law (RNEA + PD), saturation, one ABA "
+    "semi-implicit Euler step (simulation.torque.control_step)",
 }
 
 
@@ -212,6 +214,32 @@ def simulated_rows(case: Case) -> dict[str, Row]:
     return rows
 
 
+def dynamics_rows(case: Case) -> dict[str, Row]:
+    """One sample of a torque-level run (control law + ABA step) at the pool's configurations.
+
+    Empty for an arm without usable inertias (the synthetic chains carry none).
+    """
+    from fault_tolerance.errors import DynamicsUnavailable
+    from fault_tolerance.model.dynamics import ArmDynamics
+    from fault_tolerance.simulation.torque import DynamicsModel, _Arm, control_step
+
+    try:
+        dyn = ArmDynamics(case.arm)
+    except DynamicsUnavailable:
+        return {}
+    model, n = DynamicsModel(), case.arm.n
+    st = _Arm(q=case.qs[0].copy(), qd=np.zeros(n), keep=np.arange(n))
+    ff = np.zeros(n)
+
+    def sample(q, xd, out, st=st):
+        """From (q, q̇ = 0.1 ẋ-sized rates): τ, saturation, one step of 1 ms."""
+        st.q, st.qd = q, out
+        control_step(dyn, st, model, q, out, ff, None, 1e-3)
+
+    v = np.full(n, 0.1)
+    return {"dyn_sample": (sample, [(q, xd, v) for q, xd in case.qx])}
+
+
 def reference_rows(case: Case) -> dict[str, Row]:
     """The plain planner (``ft.resolve``, ``ft.rcn``), the explicit route and quadprog."""
     from fault_tolerance.resolution.api import resolve
@@ -262,8 +290,8 @@ def _limits_rows(case: Case) -> dict[str, Row]:
 
 
 def _fast_group(case: Case) -> dict[str, Row]:
-    """The fast path, the floor and the simulated sample: timed side by side (ratios)."""
-    return {**fast_rows(case), **floor_rows(case), **simulated_rows(case)}
+    """The fast path, the floor, the simulated and the dynamics sample: side by side (ratios)."""
+    return {**fast_rows(case), **floor_rows(case), **simulated_rows(case), **dynamics_rows(case)}
 
 
 GROUPS: list[tuple[str, Callable[[Case], dict[str, Row]], int]] = [

@@ -15,6 +15,8 @@ MAX_JVJA_P99_US = 100.0
 #: Joint limits (#12): bounded JVJA step / unbounded, with no bound and with two bounds active.
 MAX_BOUNDED_FREE_OVER_JVJA = 1.3
 MAX_BOUNDED_TWO_OVER_JVJA = 4.0
+#: Dynamics (#23): one dynamics sample (control law + ABA step) / one kinematic JVJA step.
+MAX_DYN_OVER_STEP = 20.0
 
 #: Generic routes that must be slower than the fast JVJA step: (row, label).
 SLOWER_ROUTES = (
@@ -69,6 +71,11 @@ def arm_targets(key: str, ops: dict) -> list[dict]:
         if jv and g:
             out.append(_item(key, f"{name}_over_jvja", label, g / jv, 1.0, ">", g / jv > 1.0))
     out += _limit_targets(key, jv, med)
+    dyn = med("dyn_sample")
+    if jv and dyn:
+        r = dyn / jv
+        out.append(_item(key, "dyn_over_jvja", "dynamics sample / kinematic JVJA step", r,
+                         MAX_DYN_OVER_STEP, "<=", r <= MAX_DYN_OVER_STEP))  # fmt: skip
     rs = med("jvja_resolve")
     if jv and rs:
         out.append(_item(key, "resolve_over_jvja", "ft.resolve / JVJA", rs / jv, None, None, None))

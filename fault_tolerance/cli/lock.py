@@ -18,6 +18,12 @@ from fault_tolerance.cli.common import (
     load_robot,
     report_warnings,
 )
+from fault_tolerance.cli.dynamics_options import (
+    add_dynamics_options,
+    check_dynamics_args,
+    dynamics_model,
+    print_torque_table,
+)
 from fault_tolerance.cli.start_options import choose_start
 from fault_tolerance.errors import InvalidInput
 
@@ -25,8 +31,11 @@ NAME = "lock"
 HELP = "a run in which a joint locks (servo model on)"
 EXAMPLE = (
     "fault-tolerance lock --robot powercube_3r --joint joint3 --at max --out out/lock_max\n"
-    "  fault-tolerance lock --robot planar_3r --joint joint2 --at 0.4 --tau 0.02 --out out/lock"
+    "  fault-tolerance lock --robot planar_3r --joint joint2 --at 0.4 --tau 0.02 --out out/lock\n"
+    "  fault-tolerance lock --robot panda --joint panda_joint4 --at 0.5 --dynamics --duration 1"
 )
+#: The planners a torque-level lock compares by default.
+DYNAMICS_ALGORITHMS = ("lnva", "jvja", "jvja_inertia", "mda", "global")
 
 
 def add_parser(sub) -> argparse.ArgumentParser:
@@ -44,9 +53,17 @@ def add_parser(sub) -> argparse.ArgumentParser:
     s.add_argument(
         "--algorithm",
         default="lnva",
-        choices=["lnva", "jvja", "mda", "global"],
-        help="the planner before the lock (default: lnva, as in the paper's Sec. V)",
+        choices=["lnva", "jvja", "mda", "jvja_inertia", "global"],
+        help="the planner before the lock (default: lnva, as in the paper's Sec. V); with "
+        "--dynamics: the one whose planned run places --at max/min",
     )
+    s.add_argument(
+        "--algorithms",
+        default=",".join(DYNAMICS_ALGORITHMS),
+        help="with --dynamics: the planners compared, comma-separated (default: "
+        f"{','.join(DYNAMICS_ALGORITHMS)}), each locked at the same time from the same start",
+    )
+    add_dynamics_options(s, lock=True)
     s.add_argument("--tau", type=float, default=0.05, help="servo time constant [s] (default 0.05)")
     s.add_argument(
         "--accel-limit",
@@ -101,6 +118,9 @@ def run(args) -> int:
     from fault_tolerance.storage.folder_lock import FolderLock
     from fault_tolerance.storage.result_folder import check_target
 
+    check_dynamics_args(args)
+    if args.dynamics:
+        return _run_dynamics(args)
     if not args.out:
         return _run(args)
     out = check_path_names(Path(args.out))
@@ -190,3 +210,68 @@ def _write(run_, arm, joint: str, t_lock: float, out: Path, html: bool, found, p
 
     run_.save(out, extras=extras, warnings=found)
     print(f"wrote {out}/ (run.npz, run.csv, summary.json, lock.png/.svg)")
+
+
+def _dynamics_algorithms(args) -> list[str]:
+    from fault_tolerance.simulation.setup import ALGORITHMS
+
+    algs = [a.strip() for a in args.algorithms.split(",") if a.strip()]
+    bad = [a for a in algs if a not in ALGORITHMS]
+    if bad or not algs:
+        raise InvalidInput(f"--algorithms {args.algorithms!r}: choose among {list(ALGORITHMS)}")
+    return algs
+
+
+def _run_dynamics(args) -> int:
+    """``lock --dynamics``: every planner, the ideal and the finite brake, the same start and time."""
+    from fault_tolerance.simulation.simulate import simulate
+    from fault_tolerance.storage.atomic import output_folder
+
+    arm = load_robot(args)
+    joint = arm.joint_names[arm.joint_index(args.joint)]
+    algs = _dynamics_algorithms(args)
+    feedback = 10.0 if args.feedback is None else args.feedback
+    gain = {} if args.gain is None else {"gain": args.gain}
+    common = dict(duration=args.duration, response=args.response, limits=not args.no_limits)
+    stepwise = [a for a in algs if a != "global"] or ["jvja"]
+    q0, path, lockable, choice = choose_start(
+        args, arm, stepwise, extra_lockable=[joint], **common, **gain
+    )
+    if choice is not None:
+        print(choice.reason())
+    duration = args.duration or path.duration
+    t_lock, _ = _lock_time(args, arm, path, q0, joint, duration, gain)
+    brake = _brake_torque(args, arm, joint)
+    models = {"ideal": dynamics_model(args), f"finite {brake:g} N·m": dynamics_model(args, brake)}
+    out = output_folder(Path(args.out)) if args.out else None
+    rows = {}
+    for alg in algs:
+        for label, model in models.items():
+            run_ = simulate(
+                arm, path, alg, q0=q0, lockable=lockable, dt=args.dt, duration=duration,
+                lock_joint=joint, lock_time=t_lock, feedback_gain=feedback,
+                response=args.response, limits=not args.no_limits, dynamics=model, **gain,
+            )  # fmt: skip
+            rows[(alg, label)] = run_.summary()
+            if out:
+                run_.save(out / f"{alg}_{label.split()[0]}")
+    print(
+        f"{joint} locks at t = {t_lock:.3f} s; {models['ideal'].describe()}; K_p = {feedback} 1/s"
+    )
+    print_torque_table(rows)
+    if out:
+        print(f"wrote {out}/ (one run folder per algorithm and brake: ALG_ideal, ALG_finite)")
+    return 0
+
+
+def _brake_torque(args, arm, joint: str) -> float:
+    """``--brake-torque``, or the locked joint's effort limit."""
+    if args.brake_torque is not None:
+        return float(args.brake_torque)
+    effort = float(arm.model.effortLimit[arm.joint_index(joint)])
+    if not (np.isfinite(effort) and effort > 0):
+        raise InvalidInput(
+            f"{joint} has no effort limit in the description; give the finite brake's torque "
+            "with --brake-torque N·m"
+        )
+    return effort

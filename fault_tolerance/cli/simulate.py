@@ -18,6 +18,11 @@ from fault_tolerance.cli.common import (
     names,
     report_warnings,
 )
+from fault_tolerance.cli.dynamics_options import (
+    add_dynamics_options,
+    check_dynamics_args,
+    dynamics_model,
+)
 from fault_tolerance.cli.start_options import choose_start
 from fault_tolerance.errors import InvalidInput
 
@@ -42,10 +47,11 @@ def add_parser(sub) -> argparse.ArgumentParser:
     s.add_argument(
         "--algorithms",
         default="lnva,jvja,mda",
-        help="comma-separated among lnva,jvja,mda,global (global: the whole-path plan, "
+        help="comma-separated among lnva,jvja,mda,jvja_inertia,global (global: the whole-path plan, "
         "docs/MATH.md W1-W5; with --x0 and no --q0 it chooses its start on the self-motion of x0)",
     )
     add_plan_options(s)
+    add_dynamics_options(s)
     s.add_argument(
         "--out", default=None, help="output folder (default: none, only the table is printed)"
     )
@@ -104,6 +110,7 @@ def run(args) -> int:
     from fault_tolerance.storage.folder_io import check_path_names
     from fault_tolerance.storage.folder_lock import FolderLock
 
+    check_dynamics_args(args)
     if not args.out:
         return _run(args, None)
     out = check_path_names(Path(args.out))
@@ -131,7 +138,9 @@ def _run(args, out: Path | None) -> int:
     out = output_folder(out) if out else None
     stepwise = [a for a in algs if a != "global"] or ["jvja"]  # the start is checked with these
     q0, path, lockable, choice = choose_start(args, arm, stepwise, **options)
-    checked = {} if choice is None else choice.runs  # the default start's checks ran these
+    checked = {} if choice is None or args.dynamics else choice.runs  # kinematic checks
+    if args.dynamics:
+        options["dynamics"] = dynamics_model(args)
     duration = args.duration or path.duration
     f = scenarios(lockable, arm.n, r=arm.redundancy, joint_names=arm.joint_names).f
     steps = check_run(args.dt, duration, arm.n, arm.m, f, runs=len(algs))  # all kept in memory
@@ -177,6 +186,8 @@ def _run(args, out: Path | None) -> int:
     if progress:
         progress.close()
     print_table(runs)
+    if args.dynamics:
+        print_dynamics_table(runs)
     for alg, run_ in runs.items():
         report_warnings(NAME, alg, run_, arm)
         print(f"{alg}: {limits_line(run_)}")
@@ -202,6 +213,18 @@ def _extras(run_, arm, html: bool):
             export_html(run_, folder / "replay.html", arm=arm)
 
     return write
+
+
+def print_dynamics_table(runs) -> None:
+    """Peak torque and its ratio to the effort limit, per run of ``--dynamics``."""
+    print(f"{'algorithm':13} {'peak |τ| [N·m]':>15} {'peak |τ|/τmax':>14} {'saturated samples':>18}")
+    for alg, run_ in runs.items():
+        s = run_.summary()
+        ratio = s["torque_peak_ratio"]
+        print(
+            f"{alg:13} {s['torque_max']:15.4g} {ratio if ratio is not None else float('nan'):14.3f} "
+            f"{s['torque_saturated_samples']:18d}"
+        )
 
 
 def print_table(runs) -> None:

@@ -120,20 +120,31 @@ def track(arm, plan: Run, model: DynamicsModel) -> Run:
         if st.held and st.stop_k is None:
             st.stop_k = k
         v_prev = plan.qd[max(k - 1, 0)]
+        off = col if col is not None and k >= k_lock else None
         # the plan's rates jump at the lock: no acceleration there, the PD closes the gap
         ff = np.zeros(n) if k == k_lock else (plan.qd[k] - v_prev) / dt
-        a = ff + model.kd * (v_prev - st.qd)
-        a += model.kp * (plan.q[k] - st.q)
-        if col is not None and k >= k_lock:
-            a[col] = 0.0  # the locked joint's motor is off; it is held (or braked)
-        cmd = dyn.inverse(st.q, st.qd, a)
-        if col is not None and k >= k_lock:
-            cmd[col] = 0.0
-        tau = np.clip(cmd, -dyn.effort, dyn.effort)
-        Q[k], QD[k], TAU[k], CMD[k] = st.q, st.qd, tau, cmd
-        for _ in range(subs):
-            _substep(dyn, st, tau, col, model, dt / subs)
+        Q[k], QD[k] = st.q, st.qd
+        TAU[k], CMD[k] = control_step(dyn, st, model, plan.q[k], v_prev, ff, off, dt, subs)
     return _run(arm, plan, model, dyn, st, (Q, QD, TAU, CMD), k_lock, col)
+
+
+# Eqn. (D8)
+def control_step(dyn, st: _Arm, model, q_ref, v_prev, ff, off, dt: float, subs: int = 1):
+    """One sample of the arm: the computed-torque law, saturation, ``subs`` ABA sub-steps.
+
+    ``off``: the locked joint (its motor off, held in the inverse dynamics) or None. Returns
+    ``(τ, τ_cmd)`` [N·m]; ``st`` moves on by ``dt``.
+    """
+    a = ff + model.kd * (v_prev - st.qd) + model.kp * (q_ref - st.q)
+    if off is not None:
+        a[off] = 0.0  # the locked joint's motor is off; it is held (or braked)
+    cmd = dyn.inverse(st.q, st.qd, a)
+    if off is not None:
+        cmd[off] = 0.0
+    tau = np.clip(cmd, -dyn.effort, dyn.effort)
+    for _ in range(subs):
+        _substep(dyn, st, tau, off, model, dt / subs)
+    return tau, cmd
 
 
 def _lock(dyn: ArmDynamics, st: _Arm, col: int, model: DynamicsModel) -> None:
