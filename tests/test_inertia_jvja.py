@@ -121,3 +121,21 @@ def test_bounded_inertia_jvja_minimises_inside_the_box():
     np.testing.assert_allclose(out.qd, res.x, atol=1e-5)
     inside = ft.resolve_bounded("jvja_inertia", J, xd, sets, bounds=(lo, np.full(5, np.inf)), M=M)
     np.testing.assert_allclose(inside.qd, free, atol=1e-12)
+
+
+@pytest.mark.parametrize("limits", [False, True])
+def test_controller_step_equals_the_resolver(limits):
+    """Controller(method='jvja_inertia') gives ft.resolve's rates (bounded: resolve_bounded's)."""
+    arm = ft.load_arm("panda", task="position")
+    ctrl = ft.Controller(arm, [1, 3, 5], method="jvja_inertia", limits=limits)
+    q, xd = arm.q_reference + 0.2, np.array([0.05, -0.02, 0.03])
+    M = ArmDynamics(arm).mass_matrix(q)
+    J = arm.jacobian(q)
+    if limits:
+        box = ft.rate_box(q, arm.lower, arm.upper, arm.velocity_limit)
+        want = ft.resolve_bounded("jvja_inertia", J, xd, [1, 3, 5], bounds=box, M=M).qd
+    else:
+        want = jvja_inertia(J, xd, [1, 3, 5], M=M)
+    np.testing.assert_allclose(ctrl.step(q, xd), want, atol=1e-10)
+    with pytest.raises(InvalidInput):
+        ctrl.step(q, np.zeros(2))

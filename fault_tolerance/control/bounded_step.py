@@ -43,7 +43,7 @@ def bounded_step(ctrl, name: str, inner: Callable, horizon: float) -> Callable:
     lim[2] = velocity_limits(arm)
     prm = np.array([1.0 / horizon, ctrl._alpha])
     reference = _reference_step(ctrl, name, inner, lim, prm)
-    if ctrl.backend != "numba":
+    if ctrl.backend != "numba" or name == "jvja_inertia":  # no compiled solve for it yet
         return reference
     from fault_tolerance.control.fast.bounded_step import compiled_bounded_step
 
@@ -61,13 +61,15 @@ def _reference_step(ctrl, name: str, inner: Callable, lim, prm) -> Callable:
     check = compiled_box_status() if ctrl.backend == "numba" else box_status_numpy
     dummy = np.zeros((ctrl.m, n)), np.zeros((ctrl.m, n)), np.zeros(n)
     sc = ctrl.scenarios
-    general = name == "jvja" and not ctrl._singletons
+    general = (name == "jvja" and not ctrl._singletons) or name == "jvja_inertia"
 
     def slow(q, xdot, out):
         J = ctrl.jacobian(q)
         opts = {"tolerate": ctrl.tolerate}
         if name == "mda":
             opts.update(dJ=ctrl.jacobian_derivatives(q), gain=ctrl.gain, max_step=ctrl.max_step)
+        if name == "jvja_inertia":
+            opts["M"] = ctrl._dynamics.mass_matrix(q)
         box_status_numpy(q, lim, prm, buf, out, *dummy, cols, False)  # the box (L1) at q
         box = (lo.copy(), hi.copy())
         res = resolve_bounded(name, J, np.asarray(xdot, dtype=float), sc, bounds=box, **opts)

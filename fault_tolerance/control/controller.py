@@ -58,6 +58,7 @@ import pinocchio as pin
 
 from fault_tolerance.control import lapack_steps as kernels
 from fault_tolerance.control.indices import ControllerIndices
+from fault_tolerance.control.inertia_step import inertia_step
 from fault_tolerance.errors import InvalidInput
 from fault_tolerance.model.arm import Arm
 from fault_tolerance.numerics.linalg import PIVOT_EPS, PIVOT_TOL
@@ -72,7 +73,7 @@ __all__ = [
 ]
 
 #: Methods a :class:`Controller` steps with.
-METHODS = ("lnva", "jvja", "mda")
+METHODS = ("lnva", "jvja", "mda", "jvja_inertia")
 #: Backends of the LNVA / JVJA steps, fastest first.
 BACKENDS = ("numba", "lapack", "numpy")
 
@@ -125,7 +126,8 @@ class Controller(ControllerIndices):
             ``"all"`` (every joint), column indices or joint names, tuples for multi-joint
             scenarios (``|S| <= r``), or a :class:`~fault_tolerance.resolution.scenarios.Scenarios`. The
             catalog's choice for an arm is ``arm.default_lockable``.
-        method: What :attr:`step` computes: ``"jvja"`` (default), ``"lnva"`` or ``"mda"``.
+        method: What :attr:`step` computes: ``"jvja"`` (default), ``"lnva"``, ``"mda"`` or
+            ``"jvja_inertia"`` (docs/MATH.md (D3); the NumPy route, built only when chosen).
         weights: One positive weight per scenario (default 1).
         gain: MDA gain α of ``q̇ = J⁺ẋ - α N ∇K`` (default ``planner.MDA_GAIN``).
         max_step: Cap of the norm of MDA's null-space step [rad/s] (``planner.MDA_MAX_STEP``).
@@ -240,7 +242,9 @@ class Controller(ControllerIndices):
             self.lnva = bounded_step(self, "lnva", self.lnva, self.horizon)
             self.jvja = bounded_step(self, "jvja", self.jvja, self.horizon)
             self.mda = bounded_step(self, "mda", self.mda, self.horizon)
-        self.step = {"lnva": self.lnva, "jvja": self.jvja, "mda": self.mda}[method]
+        if method == "jvja_inertia":  # built on request: it needs the arm's inertias
+            self.jvja_inertia = inertia_step(self)  # inside the rate box with limits
+        self.step = getattr(self, method)
 
     # -- helpers ----------------------------------------------------------------------------
     @property
