@@ -336,14 +336,14 @@ def test_mda_input_errors(planar_3r, kwargs, match):
 
 
 def test_registry_names():
-    """The registry holds exactly lnva, jvja and mda."""
-    assert set(ft.RESOLVERS) == {"lnva", "jvja", "mda"}
+    """The registry holds exactly lnva, jvja, mda and the inertia-weighted jvja_inertia."""
+    assert set(ft.RESOLVERS) == {"lnva", "jvja", "mda", "jvja_inertia"}
 
 
 def test_resolve_unknown_name_lists_the_resolvers(planar_3r):
     """An unknown resolver name raises InvalidInput listing the known ones."""
     J = planar_3r.arm.jacobian(np.array([0.3, 1.2, 1.0]))
-    with pytest.raises(ft.InvalidInput, match=r"\['jvja', 'lnva', 'mda'\]"):
+    with pytest.raises(ft.InvalidInput, match=r"\['jvja', 'jvja_inertia', 'lnva', 'mda'\]"):
         ft.resolve("fastest", J, np.zeros(2))
 
 

@@ -104,7 +104,8 @@ def reproduce(
         html: Also write a self-contained meshcat replay (``replay.html``) for each JVJA run.
         beyond: Also the section "beyond the paper" (:mod:`.beyond`): the whole-path plan against
             LNVA, JVJA and MDA on every case and in the lock experiment (``beyond_the_paper`` in
-            summary.json, its own section of REPORT.md, figures ``beyond_*``).
+            summary.json, its own section of REPORT.md, figures ``beyond_*``), and "The lock at
+            torque level" (:mod:`.torque_level`, ``torque_level`` in summary.json).
 
     On Ctrl-C (or an error) the cases already finished stay on disk, ``summary.partial.json``
     lists what was and was not finished and what stopped the run, an existing ``summary.json`` is
@@ -162,6 +163,8 @@ def _reproduce(
             if "experiment" in keys:
                 _beyond_experiment(summary, out, exp_T, bar)
             done.append("beyond_the_paper")
+            _torque_level(summary, bar, quick)
+            done.append("torque_level")
     except BaseException as err:  # Ctrl-C or a failure: keep what is done, say what is not
         bar.close()
         _write_partial(out, summary, err, keys, done, beyond)
@@ -264,10 +267,22 @@ def _write_results(out: Path, summary: dict, beyond: bool) -> None:
         from fault_tolerance.paper.beyond_the_paper import report_section
 
         report = report.rstrip("\n") + "\n\n" + report_section(summary["beyond_the_paper"])
+    if "torque_level" in summary:
+        from fault_tolerance.paper import torque_level
+
+        report = report.rstrip("\n") + "\n\n" + torque_level.report_section(summary["torque_level"])
     write_atomic(out / "REPORT.md", report)
     partial = out / "summary.partial.json"
     if partial.exists():
         partial.unlink()
+
+
+def _torque_level(summary: dict, bar, quick: bool) -> None:
+    """REPORT.md's "The lock at torque level" (:mod:`.torque_level`; quick: the Fig. 2 arm only)."""
+    from fault_tolerance.paper.torque_level import torque_level
+
+    bar.describe("the lock at torque level")
+    summary["torque_level"] = torque_level(["fig2"] if quick else None)
 
 
 def _beyond_case(summary: dict, out: Path, case: Case, res: dict, bar) -> None:
