@@ -105,3 +105,16 @@ def test_inertia_weighted_jvja_runs_with_dynamics(start):
     b = _run(start, None, "jvja_inertia", lock_joint="joint2", lock_time=0.1, dynamics=True)
     np.testing.assert_allclose(b.qd_cmd, a.qd_cmd, atol=1e-8)
     assert b.meta["algorithm"] == "jvja_inertia"
+
+
+def test_replay_page_plots_the_torques_with_their_effort_limits(start, tmp_path):
+    """The replay page of a dynamics run draws τ(t) and dashed effort limits in #ft-plots."""
+    pytest.importorskip("meshcat")
+    from fault_tolerance.viz.page import export_html
+
+    arm = ft.load_arm(CASE.robot)
+    run = _run(start, arm, lock_joint="joint2", lock_time=0.1, dynamics=True)
+    export_html(run, tmp_path / "replay.html", arm=arm)
+    text = (tmp_path / "replay.html").read_text(encoding="utf-8")
+    assert "(d) joint torques, dashed: effort limits" in text
+    assert text.count('class="ft-effort"') == 2 * arm.n

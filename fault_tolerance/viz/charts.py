@@ -85,6 +85,8 @@ class ChartRun:
     joint_names: list[str]
     vmax: list[float | None]  # velocity limit per joint [rad/s], None: none given
     lock: dict | None  # {"joint", "time"}
+    tau: np.ndarray | None = None  # applied torques of a dynamics run [N·m], shape (P, n)
+    effort: list[float | None] | None = None  # effort limit per joint [N·m], None: none given
 
 
 def _keep(t: np.ndarray, curves: list[np.ndarray], must: list[int]) -> np.ndarray:
@@ -130,8 +132,10 @@ def chart_data(run, label: str, color: str, velocity_limit, joint_names) -> Char
     if lock:
         k = int(np.searchsorted(run.t, lock["time"] - 1e-12))
         must = [k - 1, k, k + 1]
-    curves = [run.jvj, run.K, *run.jvj_parts.T, *run.qd.T]
+    tau = getattr(run, "tau", None)
+    curves = [run.jvj, run.K, *run.jvj_parts.T, *run.qd.T, *([] if tau is None else tau.T)]
     idx = _keep(run.t, curves, must)
+    effort = (run.meta.get("dynamics") or {}).get("effort")
     return ChartRun(
         label=label,
         color=color,
@@ -144,6 +148,8 @@ def chart_data(run, label: str, color: str, velocity_limit, joint_names) -> Char
         joint_names=list(joint_names),
         vmax=vmax,
         lock=None if not lock else {"joint": lock["joint"], "time": float(lock["time"])},
+        tau=None if tau is None else tau[idx],
+        effort=effort,
     )
 
 
@@ -272,6 +278,39 @@ def rates_panel(runs: list[ChartRun]) -> str:
     return head + "".join(body) + _locks(ax, runs) + close
 
 
+def torque_panel(runs: list[ChartRun]) -> str:
+    """Panel (d) of dynamics runs: applied torques τ(t) around the lock, dashed: effort limits."""
+    t0, t1 = _t_range(runs)
+    have = [r for r in runs if r.tau is not None]
+    limits = [v for r in have for v in (r.effort or []) if v is not None]
+    lo, hi = _range([np.abs(r.tau) for r in have] + ([np.array(limits)] if limits else []),
+                    False, True)  # fmt: skip
+    ax = _Axes(t0, t1, -hi, hi, log=False)
+    body = []
+    for j, v in enumerate(have[0].effort or []):
+        if v is None:
+            continue
+        for sign in (v, -v):
+            y = float(ax.y(sign))
+            body.append(
+                f'<line class="ft-effort" data-joint="{html_lib.escape(have[0].joint_names[j])}" '
+                f'x1="{LEFT}" x2="{WIDTH - RIGHT}" y1="{y:.1f}" y2="{y:.1f}" '
+                f'stroke="{JOINT_COLORS[j % len(JOINT_COLORS)]}" stroke-width="1.1" '
+                'stroke-dasharray="6 3"/>'
+            )
+    for i, r in enumerate(runs):
+        if r.tau is None:
+            continue
+        g = [f'<g class="ft-run-only" data-run="{i}">']
+        for j, name in enumerate(r.joint_names):
+            style = (f'stroke="{JOINT_COLORS[j % len(JOINT_COLORS)]}" stroke-width="1.4" '
+                     f'data-joint="{html_lib.escape(name)}"')  # fmt: skip
+            g.append(_polyline(ax, r.t, r.tau[:, j], style))
+        body.append("".join(g) + "</g>")
+    head, close = _frame(ax, "(d) joint torques, dashed: effort limits", "N·m", "torques")
+    return head + "".join(body) + _locks(ax, runs) + close
+
+
 def _legend(runs: list[ChartRun]) -> str:
     esc = html_lib.escape
     items = []
@@ -308,6 +347,8 @@ def plots_html(runs: list[ChartRun], warnings: list[list[str]] | None = None) ->
         panels.append(jump_panel(runs))
         panels.append(rcn_panel(runs))
     panels.append(rates_panel(runs))
+    if any(r.tau is not None for r in runs):
+        panels.append(torque_panel(runs))
     notes = []
     for i, items in enumerate(warnings or []):
         for w in items:
