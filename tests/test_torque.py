@@ -118,3 +118,12 @@ def test_replay_page_plots_the_torques_with_their_effort_limits(start, tmp_path)
     text = (tmp_path / "replay.html").read_text(encoding="utf-8")
     assert "(d) joint torques, dashed: effort limits" in text
     assert text.count('class="ft-effort"') == 2 * arm.n
+
+
+def test_docs_dynamics_example_runs():
+    """docs/dynamics.md's Python example runs as written."""
+    from pathlib import Path
+
+    text = (Path(__file__).resolve().parents[1] / "docs" / "dynamics.md").read_text()
+    block = text.split("```python\n", 1)[1].split("```", 1)[0]
+    exec(compile(block, "docs/dynamics.md", "exec"), {})  # noqa: S102 - our own documentation
