@@ -97,6 +97,10 @@ def test_dynamics_options_are_checked():
         ft.simulate(arm, CASE.path(), q0=np.zeros(3), dynamics="yes")
     with pytest.raises(InvalidInput, match="brake torque"):
         DynamicsModel(brake_torque=-1.0)
+    with pytest.raises(InvalidInput, match="kd must be finite and >= 0"):
+        DynamicsModel(kd=-1.0)
+    with pytest.raises(InvalidInput, match="max_substep must be finite and > 0"):
+        DynamicsModel(max_substep=0.0)
 
 
 def test_inertia_weighted_jvja_runs_with_dynamics(start):

@@ -55,10 +55,10 @@ class DynamicsModel:
     gravity: bool = True
 
     def __post_init__(self) -> None:
-        for name in ("kp", "kd", "max_substep"):
-            v = getattr(self, name)
-            if not (np.isfinite(v) and v >= 0) or (name == "max_substep" and v <= 0):
-                raise InvalidInput(f"dynamics {name} must be finite and > 0, got {v}")
+        for name, low in (("kp", ">= 0"), ("kd", ">= 0"), ("max_substep", "> 0")):
+            v = float(getattr(self, name))
+            if not (np.isfinite(v) and (v > 0 or (v == 0 and low == ">= 0"))):
+                raise InvalidInput(f"dynamics {name} must be finite and {low}, got {v}")
         object.__setattr__(self, "brake_torque", check_brake_torque(self.brake_torque))
 
     def describe(self) -> str:
