@@ -24,6 +24,7 @@ from fault_tolerance.analysis import batch  # noqa: E402
 from fault_tolerance.control.controller import Controller  # noqa: E402
 from fault_tolerance.errors import (  # noqa: E402
     AmbiguousFrame,
+    DynamicsUnavailable,
     FaultToleranceError,
     FolderLocked,
     FrameNotFound,
@@ -128,6 +129,7 @@ __all__ = [
     "batch",
     # errors
     "AmbiguousFrame",
+    "DynamicsUnavailable",
     "FaultToleranceError",
     "FolderLocked",
     "FrameNotFound",

@@ -176,7 +176,9 @@ def test_bad_resolver_inputs_are_refused(planar_3r):
     """Unknown algorithm or response, non-finite J or ẋ, mismatched shapes: InvalidInput (also a
     ValueError) listing what is allowed."""
     J = planar_3r.arm.jacobian(Q)
-    with pytest.raises(ft.InvalidInput, match=r"'jvjaa' is not one of \['jvja', 'lnva', 'mda'\]"):
+    with pytest.raises(
+        ft.InvalidInput, match=r"'jvjaa' is not one of \['jvja', 'jvja_inertia', 'lnva', 'mda'\]"
+    ):
         ft.resolve("jvjaa", J, np.array([0.1, 0.0]))
     with pytest.raises(ft.InvalidInput, match="'both' is not one of"):
         ft.resolve("jvja", J, np.array([0.1, 0.0]), response="both")
