@@ -16,7 +16,7 @@ import fault_tolerance as ft
 from fault_tolerance.bench import command as bench_command
 from fault_tolerance.bench import report as bench_report
 from fault_tolerance.bench import routes as bench_routes
-from fault_tolerance.resolution.resolvers import jvja_explicit
+from fault_tolerance.resolution.jvja import jvja_explicit
 
 ROOT = __import__("pathlib").Path(__file__).resolve().parents[1]
 TINY = ["--robots", "planar_3r", "--steps", "4", "--warmup", "1", "--batch-configurations", "200"]

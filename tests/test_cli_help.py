@@ -7,7 +7,7 @@ import argparse
 import pytest
 
 from fault_tolerance.cli import build_parser
-from fault_tolerance.resolution.resolvers import MDA_GAIN
+from fault_tolerance.resolution.mda import MDA_GAIN
 
 
 def options(parser, path=()):

@@ -216,7 +216,7 @@ def reference_rows(case: Case) -> dict[str, Row]:
     """The plain planner (``ft.resolve``, ``ft.rcn``), the explicit route and quadprog."""
     from fault_tolerance.resolution.api import resolve
     from fault_tolerance.resolution.indices import rcn
-    from fault_tolerance.resolution.resolvers import jvja_explicit
+    from fault_tolerance.resolution.jvja import jvja_explicit
 
     arm, ctrl, sc, qx = case.arm, case.ctrl, case.sc, case.qx
     rows: dict[str, Row] = {

@@ -208,15 +208,57 @@ def add_path_options(p: argparse.ArgumentParser) -> None:
         choices=["least_norm", "continuation"],
         help="post-failure response of the reduced robot (docs/MATH.md, G3)",
     )
-    from fault_tolerance.resolution.resolvers import MDA_GAIN
+    from fault_tolerance.resolution.mda import MDA_GAIN
 
     g.add_argument("--gain", type=float, default=None, help=f"MDA gain α (default: {MDA_GAIN:g})")
+    g.add_argument(
+        "--option",
+        action="append",
+        default=[],
+        metavar="NAME=VALUE",
+        help="an option of the resolver (its options dataclass; docs/architecture.md, 'Adding a "
+        "resolver'), e.g. --option damping=0.05; repeat for several. Each algorithm gets the "
+        "options it takes; one that none of them takes is refused",
+    )
     g.add_argument(
         "--no-limits",
         action="store_true",
         help="ignore the joint position and velocity limits (the paper's formulation); by "
         "default every step stays inside them (docs/MATH.md, Joint limits)",
     )
+
+
+def _option_value(text: str):
+    """``--option`` values: a number, true/false, none, or the text itself."""
+    low = text.strip().lower()
+    if low in ("true", "false"):
+        return low == "true"
+    if low == "none":
+        return None
+    try:
+        return int(text) if low.lstrip("+-").isdigit() else float(text)
+    except ValueError:
+        return text.strip()
+
+
+def resolver_options(args, algorithms) -> dict:
+    """``--option NAME=VALUE`` as a dict; an option none of ``algorithms`` takes is refused."""
+    from fault_tolerance.simulation.simulate import option_names
+
+    given: dict = {}
+    for item in getattr(args, "option", None) or []:
+        name, eq, value = item.partition("=")
+        if not eq or not name.strip():
+            raise InvalidInput(f"--option {item!r}: write NAME=VALUE, e.g. --option gain=0.02")
+        given[name.strip()] = _option_value(value)
+    taken = {k for a in algorithms for k in option_names(a)}
+    unknown = sorted(set(given) - taken)
+    if unknown:
+        allowed = {a: list(option_names(a)) for a in algorithms}
+        raise InvalidInput(
+            f"--option {unknown}: not an option of {list(algorithms)}; theirs: {allowed}"
+        )
+    return given
 
 
 def limits_line(run_) -> str:

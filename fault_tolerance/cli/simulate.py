@@ -17,6 +17,7 @@ from fault_tolerance.cli.common import (
     load_robot,
     names,
     report_warnings,
+    resolver_options,
 )
 from fault_tolerance.cli.start_options import choose_start
 from fault_tolerance.errors import InvalidInput
@@ -36,14 +37,18 @@ EXAMPLE = (
 
 def add_parser(sub) -> argparse.ArgumentParser:
     """The ``simulate`` sub-command."""
+    from fault_tolerance.resolution.resolvers import BUILTINS
+    from fault_tolerance.simulation.simulate import algorithms
+
     s = sub.add_parser(NAME, help=HELP, epilog=epilog(EXAMPLE), formatter_class=FORMATTER)
     add_robot_options(s)
     add_path_options(s)
     s.add_argument(
         "--algorithms",
-        default="lnva,jvja,mda",
-        help="comma-separated among lnva,jvja,mda,global (global: the whole-path plan, "
-        "docs/MATH.md W1-W5; with --x0 and no --q0 it chooses its start on the self-motion of x0)",
+        default=",".join(e.name for e in BUILTINS),
+        help=f"comma-separated among {','.join(algorithms())} (registered resolvers, then path "
+        "planners; global: the whole-path plan, docs/MATH.md W1-W5; with --x0 and no --q0 it "
+        "chooses its start on the self-motion of x0)",
     )
     add_plan_options(s)
     s.add_argument(
@@ -77,13 +82,30 @@ def add_plan_options(s) -> None:
 
 
 def _algorithms(args) -> list[str]:
-    from fault_tolerance.simulation.setup import ALGORITHMS
+    from fault_tolerance.simulation.simulate import algorithms
 
     algs = names(args.algorithms) or []
-    bad = [a for a in algs if a not in ALGORITHMS]
+    bad = [a for a in algs if a not in algorithms()]
     if bad or not algs:
-        raise InvalidInput(f"--algorithms {args.algorithms!r}: choose among {list(ALGORITHMS)}")
+        raise InvalidInput(f"--algorithms {args.algorithms!r}: choose among {list(algorithms())}")
     return algs
+
+
+def _sim_options(args, algs: list[str]) -> tuple[dict, dict]:
+    """The runs' shared options of :func:`simulate`, and ``--option`` (each algorithm its own)."""
+    from fault_tolerance.resolution.mda import MDA_GAIN
+
+    resolver = resolver_options(args, algs)  # an option none of algs takes is refused
+    options = {
+        "duration": args.duration,
+        "feedback_gain": args.feedback or 0.0,
+        "response": args.response,
+        "gain": MDA_GAIN if args.gain is None else args.gain,
+        "limits": not args.no_limits,  # the default start's checks run the same formulation
+    }
+    if resolver:
+        options["options"] = resolver
+    return options, resolver
 
 
 def _global_start(alg: str, args) -> dict:
@@ -112,24 +134,19 @@ def run(args) -> int:
 
 
 def _run(args, out: Path | None) -> int:
-    from fault_tolerance.resolution.resolvers import MDA_GAIN
+    from fault_tolerance.resolution.registry import names as registered
     from fault_tolerance.resolution.scenarios import scenarios
     from fault_tolerance.simulation.diagnostics import check_run as check
-    from fault_tolerance.simulation.simulate import simulate
+    from fault_tolerance.simulation.setup import TRACKED_PAST_PLAN
+    from fault_tolerance.simulation.simulate import options_for, simulate
     from fault_tolerance.storage.atomic import output_folder
     from fault_tolerance.storage.budget import check_run
 
     arm = load_robot(args)
     algs = _algorithms(args)
-    options = {
-        "duration": args.duration,
-        "feedback_gain": args.feedback or 0.0,
-        "response": args.response,
-        "gain": MDA_GAIN if args.gain is None else args.gain,
-        "limits": not args.no_limits,  # the default start's checks run the same formulation
-    }
+    options, resolver = _sim_options(args, algs)
     out = output_folder(out) if out else None
-    stepwise = [a for a in algs if a != "global"] or ["jvja"]  # the start is checked with these
+    stepwise = [a for a in algs if a in registered()] or [TRACKED_PAST_PLAN]  # checks the start
     q0, path, lockable, choice = choose_start(args, arm, stepwise, **options)
     checked = {} if choice is None else choice.runs  # the default start's checks ran these
     duration = args.duration or path.duration
@@ -154,7 +171,7 @@ def _run(args, out: Path | None) -> int:
                     lockable=lockable,
                     dt=args.dt,
                     progress=progress,
-                    **options,
+                    **{**options, "options": options_for(alg, resolver)},
                 )
             found[alg] = check(runs[alg], arm)
             if out:  # the run, its plot and page appear together, whole

@@ -19,6 +19,7 @@ from fault_tolerance.control.fast.box_check import box_status_numpy, compiled_bo
 from fault_tolerance.errors import InvalidInput
 from fault_tolerance.model.joint_limits import NO_LIMIT, velocity_limits
 from fault_tolerance.resolution.bounded import resolve_bounded
+from fault_tolerance.resolution.registry import KERNEL_JVJA, KERNEL_MDA, get
 
 
 def bounded_step(ctrl, name: str, inner: Callable, horizon: float) -> Callable:
@@ -56,17 +57,18 @@ def _reference_step(ctrl, name: str, inner: Callable, lim, prm) -> Callable:
     buf = np.empty((4, n))  # lo, hi, scratch (n), scratch (m <= n)
     lo, hi = buf[0], buf[1]
     ws = ctrl._jvja_ws  # [P, Q, c] of the last JVJA fast step, N = I - PᵀQ (set by the kernels)
-    jv = name == "jvja" and ctrl._singletons
+    mode = get(name).compiled  # the built-in kernel this step checks
+    jv = mode == KERNEL_JVJA and ctrl._singletons
     cols = ctrl.scenarios.columns if ctrl._singletons else np.zeros(0, dtype=np.int64)
     check = compiled_box_status() if ctrl.backend == "numba" else box_status_numpy
     dummy = np.zeros((ctrl.m, n)), np.zeros((ctrl.m, n)), np.zeros(n)
     sc = ctrl.scenarios
-    general = name == "jvja" and not ctrl._singletons
+    general = mode == KERNEL_JVJA and not ctrl._singletons
 
     def slow(q, xdot, out):
         J = ctrl.jacobian(q)
         opts = {"tolerate": ctrl.tolerate}
-        if name == "mda":
+        if mode == KERNEL_MDA:
             opts.update(dJ=ctrl.jacobian_derivatives(q), gain=ctrl.gain, max_step=ctrl.max_step)
         box_status_numpy(q, lim, prm, buf, out, *dummy, cols, False)  # the box (L1) at q
         box = (lo.copy(), hi.copy())

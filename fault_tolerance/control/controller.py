@@ -61,18 +61,18 @@ from fault_tolerance.control.indices import ControllerIndices
 from fault_tolerance.errors import InvalidInput
 from fault_tolerance.model.arm import Arm
 from fault_tolerance.numerics.linalg import PIVOT_EPS, PIVOT_TOL
-from fault_tolerance.resolution import resolvers as planner
+from fault_tolerance.resolution import jvja as jvja_module
+from fault_tolerance.resolution import mda as mda_module
+from fault_tolerance.resolution.lnva import lnva as lnva_rates
+from fault_tolerance.resolution.registry import KERNEL_JVJA, KERNEL_LNVA, KERNEL_MDA, get
 from fault_tolerance.resolution.scenarios import Scenarios, scenarios
 
 __all__ = [
     "BACKENDS",
     "Controller",
-    "METHODS",
     "available_backends",
 ]
 
-#: Methods a :class:`Controller` steps with.
-METHODS = ("lnva", "jvja", "mda")
 #: Backends of the LNVA / JVJA steps, fastest first.
 BACKENDS = ("numba", "lapack", "numpy")
 
@@ -125,10 +125,17 @@ class Controller(ControllerIndices):
             ``"all"`` (every joint), column indices or joint names, tuples for multi-joint
             scenarios (``|S| <= r``), or a :class:`~fault_tolerance.resolution.scenarios.Scenarios`. The
             catalog's choice for an arm is ``arm.default_lockable``.
-        method: What :attr:`step` computes: ``"jvja"`` (default), ``"lnva"`` or ``"mda"``.
+        method: What :attr:`step` computes: a registered resolver
+            (:func:`fault_tolerance.resolution.registry.names`), ``"jvja"`` by default. The
+            built-ins step with their compiled kernels; a resolver registered without
+            ``compiled`` steps with its reference rates (its ``bounded`` variant under limits),
+            through :func:`fault_tolerance.control.generic_step.generic_step`.
+        options: The resolver's own options by name (its options dataclass); ``gain`` and
+            ``max_step`` below fill options of those names unless given here. An option the
+            resolver does not take raises :class:`~fault_tolerance.errors.InvalidInput`.
         weights: One positive weight per scenario (default 1).
-        gain: MDA gain α of ``q̇ = J⁺ẋ - α N ∇K`` (default ``planner.MDA_GAIN``).
-        max_step: Cap of the norm of MDA's null-space step [rad/s] (``planner.MDA_MAX_STEP``).
+        gain: MDA gain α of ``q̇ = J⁺ẋ - α N ∇K`` (default ``mda.MDA_GAIN``).
+        max_step: Cap of the norm of MDA's null-space step [rad/s] (``mda.MDA_MAX_STEP``).
         tolerate: As ``planner.jvja(tolerate=True)``: pivots of ``N[S, S]`` below
             ``linalg.PIVOT_EPS`` are damped (by the planner) instead of raising
             :class:`~fault_tolerance.errors.IntolerableFailure`; for loops that may cross a
@@ -170,15 +177,21 @@ class Controller(ControllerIndices):
         *,
         method: str = "jvja",
         weights: Sequence[float] | None = None,
-        gain: float = planner.MDA_GAIN,
-        max_step: float = planner.MDA_MAX_STEP,
+        gain: float = mda_module.MDA_GAIN,
+        max_step: float = mda_module.MDA_MAX_STEP,
         tolerate: bool = False,
         backend: str = "auto",
         limits: bool = True,
         horizon: float | None = None,
+        options: dict | None = None,
     ) -> None:
-        if method not in METHODS:
-            raise InvalidInput(f"method '{method}' is not one of {list(METHODS)}")
+        entry = get(method)
+        if limits and entry.bounded is None:
+            raise InvalidInput(
+                f"resolver '{method}' has no bounded variant: it cannot honour the joint limits; "
+                "build the Controller with limits=False"
+            )
+        self.options = entry.options_with(options, {"gain": gain, "max_step": max_step})
         gain = float(gain)
         if not np.isfinite(gain) or gain < 0:
             raise InvalidInput(f"mda gain must be finite and >= 0, got {gain}")
@@ -218,12 +231,23 @@ class Controller(ControllerIndices):
         self._box_ws = None  # the compiled bounded steps' workspace (boxfast)
         self.bounded_steps = 0
         self.bounded_reference_steps = 0
+        self._build_steps(backend, horizon)
+        compiled = {KERNEL_LNVA: self.lnva, KERNEL_JVJA: self.jvja, KERNEL_MDA: self.mda}
+        if entry.compiled in compiled and not options:
+            self.step = compiled[entry.compiled]
+        else:  # its reference rates (a new resolver, or a built-in with options of its own)
+            from fault_tolerance.control.generic_step import generic_step
+
+            self.step = generic_step(self, entry, self.options)
+
+    def _build_steps(self, backend: str, horizon: float | None) -> None:
+        """The built-ins' steps :attr:`lnva`, :attr:`jvja`, :attr:`mda` on ``backend``'s kernels."""
         if backend == "numba":
             from fault_tolerance.control.fast.step import compiled_step
 
-            self.lnva = compiled_step(self, 0)
+            self.lnva = compiled_step(self, KERNEL_LNVA)
             if self._singletons:
-                self.jvja = compiled_step(self, 1)
+                self.jvja = compiled_step(self, KERNEL_JVJA)
             else:  # multi-joint scenarios (G1), compiled too
                 from fault_tolerance.control.fast.multi_step import compiled_multi_step
 
@@ -240,7 +264,6 @@ class Controller(ControllerIndices):
             self.lnva = bounded_step(self, "lnva", self.lnva, self.horizon)
             self.jvja = bounded_step(self, "jvja", self.jvja, self.horizon)
             self.mda = bounded_step(self, "mda", self.mda, self.horizon)
-        self.step = {"lnva": self.lnva, "jvja": self.jvja, "mda": self.mda}[method]
 
     # -- helpers ----------------------------------------------------------------------------
     @property
@@ -314,11 +337,11 @@ class Controller(ControllerIndices):
             raise InvalidInput("q and xdot must be finite")
         self.fallbacks += 1
         if name == "lnva":
-            qd = planner.lnva(J, xdot)
+            qd = lnva_rates(J, xdot)
         elif name == "jvja":
-            qd = planner.jvja(J, xdot, self.scenarios, tolerate=self.tolerate)
+            qd = jvja_module.jvja(J, xdot, self.scenarios, tolerate=self.tolerate)
         else:
-            qd = planner.mda(
+            qd = mda_module.mda(
                 J,
                 xdot,
                 self.scenarios,

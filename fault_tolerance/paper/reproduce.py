@@ -30,7 +30,7 @@ from fault_tolerance.paper.start_sensitivity import (
     SENSITIVITY_STARTS,
     start_sensitivity,
 )
-from fault_tolerance.resolution.resolvers import MDA_GAIN
+from fault_tolerance.resolution.mda import MDA_GAIN
 from fault_tolerance.simulation.run import Run
 from fault_tolerance.storage.atomic import output_folder, write_atomic
 from fault_tolerance.storage.folder_io import check_path_names

@@ -180,18 +180,23 @@ def _seeds(arm: Arm, sc: Scenarios, rng, max_seeds: int):
         )
 
 
-#: Order in which a candidate's runs are checked: cheap resolvers first, so a bad start fails fast.
-_CHEAP_FIRST = ("lnva", "jvja", "mda")
-
-
 def _check(arm, q0, path, algorithms, sc, sim_options):
-    """Simulate ``path`` from ``q0``: ``(problem, caveat, largest k_S, runs)``."""
-    from fault_tolerance.simulation.simulate import simulate
+    """Simulate ``path`` from ``q0``: ``(problem, caveat, largest k_S, runs)``.
 
-    order = sorted(algorithms, key=lambda a: _CHEAP_FIRST.index(a) if a in _CHEAP_FIRST else 9)
+    The runs go in the registry's order (the built-ins first, cheapest first: LNVA, JVJA, MDA),
+    so a bad start fails fast; ``sim_options["options"]`` gives each resolver those it takes.
+    """
+    from fault_tolerance.resolution.registry import names
+    from fault_tolerance.simulation.simulate import options_for, simulate
+
+    known = names()
+    order = sorted(algorithms, key=lambda a: known.index(a) if a in known else len(known))
     worst, caveat, runs = 0.0, None, {}
     for alg in order:
-        run = simulate(arm, path, alg, q0=q0, lockable=sc, **sim_options)
+        own = dict(sim_options)
+        if "options" in own:
+            own["options"] = options_for(alg, own["options"])
+        run = simulate(arm, path, alg, q0=q0, lockable=sc, **own)
         problem = run_problem(arm, run)
         if problem:
             return f"{alg}: {problem}", None, worst, {}

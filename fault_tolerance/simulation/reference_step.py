@@ -32,7 +32,7 @@ from fault_tolerance.simulation.run import (
     FLAG_STEP_LIMITED,
     FLAG_TASK_SCALED,
 )
-from fault_tolerance.simulation.setup import _Setup, _State
+from fault_tolerance.simulation.setup import TRACKED_PAST_PLAN, _Setup, _State
 
 #: Reduced robots whose smallest N[S, S] pivot falls below this are flagged near-intolerable; the
 #: pivots are damped there (``linalg.PIVOT_EPS``), so JVJA's rates and λ stay finite.
@@ -57,8 +57,7 @@ def _step(s: _Setup, state: _State, k: int, rec: dict, x_des, xd_des) -> None:
             if not state.locked:
                 flag |= _box_flags(sol.active, sol.scale)
     elif not state.locked or state.lock_jump is None:
-        opts = dict(response=s.response, arm=arm, q=q, gain=s.gain, tolerate=True,
-                    max_step=s.max_step, proj=proj)  # fmt: skip
+        opts = dict(s.options or {}, arm=arm, q=q, tolerate=True, proj=proj)
         if box is None:
             planned = resolve(s.algorithm, J, xd_cmd, s.sc, **opts)
         else:
@@ -71,10 +70,8 @@ def _step(s: _Setup, state: _State, k: int, rec: dict, x_des, xd_des) -> None:
         flag = lflag
     else:
         qd_cmd = planned
-        if (
-            s.algorithm == "mda"
-            and np.linalg.norm(qd_cmd - proj.Jpinv @ xd_cmd) >= 0.999 * s.max_step
-        ):
+        cap = (s.options or {}).get("max_step")  # a resolver whose null-space step is capped
+        if cap is not None and np.linalg.norm(qd_cmd - proj.Jpinv @ xd_cmd) >= 0.999 * cap:
             flag |= FLAG_STEP_LIMITED
     if np.any(np.abs(qd_cmd) > s.vmax):
         flag |= FLAG_OVER_SPEED
@@ -176,4 +173,4 @@ def _tracking_rates(s: _Setup, k: int, q, J, xd_cmd, proj) -> np.ndarray:
     """``J⁺ẋ_cmd + N (q_ref[k+1] − q)/dt``; past the reference's end, JVJA's rates."""
     if k + 1 < len(s.reference):
         return proj.Jpinv @ xd_cmd + proj.N @ ((s.reference[k + 1] - q) / s.dt)
-    return resolve("jvja", J, xd_cmd, s.sc, tolerate=True, proj=proj)
+    return resolve(TRACKED_PAST_PLAN, J, xd_cmd, s.sc, tolerate=True, proj=proj)

@@ -23,7 +23,8 @@ from fault_tolerance.model.arm_record import arm_record
 from fault_tolerance.model.joint_limits import NO_LIMIT, wrap_into_limits
 from fault_tolerance.model.task_errors import angular_mask, error_norms
 from fault_tolerance.numerics.linalg import projection
-from fault_tolerance.resolution.resolvers import MDA_GAIN
+from fault_tolerance.resolution.mda import MDA_GAIN
+from fault_tolerance.resolution.registry import get, names
 from fault_tolerance.simulation.paths import TaskPath
 from fault_tolerance.simulation.reference_step import _step
 from fault_tolerance.simulation.run import (
@@ -32,6 +33,7 @@ from fault_tolerance.simulation.run import (
 from fault_tolerance.simulation.setup import (
     GLOBAL,
     HISTORIES,
+    TRACKED_PAST_PLAN,
     ServoModel,
     _allocate,
     _maybe_lock,
@@ -47,6 +49,28 @@ ENGINES = ("auto", "fast", "reference")
 #: returning a :class:`Run`. The planning layer registers ``"global"``
 #: (:mod:`fault_tolerance.planning.wholepath.run`), which sits above this one.
 PATH_PLANNERS: dict[str, Callable[..., Run]] = {}
+
+
+def algorithms() -> tuple[str, ...]:
+    """Every algorithm :func:`simulate` runs: the registered resolvers, then the path planners."""
+    return (*names(), *PATH_PLANNERS)
+
+
+def option_names(algorithm: str) -> tuple[str, ...]:
+    """The ``options=`` :func:`simulate` takes for ``algorithm`` (a path planner: none)."""
+    if algorithm in PATH_PLANNERS:
+        return ()
+    if algorithm not in names():
+        raise InvalidInput(f"algorithm {algorithm!r} is not one of {list(algorithms())}")
+    return get(algorithm).option_names
+
+
+def options_for(algorithm: str, options: dict | None) -> dict | None:
+    """The part of ``options`` that ``algorithm`` takes (several algorithms share one set)."""
+    if not options:
+        return None
+    own = option_names(algorithm)
+    return {k: v for k, v in options.items() if k in own} or None
 
 
 def simulate(
@@ -70,14 +94,15 @@ def simulate(
     plan_options: dict | None = None,
     limits: bool = True,
     horizon: float | None = None,
+    options: dict | None = None,
 ) -> Run:
     """Integrate ``algorithm`` along ``path`` from ``q0``; optionally lock a joint on the way.
 
     Args:
         arm: The arm.
         path: Task path with the arm's ``m`` coordinates.
-        algorithm: ``"lnva"``, ``"jvja"``, ``"mda"`` or ``"global"`` (the whole-path plan of
-            :mod:`fault_tolerance.planning.wholepath`, tracked in the null space, MATH.md (W3)).
+        algorithm: One of :func:`algorithms`: a registered resolver (``"lnva"``, ``"jvja"``,
+            ``"mda"``, ...) or ``"global"`` (the whole-path plan, tracked in the null space, (W3)).
         q0: Initial configuration, shape (n,). Required, except for ``"global"``: without it the
             global plan chooses its start on the self-motion of the path's first point.
         lockable: Joints that may lock (default: the arm's default lockable joints).
@@ -102,6 +127,8 @@ def simulate(
             inside it and scale the task out of reach (docs/MATH.md "Joint limits"); ``q0`` must
             be inside the limits. ``False``: the paper's unconstrained formulation.
         horizon: Horizon of the rate box [s] (default ``bounded.RATE_HORIZON``; at least ``dt``).
+        options: The resolver's own options by name (its options dataclass; ``response`` and
+            ``gain`` fill those of the same name unless given here); an unknown one raises.
 
     Example:
         >>> import numpy as np, fault_tolerance as ft
@@ -113,29 +140,36 @@ def simulate(
         >>> bool(np.allclose(run.q, ref.q, rtol=0, atol=1e-12))
         True
     """
-    _check_call(engine, algorithm, plan_options, q0)
+    _check_call(engine, algorithm, plan_options, q0, options)
     sim = dict(
         lockable=lockable, weights=weights, response=response, dt=dt, duration=duration,
         feedback_gain=feedback_gain, gain=gain, lock_joint=lock_joint, lock_time=lock_time,
         servo=servo, limits=limits, horizon=horizon,
     )  # fmt: skip
-    if algorithm == GLOBAL:
-        if GLOBAL not in PATH_PLANNERS:
-            raise InvalidInput(
-                f"algorithm '{GLOBAL}' needs the whole-path planner: import fault_tolerance"
-            )
-        return PATH_PLANNERS[GLOBAL](
+    if algorithm in PATH_PLANNERS:
+        return PATH_PLANNERS[algorithm](
             arm, path, q0=q0, plan_options=plan_options, progress=progress, loop=_simulate, **sim
         )
-    return _simulate(arm, path, algorithm, q0=q0, progress=progress, engine=engine, **sim)
+    sim.update(progress=progress, engine=engine, options=options)
+    return _simulate(arm, path, algorithm, q0=q0, **sim)
 
 
-def _check_call(engine: str, algorithm: str, plan_options, q0) -> None:
+def _check_call(engine: str, algorithm: str, plan_options, q0, options=None) -> None:
     """The options of :func:`simulate` that decide the route, checked before any work."""
     if engine not in ENGINES:
         raise InvalidInput(f"engine {engine!r} is not one of {list(ENGINES)}")
-    if algorithm == GLOBAL:
+    if algorithm == GLOBAL and GLOBAL not in PATH_PLANNERS:
+        raise InvalidInput(
+            f"algorithm '{GLOBAL}' needs the whole-path planner: import fault_tolerance"
+        )
+    if algorithm in PATH_PLANNERS:
+        if options:
+            raise InvalidInput(
+                f"options are a step resolver's; '{algorithm}' takes plan_options instead"
+            )
         return
+    if algorithm not in names():
+        raise InvalidInput(f"algorithm {algorithm!r} is not one of {list(algorithms())}")
     if plan_options is not None:
         raise InvalidInput(f"plan_options are options of algorithm 'global', not of '{algorithm}'")
     if q0 is None:
@@ -165,12 +199,13 @@ def _simulate(
     engine: str = "auto",
     limits: bool = True,
     horizon: float | None = None,
+    options: dict | None = None,
 ) -> Run:
     """The loop of :func:`simulate`; with ``reference`` (the global plan) the rates track it."""
     setup = _setup(
-        arm, path, "jvja" if reference is not None else algorithm, q0, lockable, weights,
-        response, dt, duration, feedback_gain, gain, lock_joint, lock_time, servo, limits,
-        horizon,
+        arm, path, TRACKED_PAST_PLAN if reference is not None else algorithm, q0, lockable,
+        weights, response, dt, duration, feedback_gain, gain, lock_joint, lock_time, servo,
+        limits, horizon, options,
     )  # fmt: skip
     if reference is not None:
         setup = replace(setup, algorithm=algorithm, reference=np.asarray(reference, dtype=float))
@@ -229,12 +264,14 @@ def _finish(s: _Setup, state: _State, rec: dict, q0) -> Run:
         "dt": s.dt,
         "duration": s.duration,
         "feedback_gain": s.feedback_gain,
-        "mda_gain": s.gain if s.algorithm == "mda" else None,
+        "mda_gain": s.gain if "gain" in (s.options or {}) else None,
         "q0": np.asarray(q0, dtype=float).tolist(),
         "path": s.path.spec(),
         "servo": s.servo.describe() if servo_used else "perfect rate tracking",
         "limits": _limits_meta(s),
     }
+    if s.user_options:  # a resolver's own options, as given (absent: its defaults)
+        meta["options"] = dict(s.user_options)
     if s.lock_col is not None:
         meta["lock"] = {
             "joint": arm.joint_names[s.lock_col],

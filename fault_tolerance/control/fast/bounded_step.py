@@ -17,10 +17,10 @@ import numpy as np
 import pinocchio as pin
 
 from fault_tolerance.errors import FaultToleranceError
+from fault_tolerance.resolution.registry import KERNEL_JVJA, KERNEL_MDA, get
 
 _LWA = pin.LOCAL_WORLD_ALIGNED
 _F64 = np.dtype(np.float64)
-_MODES = {"lnva": 0, "jvja": 1, "mda": 2}
 _ERRORS = (ValueError, TypeError, RuntimeError, AttributeError, IndexError)
 
 
@@ -59,7 +59,8 @@ def compiled_bounded_step(ctrl, name: str, inner: Callable, reference: Callable,
     views["lim"][:] = lim
     views["prm"][:] = prm
     Iw = I0.copy()  # its own mode; the int scratch of the copy is its own too
-    Iw[4] = JVJA_MULTI if (name == "jvja" and not ctrl._singletons) else _MODES[name]
+    mode = get(name).compiled  # the kernel mode of this built-in
+    Iw[4] = JVJA_MULTI if (mode == KERNEL_JVJA and not ctrl._singletons) else mode
     n, m = ctrl.n, ctrl.m
     model, data, fid, rows = ctrl.model, ctrl.data, ctrl.frame_id, ctrl._rows
     cfj, empty, ndarray = pin.computeFrameJacobian, np.empty, np.ndarray
@@ -82,7 +83,7 @@ def compiled_bounded_step(ctrl, name: str, inner: Callable, reference: Callable,
             pass
         return reference(q, xdot, out)  # converts, or says what is wrong
 
-    if name == "mda":
+    if mode == KERNEL_MDA:
         return _mda_step(ctrl, inner, reference, F, Iw)
 
     def step(q: np.ndarray, xdot: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:

@@ -24,6 +24,7 @@ from fault_tolerance.numerics.fast import sample_dense as sd
 from fault_tolerance.numerics.linalg import PIVOT_EPS
 from fault_tolerance.resolution.bounded import SCALE_TOL, bounded_least_norm, reduced_bounded
 from fault_tolerance.resolution.indices import RCN_MAX
+from fault_tolerance.resolution.registry import get
 from fault_tolerance.simulation.fast import sample as sk
 from fault_tolerance.simulation.fast.sample_bounded import (
     DECLINED,
@@ -36,8 +37,8 @@ _TASK_SCALED = 64  # run.FLAG_TASK_SCALED
 _LWA = pin.LOCAL_WORLD_ALIGNED
 _WORLD = pin.WORLD
 
-#: Algorithms of :func:`~fault_tolerance.simulation.simulate.simulate` the kernel computes itself.
-METHODS = {"lnva": sk.LNVA, "jvja": sk.JVJA, "mda": sk.MDA}
+#: Kernel modes (a registry entry's ``compiled``) the sample computes itself.
+MODES = (sk.LNVA, sk.JVJA, sk.MDA)
 
 
 def available() -> bool:
@@ -55,13 +56,14 @@ def covers(sc, algorithm: str, response: str, limits: bool = False) -> str | Non
         return "numba is not installed"
     if not sc.singletons:
         return "multi-joint scenarios (the reference handles them)"
-    if algorithm not in METHODS:
-        return f"algorithm {algorithm!r}"
+    mode = get(algorithm).compiled
+    if mode not in MODES:
+        return f"algorithm {algorithm!r} (no compiled kernel: its reference rates run)"
     with np.errstate(over="ignore"):
         overflow = not np.isfinite(sc.weights.sum())
     if overflow:
         return "weights whose sum overflows (the reference rescales them)"
-    if limits and algorithm == "jvja" and response == "continuation":
+    if limits and mode == sk.JVJA and response == "continuation":
         return "JVJA's continuation response under joint limits (a bounded solve at every sample)"
     return None
 
@@ -102,9 +104,9 @@ class Sampler:
         self.full_pose = list(arm.rows) == [0, 1, 2, 3, 4, 5]
         self.trans_rows = np.asarray(arm.rows)
         self.arm, self.s, self.kp = arm, s, float(s.feedback_gain)
-        self.method = METHODS[s.algorithm]
+        self.method = get(s.algorithm).compiled
         self.continuation = s.response == "continuation"
-        if self.continuation and s.algorithm == "jvja":
+        if self.continuation and self.method == sk.JVJA:
             self.method = sk.GIVEN  # (G3) rates from the planner, the rest compiled
         self.cols = np.ascontiguousarray(sc.columns, dtype=np.int64)
         self.w = np.ascontiguousarray(sc.weights, dtype=float)
@@ -131,7 +133,7 @@ class Sampler:
         self.boxed = None  # the Controller's bounded step, built at the first sample that needs it
         self.reduced_ws = None  # the compiled reduced robots' workspace (boxsolve), built likewise
         self.bounded_tables = None  # the compiled bounded sample's tables
-        if self.ONE_CALL and s.limits and s.algorithm in ("jvja", "lnva"):
+        if self.ONE_CALL and s.limits and self.method in (sk.JVJA, sk.LNVA):
             self._compiled_tables()
         #: Samples handed to the reference code (not certified, the lock, a bound met after it),
         #: and samples that met a bound, solved by the bounded resolvers here.
@@ -188,7 +190,7 @@ class Sampler:
         xd_cmd = xd_des + self.kp * err if self.kp else xd_des
         method, qd_in = (sk.LOCKED if state.locked else self.method), self.zeros
         if method == sk.GIVEN:
-            from fault_tolerance.resolution.resolvers import jvja
+            from fault_tolerance.resolution.jvja import jvja
 
             qd_in = jvja(J, xd_cmd, self.s.sc, response="continuation", tolerate=True)
         if self.bounded_tables:  # the bounded sample in the same compiled call
@@ -274,7 +276,7 @@ class Sampler:
             if getattr(ctrl, "_box_ws", None) is None:
                 self.bounded_tables = ()
                 return None
-            mode = JVJA if self.s.algorithm == "jvja" else LNVA
+            mode = JVJA if get(self.s.algorithm).compiled == sk.JVJA else LNVA
             F, Iw, views = own_workspace(*ctrl._box_ws[:2], mode)
             self.box_views = views
             F2, Iw2 = self._reduced_workspace()[:2]
