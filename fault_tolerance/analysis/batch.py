@@ -30,6 +30,7 @@ from fault_tolerance.analysis.fast import batch as batch_kernel
 from fault_tolerance.errors import IntolerableFailure, InvalidInput
 from fault_tolerance.numerics.linalg import DAMPING, PIVOT_TOL, RANK_RTOL, SIGMA_EPS
 from fault_tolerance.resolution.indices import RCN_MAX, RESPONSES
+from fault_tolerance.resolution.registry import KERNEL_JVJA, KERNEL_LNVA, get, names
 from fault_tolerance.resolution.scenarios import Scenarios, scenarios
 
 #: Rows per chunk: temporaries are O(CHUNK · n²) floats, whatever B is.
@@ -78,6 +79,10 @@ def _check(Js, *vectors) -> tuple[np.ndarray, ...]:
 def _scenarios(Js: np.ndarray, lockable, weights, joint_names) -> Scenarios:
     _, m, n = Js.shape
     return scenarios(lockable, n, r=n - m, weights=weights, joint_names=joint_names)
+
+
+#: The kernel modes this module batches by stacked NumPy (and the compiled step): LNVA, JVJA.
+BATCHED = (KERNEL_LNVA, KERNEL_JVJA)
 
 
 def _option(intolerable: str) -> str:
@@ -173,18 +178,28 @@ def resolve(
     joint_names: Sequence[str] = (),
     intolerable: str = "raise",
     chunk: int = CHUNK,
+    options: dict | None = None,
 ) -> np.ndarray:
-    """Rates of resolver ``name`` (``"lnva"`` or ``"jvja"``) for every row, shape (B, n).
+    """Rates of the registered resolver ``name`` for every row, shape (B, n).
 
     Row b equals ``ft.resolve(name, Js[b], xdots[b], lockable, ...)``. ``intolerable="nan"``
-    fills rows with an intolerable scenario with NaN (jvja) instead of raising. MDA needs the
-    configurations and Jacobian derivatives; it is not batched (use :func:`ft.resolve` per row).
+    fills rows with an intolerable scenario with NaN instead of raising. LNVA and JVJA are
+    batched (below); another registered resolver runs its reference rates row by row, with its
+    ``options`` (``weights`` and ``response`` fill options of those names). A resolver that needs
+    the configuration (MDA: the Jacobian derivatives at each row's ``q``) is refused: use
+    :func:`ft.resolve` per row.
 
     With numba, LNVA and least-norm single-joint JVJA run the Controller's compiled step on
     every row (:mod:`.batch_kernel`); the rows it refuses (near a singularity, a small pivot, an
     ill-conditioned ``J Jᵀ``), multi-joint scenarios and the continuation response take
     :func:`resolve_stacked`, the stacked NumPy code.
     """
+    entry = get(name)
+    if entry.compiled not in BATCHED or options:
+        run = {"weights": weights, "response": response}
+        return _per_row(
+            entry, Js, xdots, lockable, entry.options_with(options, run), joint_names, intolerable
+        )
     Js, xdots, sc = _resolve_input(
         name, Js, xdots, lockable, weights, response, intolerable, joint_names
     )
@@ -194,6 +209,27 @@ def resolve(
     redo = np.flatnonzero(status)
     if redo.size:
         out[redo] = _stacked(Js[redo], xdots[redo], sc, response, intolerable, chunk)
+    return out
+
+
+def _per_row(entry, Js, xdots, lockable, options, joint_names, intolerable) -> np.ndarray:
+    """Rates of a resolver the batch does not know, by its reference rates row by row."""
+    if entry.needs_configuration:
+        raise InvalidInput(
+            f"batched resolver '{entry.name}' needs the configuration of every row (arm and q); "
+            f"batched resolvers are {[n for n in names() if not get(n).needs_configuration]}; "
+            "call ft.resolve per row"
+        )
+    _option(intolerable)
+    Js, xdots = _check(Js, ("xdots", xdots, np.shape(Js)[1]))
+    out = np.empty((Js.shape[0], Js.shape[2]))
+    for b in range(Js.shape[0]):
+        try:
+            out[b] = entry.call(Js[b], xdots[b], lockable, joint_names=joint_names, **options)
+        except IntolerableFailure:
+            if intolerable == "raise":
+                raise
+            out[b] = np.nan
     return out
 
 
@@ -225,14 +261,19 @@ def resolve_stacked(
 
 def _resolve_input(name, Js, xdots, lockable, weights, response, intolerable, joint_names):
     """Validated ``Js``, ``xdots`` and the scenarios (None for LNVA) of :func:`resolve`."""
-    if name not in ("lnva", "jvja"):
-        raise InvalidInput(f"batched resolver '{name}' is not one of ['jvja', 'lnva']")
+    mode = get(name).compiled
+    if mode not in BATCHED:
+        raise InvalidInput(f"stacked resolver '{name}' is not one of {_stacked_names()}")
     if response not in RESPONSES:
         raise InvalidInput(f"response {response!r} is not one of {RESPONSES}")
     _option(intolerable)
     Js, xdots = _check(Js, ("xdots", xdots, np.shape(Js)[1]))
-    sc = _scenarios(Js, lockable, weights, joint_names) if name == "jvja" else None
+    sc = _scenarios(Js, lockable, weights, joint_names) if mode == KERNEL_JVJA else None
     return Js, xdots, sc
+
+
+def _stacked_names() -> list[str]:
+    return [n for n in names() if get(n).compiled in BATCHED]
 
 
 def _stacked(Js, xdots, sc: Scenarios | None, response, intolerable, chunk) -> np.ndarray:

@@ -17,6 +17,7 @@ from fault_tolerance.cli.common import (
     limits_line,
     load_robot,
     report_warnings,
+    resolver_options,
 )
 from fault_tolerance.cli.start_options import choose_start
 from fault_tolerance.errors import InvalidInput
@@ -41,10 +42,12 @@ def add_parser(sub) -> argparse.ArgumentParser:
         help="lock time [s], or max / min: the moment of largest / smallest jump of the planned "
         "run (default: max)",
     )
+    from fault_tolerance.simulation.simulate import algorithms
+
     s.add_argument(
         "--algorithm",
         default="lnva",
-        choices=["lnva", "jvja", "mda", "global"],
+        choices=list(algorithms()),  # the registered resolvers, then the path planners
         help="the planner before the lock (default: lnva, as in the paper's Sec. V)",
     )
     s.add_argument("--tau", type=float, default=0.05, help="servo time constant [s] (default 0.05)")
@@ -118,6 +121,9 @@ def _run(args) -> int:
     servo = ServoModel(tau=args.tau, accel_limit=args.accel_limit)
     feedback = 10.0 if args.feedback is None else args.feedback
     gain = {} if args.gain is None else {"gain": args.gain}
+    resolver = resolver_options(args, [args.algorithm])  # --option, checked before any work
+    if resolver:
+        gain["options"] = resolver
     # the start is checked with the planned (lock-free) run; the locking joint must be tolerable
     q0, path, lockable, choice = choose_start(
         args,

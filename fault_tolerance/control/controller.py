@@ -64,7 +64,7 @@ from fault_tolerance.numerics.linalg import PIVOT_EPS, PIVOT_TOL
 from fault_tolerance.resolution import jvja as jvja_module
 from fault_tolerance.resolution import mda as mda_module
 from fault_tolerance.resolution.lnva import lnva as lnva_rates
-from fault_tolerance.resolution.registry import KERNEL_JVJA, KERNEL_LNVA, KERNEL_MDA, get
+from fault_tolerance.resolution.registry import KERNEL_JVJA, KERNEL_LNVA, KERNEL_MDA, get, names
 from fault_tolerance.resolution.scenarios import Scenarios, scenarios
 
 __all__ = [
@@ -185,6 +185,8 @@ class Controller(ControllerIndices):
         horizon: float | None = None,
         options: dict | None = None,
     ) -> None:
+        if method not in names():
+            raise InvalidInput(f"method '{method}' is not one of {list(names())}")
         entry = get(method)
         if limits and entry.bounded is None:
             raise InvalidInput(

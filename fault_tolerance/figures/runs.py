@@ -23,13 +23,15 @@ import numpy as np
 from fault_tolerance.simulation.run import Run
 from fault_tolerance.storage.atomic import write_atomic
 
-COLORS = {"lnva": "#1f77b4", "jvja": "#d62728", "mda": "#2ca02c", "global": "#9467bd"}
-LABELS = {
-    "lnva": "LNVA (least norm)",
-    "jvja": "JVJA (minimum jump)",
-    "mda": "MDA (maximum dexterity)",
-    "global": "global (whole-path plan)",
-}
+
+def style(name: str) -> dict:
+    """Colour and label of the curve of algorithm ``name``: its registry entry's (else matplotlib's)."""
+    from fault_tolerance.simulation.simulate import algorithm_style
+
+    known = algorithm_style(name)
+    return (
+        {"color": None, "label": name} if known is None else {"color": known[0], "label": known[1]}
+    )
 
 
 def _subplots(nrows: int, ncols: int, figsize, **kw):
@@ -74,9 +76,9 @@ def plot_comparison(runs: Mapping[str, Run], title: str = ""):
     """
     fig, (ax1, ax2) = _subplots(2, 1, (7.0, 6.2), sharex=True)
     for name, run in runs.items():
-        style = {"color": COLORS.get(name), "label": LABELS.get(name, name), "lw": 1.6}
-        ax1.plot(run.t, run.jvj, **style)
-        ax2.plot(run.t, run.K, **style)
+        curve = {**style(name), "lw": 1.6}
+        ax1.plot(run.t, run.jvj, **curve)
+        ax2.plot(run.t, run.K, **curve)
     ax1.set_ylabel(r"square-sum jump $\lambda$ [(rad/s)$^2$]")
     ax1.set_title("(a) joint velocity jump", loc="left", fontsize=10)
     ax2.set_ylabel(r"square-sum RCN $K=\sum_S k_S^2$")

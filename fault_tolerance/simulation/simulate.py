@@ -49,11 +49,24 @@ ENGINES = ("auto", "fast", "reference")
 #: returning a :class:`Run`. The planning layer registers ``"global"``
 #: (:mod:`fault_tolerance.planning.wholepath.run`), which sits above this one.
 PATH_PLANNERS: dict[str, Callable[..., Run]] = {}
+#: How plots and the replay page show a path planner: ``(colour, label)``, registered with it.
+PATH_PLANNER_STYLES: dict[str, tuple[str, str]] = {}
 
 
 def algorithms() -> tuple[str, ...]:
     """Every algorithm :func:`simulate` runs: the registered resolvers, then the path planners."""
     return (*names(), *PATH_PLANNERS)
+
+
+def algorithm_style(algorithm: str | None) -> tuple[str, str] | None:
+    """``(colour, label)`` of an algorithm for plots and the replay page; None if unknown."""
+    name = str(algorithm or "").lower()
+    if name in PATH_PLANNER_STYLES:
+        return PATH_PLANNER_STYLES[name]
+    if name in names():
+        entry = get(name)
+        return entry.colour, entry.label
+    return None
 
 
 def option_names(algorithm: str) -> tuple[str, ...]:

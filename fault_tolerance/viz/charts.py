@@ -40,8 +40,7 @@ from fault_tolerance.viz.svg import (
 
 #: Time buckets of the decimation: each keeps the smallest and largest sample of every curve.
 BUCKETS = 300
-#: Colours of runs by algorithm (as in the figures of plots.py), then a palette for the rest.
-RUN_COLORS = {"lnva": "#1f77b4", "jvja": "#d62728", "mda": "#2ca02c", "global": "#9467bd"}
+#: Colours for runs whose algorithm's registered colour is taken or unknown.
 PALETTE = (
     "#1f77b4",
     "#d62728",
@@ -148,8 +147,15 @@ def chart_data(run, label: str, color: str, velocity_limit, joint_names) -> Char
 
 
 def run_color(algorithm: str | None, index: int, taken: set[str]) -> str:
-    """The colour of a run: its algorithm's if still free, else the next free palette colour."""
-    c = RUN_COLORS.get(str(algorithm or "").lower())
+    """The colour of a run: its algorithm's if still free, else the next free palette colour.
+
+    An algorithm's colour is its registry entry's (``ResolverEntry.colour``; a path planner's from
+    ``PATH_PLANNER_STYLES``), as in the figures of :mod:`fault_tolerance.figures.runs`.
+    """
+    from fault_tolerance.simulation.simulate import algorithm_style
+
+    known = algorithm_style(algorithm)
+    c = known[0] if known else None
     if c and c not in taken:
         return c
     for c in PALETTE[index:] + PALETTE[:index]:
