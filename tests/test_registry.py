@@ -356,3 +356,18 @@ def test_no_resolver_name_list_outside_the_registry():
         if hits:
             found[rel] = hits
     assert not found, found
+
+
+def test_the_architecture_page_example_runs(tmp_path, monkeypatch, capsys):
+    """docs/architecture.md, 'Adding a resolver': its Python block runs and leaves no resolver."""
+    import re
+
+    text = (Path(__file__).resolve().parents[1] / "docs" / "architecture.md").read_text("utf-8")
+    section = text.split("## Adding a resolver", 1)[1].split("\n## ", 1)[0]
+    (block,) = re.findall(r"```python\n(.*?)```", section, flags=re.S)
+    monkeypatch.chdir(tmp_path)
+    exec(compile(block, "docs/architecture.md", "exec"), {})  # noqa: S102 - our own docs
+    out = capsys.readouterr().out
+    assert out.startswith("True\nTrue\nresolver 'damped_lnva': unknown option(s) ['gain']")
+    assert "damped_lnva" in out.split("algorithm", 1)[1]  # the CLI's table has its row
+    assert "damped_lnva" not in registry.names()

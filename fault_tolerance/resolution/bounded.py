@@ -178,7 +178,7 @@ def _nearest_on_task(J, xdot, qd, lo, hi, proj) -> BoundedRates:
 
 
 def bounded_nearest(rates):
-    """The bounded variant of a resolver whose objective is the distance to its own rates.
+    """The bounded variant of a resolver whose objective is the distance to its own rates, (L2n).
 
     LNVA minimises ``‖q̇‖²``, MDA ``‖q̇ + α∇K‖²``: on the task's affine set both are
     ``‖q̇ − q̇*‖²`` up to a constant, ``q̇*`` their unbounded rates, so inside the box their rates
