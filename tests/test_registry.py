@@ -371,3 +371,24 @@ def test_the_architecture_page_example_runs(tmp_path, monkeypatch, capsys):
     assert out.startswith("True\nTrue\nresolver 'damped_lnva': unknown option(s) ['gain']")
     assert "damped_lnva" in out.split("algorithm", 1)[1]  # the CLI's table has its row
     assert "damped_lnva" not in registry.names()
+
+
+def test_options_the_caller_owns_are_refused(arm, path):
+    """Weights (and a run's response) belong to simulate / Controller: options= may not set them."""
+    with pytest.raises(InvalidInput, match=r"simulate\(weights=...\)"):
+        ft.simulate(arm, path, "jvja", q0=Q0, duration=0.1, options={"weights": [1, 2, 3]})
+    with pytest.raises(InvalidInput, match=r"simulate\(response=...\)"):
+        ft.simulate(arm, path, "jvja", q0=Q0, duration=0.1, options={"response": "continuation"})
+    with pytest.raises(InvalidInput, match=r"Controller\(weights=...\)"):
+        ft.Controller(arm, method="jvja", options={"weights": [1, 2, 3]}, limits=False)
+
+
+def test_builtin_options_through_the_controller(arm):
+    """A built-in given options of its own steps by its reference rates, with those options."""
+    ctrl = ft.Controller(arm, "all", method="mda", options={"gain": 0.5}, limits=False)
+    J = arm.jacobian(Q0)
+    np.testing.assert_allclose(
+        ctrl.step(Q0, XD), ft.resolve("mda", J, XD, "all", arm=arm, q=Q0, gain=0.5), atol=1e-12
+    )
+    compiled = ft.Controller(arm, "all", method="mda", gain=0.5, limits=False)
+    np.testing.assert_allclose(ctrl.step(Q0, XD), compiled.step(Q0, XD), atol=1e-9)

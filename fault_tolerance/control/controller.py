@@ -193,7 +193,8 @@ class Controller(ControllerIndices):
                 f"resolver '{method}' has no bounded variant: it cannot honour the joint limits; "
                 "build the Controller with limits=False"
             )
-        self.options = entry.options_with(options, {"gain": gain, "max_step": max_step})
+        run = {"gain": gain, "max_step": max_step}  # the scenarios' weights are weights=
+        self.options = entry.options_with(options, run, {"weights": "Controller(weights=...)"})
         gain = float(gain)
         if not np.isfinite(gain) or gain < 0:
             raise InvalidInput(f"mda gain must be finite and >= 0, got {gain}")

@@ -105,14 +105,23 @@ class ResolverEntry:
             )
         return self.options(**given)
 
-    def options_with(self, options: Mapping | None, run: Mapping) -> dict:
+    def options_with(
+        self, options: Mapping | None, run: Mapping, owned: Mapping | None = None
+    ) -> dict:
         """Every option of this resolver by name: ``options``, then ``run``'s of the same name.
 
         ``run`` holds a caller's own settings that some resolvers take as options (a simulation's
         ``response`` and ``gain``, a Controller's ``gain`` and ``max_step``); an option this
-        resolver does not take raises :class:`InvalidInput`, before any work.
+        resolver does not take raises :class:`InvalidInput`, before any work. ``owned`` maps the
+        options the caller sets itself (and may not take from ``options``) to the keyword to use.
         """
-        given = dict(options or {})
+        given, owned = dict(options or {}), owned or {}
+        clash = sorted(set(given) & set(owned))
+        if clash:
+            raise InvalidInput(
+                f"option(s) {clash} of resolver '{self.name}' are set by "
+                f"{[owned[k] for k in clash]} here, not by options="
+            )
         self.make_options(given)  # unknown names and bad values raise here
         given.update({k: v for k, v in run.items() if k in self.option_names and k not in given})
         return _fields(self.make_options(given))

@@ -155,7 +155,8 @@ def _setup(
     vmax = np.where(np.isfinite(vmax) & (vmax > 0), vmax, np.inf)  # 0 or inf: no limit given
     h = _check_limits(arm, q0, limits, horizon, dt)
     run = {"response": response, "gain": gain, "max_step": MDA_MAX_ANGLE / dt}
-    opts = entry.options_with(options, run)  # an option the resolver does not take raises
+    owned = {"weights": "simulate(weights=...)", "response": "simulate(response=...)"}
+    opts = entry.options_with(options, run, owned)  # one it does not take raises
     cap = opts.get("max_step", run["max_step"])  # the compiled sample's cap of MDA's step
     return _Setup(
         arm, path, algorithm, sc, response, dt, duration, steps, feedback_gain,
