@@ -225,14 +225,15 @@ def print_table(runs) -> None:
     """λ and K statistics, position error [m] (and orientation error [rad]) of each run."""
     summaries = {alg: run_.summary() for alg, run_ in runs.items()}
     angular = any("orientation_error_max" in s for s in summaries.values())
+    w = max([10, *map(len, summaries)])  # a registered resolver's name may be longer
     print(
-        f"{'algorithm':10} {'λ mean':>10} {'λ max':>10} {'K mean':>10} {'K max':>10} "
+        f"{'algorithm':{w}} {'λ mean':>10} {'λ max':>10} {'K mean':>10} {'K max':>10} "
         f"{'pos err max [m]':>16}" + (f" {'ori err max [rad]':>18}" if angular else "")
         + "   (λ in (rad/s)²)"
     )  # fmt: skip
     for alg, s in summaries.items():
         ori = f" {s.get('orientation_error_max', float('nan')):18.3g}" if angular else ""
         print(
-            f"{alg:10} {s['jvj_mean']:10.4g} {s['jvj_max']:10.4g} {s['rcn_mean']:10.4g} "
+            f"{alg:{w}} {s['jvj_mean']:10.4g} {s['jvj_max']:10.4g} {s['rcn_mean']:10.4g} "
             f"{s['rcn_max']:10.4g} {s['tracking_error_max']:16.3g}" + ori
         )
