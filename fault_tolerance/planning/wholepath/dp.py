@@ -18,11 +18,11 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from fault_tolerance.errors import InvalidInput
+from fault_tolerance.numerics.linalg import projection
 from fault_tolerance.planning.wholepath.problem import (
     PathProblem,
     kinematics,
     post_rates,
-    projections,
     reduced_condition_numbers,
 )
 
@@ -113,7 +113,7 @@ def _correct(prob: PathProblem, Q: np.ndarray, ks: np.ndarray, iters: int = 2) -
     """A few Newton steps back onto ``x(q) = x_des[k]`` (range-space moves only)."""
     for _ in range(iters):
         J, E = kinematics(prob, Q, ks)
-        Q = Q + np.einsum("bnm,bm->bn", projections(J).Jpinv, E)
+        Q = Q + np.einsum("bnm,bm->bn", projection(J).Jpinv, E)
     return Q
 
 
@@ -211,7 +211,7 @@ def node_data(prob: PathProblem, st: Stage) -> NodeData:
     """``λ(a + nν) = c₀ − 2c₁ν + Wν²`` at every node of a stage (W = Σ w_S)."""
     ks = np.full(len(st.q), st.k)
     J, E = kinematics(prob, st.q, ks)
-    P = projections(J)
+    P = projection(J)
     a = np.einsum("bnm,bm->bn", P.Jpinv, prob.xd_des[st.k] + prob.feedback_gain * E)
     nv = null_vectors(J)
     d = post_rates(a, P.N, prob.sc) - a[:, None, :]
@@ -236,7 +236,7 @@ def stage_edges(
     dts = (nxt.k - st.k) * prob.dt
     ks = np.full(len(st.q), nxt.k)
     _, E = kinematics(prob, st.q, ks)
-    p = st.q + np.einsum("bnm,bm->bn", projections(nd.J).Jpinv, E)  # range motion only
+    p = st.q + np.einsum("bnm,bm->bn", projection(nd.J).Jpinv, E)  # range motion only
     _, c = cKDTree(nxt.q).query(p)
     sig_p = nxt.sigma[c] + np.einsum("bn,bn->b", nn.n[c], p - nxt.q[c])
     G2 = len(nxt.q)

@@ -18,12 +18,12 @@ import numpy as np
 import scipy.sparse as sp
 
 from fault_tolerance.errors import InvalidInput
+from fault_tolerance.numerics.linalg import projection
 from fault_tolerance.planning.wholepath.problem import (
     PathProblem,
     Trajectory,
     kinematics,
     post_rates,
-    projections,
     reduced_condition_numbers,
     rollout,
 )
@@ -64,7 +64,7 @@ class _Linear(NamedTuple):
 
 def _rates_and_residuals(prob, Q, ks, Bn, v):
     J, E = kinematics(prob, Q, ks)
-    P = projections(J)
+    P = projection(J)
     a = np.einsum("bnm,bm->bn", P.Jpinv, prob.xd_des[ks] + prob.feedback_gain * E)
     qd = a + np.einsum("bij,bj->bi", P.N, np.einsum("bnr,br->bn", Bn, v))
     sw = np.sqrt(prob.sc.weights)[None, :, None]
