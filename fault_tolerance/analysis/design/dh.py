@@ -205,6 +205,7 @@ def evaluate_table(
         "mean_jvj": float(np.mean(run.jvj)),
         "max_jvj": float(np.max(run.jvj)),
         "rcn_max": k_max,
+        "K_max": float(np.max(run.K)),
         "manipulability": manip,
         "q0": [float(v) for v in run.meta["q0"]],
     }
@@ -422,6 +423,7 @@ def _dh_record(spec, chosen: DHTable, base: DHTable, found, seen: dict, seed: in
         "mean_jvj": final.get("mean_jvj"),
         "max_jvj": final.get("max_jvj"),
         "rcn_max": final.get("rcn_max"),
+        "K_max": final.get("K_max"),
         "manipulability": final.get("manipulability"),
         "feasible": final["feasible"],
         "q0": final.get("q0"),
