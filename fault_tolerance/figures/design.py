@@ -92,6 +92,8 @@ def plot_dh_design(d, path: str | Path) -> Path:
     if base.get("mean_jvj") is not None:
         ax.plot(base["rcn_max"], base["mean_jvj"], "s", c="k", ms=8, label="baseline")
     ax.plot(rec["rcn_max"], rec["mean_jvj"], "*", c="#e6550d", ms=14, label="chosen")
+    ax.set_xscale("log")
+    ax.set_yscale("log")
     ax.set_xlabel("largest reduced condition number k_S along the task [1]")
     ax.set_ylabel("mean square-sum jump λ [(rad/s)²]")
     names = ", ".join(f"{k} = {v:.3g}" for k, v in rec["parameters"].items())
