@@ -21,7 +21,7 @@ from fault_tolerance.model.dh import (
 
 
 def _dh_standard(a, alpha, d, theta):
-    """Eq. (D1) written out entry by entry (Spong's matrix), independent of the package."""
+    """Eq. (H1) written out entry by entry (Spong's matrix), independent of the package."""
     ct, st, ca, sa = math.cos(theta), math.sin(theta), math.cos(alpha), math.sin(alpha)
     return np.array(
         [
@@ -34,7 +34,7 @@ def _dh_standard(a, alpha, d, theta):
 
 
 def _dh_modified(a, alpha, d, theta):
-    """Eq. (D2) written out entry by entry (Craig's matrix)."""
+    """Eq. (H2) written out entry by entry (Craig's matrix)."""
     ct, st, ca, sa = math.cos(theta), math.sin(theta), math.cos(alpha), math.sin(alpha)
     return np.array(
         [

@@ -5,9 +5,9 @@ joint variable), the joint type (revolute or prismatic), its limits and a link r
 visuals. Two conventions:
 
 * ``"standard"`` (distal): ``T_i = Rz(θ_i) Tz(d_i) Tx(a_i) Rx(α_i)``, joint ``i`` turns about
-  ``z_{i-1}`` — eq. (D1);
+  ``z_{i-1}`` — eq. (H1);
 * ``"modified"`` (proximal, Craig): ``T_i = Rx(α_{i-1}) Tx(a_{i-1}) Rz(θ_i) Tz(d_i)``, joint ``i``
-  turns about ``z_i`` — eq. (D2).
+  turns about ``z_i`` — eq. (H2).
 
 :func:`dh_urdf` writes the URDF (joints ``joint1 … jointN`` along z of their frames, a fixed
 ``tool`` frame at the end, cylinders between joint origins, uniform-rod inertias); Pinocchio then
@@ -155,9 +155,9 @@ def _trans(x: float, y: float, z: float) -> np.ndarray:
 def _joint_origins(table: DHTable) -> list[np.ndarray]:
     """Fixed placements (4x4) before each joint and of the tool, n + 1 of them.
 
-    Standard (D1): joint ``i`` sits at frame ``i-1``; between joints ``i`` and ``i+1`` stands
+    Standard (H1): joint ``i`` sits at frame ``i-1``; between joints ``i`` and ``i+1`` stands
     ``Rz(θ_i) Tz(d_i) Tx(a_i) Rx(α_i)`` (the joint variable turns or slides along z first, and
-    ``Rz``, ``Tz`` commute). Modified (D2): joint ``i`` sits after ``Rx(α_{i-1}) Tx(a_{i-1})
+    ``Rz``, ``Tz`` commute). Modified (H2): joint ``i`` sits after ``Rx(α_{i-1}) Tx(a_{i-1})
     Rz(θ_i) Tz(d_i)``; the row's own ``a``, ``alpha`` are the ones *before* its joint.
     """
     out = []

@@ -73,7 +73,7 @@ def report_section(s: dict) -> str:
             "",
             "The paper's last paragraph asks for the joint layout and DH parameters that minimise "
             "the jump under the RCN requirement. `fault-tolerance design --vary dh` searches them "
-            "(differential evolution, then a pattern search; docs/MATH.md (D3)-(D4)). Here: the "
+            "(differential evolution, then a pattern search; docs/MATH.md (H3)-(H4)). Here: the "
             f"paper's spatial 4R on the {s['case']} task, upper arm d3 and forearm a4 varied, total "
             f"length fixed at 1.3 m, subject to k_S ≤ {s['rcn_threshold']:g} along the task, "
             f"{s['evaluations']} designs evaluated.",

@@ -1,4 +1,4 @@
-"""Dimensional synthesis of serial arms from DH tables: the jump and the RCN on a task (MATH.md (D3)).
+"""Dimensional synthesis of serial arms from DH tables: the jump and the RCN on a task (MATH.md (H3)).
 
 The paper ends by asking which joint layout and DH parameters minimise the joint velocity jump
 while the reduced condition numbers stay under a threshold. A design space is a base
@@ -6,7 +6,7 @@ while the reduced condition numbers stay under a threshold. A design space is a 
 length, an offset, a twist from a set such as {0, ±π/2}, or a joint limit, each with bounds).
 Every candidate arm runs the paper's planning on the task (Sec. III.D: the minimum-``K`` start,
 then JVJA; :func:`~fault_tolerance.planning.paper_loop.plan`) and is scored by its mean (or
-largest) square-sum jump λ, subject to ``max k_S ≤ rcn_max`` along the task (D3).
+largest) square-sum jump λ, subject to ``max k_S ≤ rcn_max`` along the task (H3).
 
 The search (:mod:`.search_core`) is differential evolution, then a pattern search around the best;
 every generation is one chunked, resumable round of :func:`~fault_tolerance.analysis.sweep.run`
@@ -116,7 +116,7 @@ def _number(text: str, item: str) -> float:
         raise InvalidInput(f"DH parameter {item!r}: {text!r} is not a number") from None
 
 
-# Eqn. (D3): a candidate of the design space.
+# Eqn. (H3): a candidate of the design space.
 def candidate_table(base: DHTable, params: Sequence[DHParam], u, total_length=None) -> DHTable:
     """The table at unit coordinates ``u`` (one per parameter).
 
@@ -370,7 +370,7 @@ def dh_design(
     folder=None,
     progress: bool = False,
 ) -> DHDesign:
-    """Search the DH design space of ``spec`` (:func:`design_spec`); module doc, MATH.md (D3)-(D4)."""
+    """Search the DH design space of ``spec`` (:func:`design_spec`); module doc, MATH.md (H3)-(H4)."""
     from fault_tolerance.analysis.design.search_core import global_search
     from fault_tolerance.analysis.sweep import run
 

@@ -1,6 +1,6 @@
 """A global search over a box, one round at a time: differential evolution, then a pattern search.
 
-docs/MATH.md (D4).
+docs/MATH.md (H4).
 
 The caller gives ``evaluate_round(candidates, tag) -> scores`` (minimised; ``inf`` for a refused
 candidate). Differential evolution (SciPy's, ``updating="deferred"``, seeded) asks for one whole
@@ -67,7 +67,7 @@ def global_search(
     pattern_rounds: int = 6,
     start: np.ndarray | None = None,
 ) -> SearchResult:
-    """Minimise over ``[0, 1]^dims``: differential evolution, then the pattern search (D4).
+    """Minimise over ``[0, 1]^dims``: differential evolution, then the pattern search (H4).
 
     ``start`` (unit coordinates, e.g. the baseline design) is evaluated first and joins DE's
     initial population, so the result is never worse than it.
