@@ -26,6 +26,7 @@ from .errors import (  # noqa: E402
     JointNotFound,
     RobotNotFound,
     StructurallyIntolerable,
+    UnsafeDescription,
     URDFError,
 )
 from .failures import Scenarios, scenarios  # noqa: E402
@@ -88,5 +89,6 @@ __all__ = [
     "InvalidTask",
     "JointNotFound",
     "RobotNotFound",
+    "UnsafeDescription",
     "URDFError",
 ]
