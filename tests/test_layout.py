@@ -98,7 +98,12 @@ FUNCTION_LINES = 80
 #: Still over the limits this round, each in a file another piece of work is rewriting now (#11
 #: items 1-2, the fast path: "simfast"); delete an entry once its split is merged (the test below
 #: says which entries are no longer needed).
-TOO_LONG_FOR_NOW: dict[str, str] = {}
+TOO_LONG_FOR_NOW: dict[str, str] = {
+    # #22 asked for one self-contained module (stdlib, xacro and errors only) that the package
+    # restructuring moves into model/formats/; split it there into the evaluator, the confined
+    # reads and the xacro hooks.
+    "xacro_eval.py": "safe xacro (#22): one module until the move to model/formats/",
+}
 
 
 def _functions(tree: ast.AST, prefix: str = ""):
