@@ -40,6 +40,7 @@ from fault_tolerance.errors import (  # noqa: E402
     PackageNotFound,
     RobotNotFound,
     StructurallyIntolerable,
+    UnsafeDescription,
     URDFError,
 )
 from fault_tolerance.model.arm import Arm, parse_task  # noqa: E402
@@ -145,6 +146,7 @@ __all__ = [
     "RobotNotFound",
     "StructurallyIntolerable",
     "URDFError",
+    "UnsafeDescription",
 ]
 
 

@@ -82,6 +82,16 @@ class PackageNotFound(URDFError):
         )
 
 
+class UnsafeDescription(URDFError):
+    """A description that would run code, read a file it should not, or expand without bound.
+
+    Raised for a xacro ``${...}`` expression outside the accepted ones (docs/xacro.md), a read
+    outside the folders the user named, or an expansion past one of the limits of
+    :mod:`fault_tolerance.xacro_eval`. The message names the file, the line where it can be had
+    and the expression or file refused.
+    """
+
+
 class InvalidTask(FaultToleranceError):
     """A task specification is not one of the allowed ones."""
 

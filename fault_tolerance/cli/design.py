@@ -36,7 +36,11 @@ def add_parser(sub) -> argparse.ArgumentParser:
         NAME, help=HELP, description=DASK_HELP, epilog=epilog(EXAMPLE), formatter_class=FORMATTER
     )
     add_robot_options(s)
-    s.add_argument("--vary", default="limits", help="limits | links,limits (planar 3R) | dh | dh,limits (a DH arm) (default limits)")
+    s.add_argument(
+        "--vary",
+        default="limits",
+        help="limits | links,limits (planar 3R) | dh | dh,limits (a DH arm) (default limits)",
+    )
     s.add_argument(
         "--objective",
         default=None,
