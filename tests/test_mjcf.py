@@ -361,3 +361,18 @@ def test_a_free_joint_on_the_chain_is_refused_and_fixed_when_left_out(tmp_path):
         ft.load_arm(str(path), task="planar")
     arm = ft.load_arm(str(path), task="planar", joints=["j1", "j2"])
     assert arm.joint_names == ["j1", "j2"]
+
+
+def test_the_descriptions_page_example_runs(monkeypatch):
+    """docs/descriptions.md's Python example runs from the repository root."""
+    import re
+
+    root = Path(__file__).resolve().parents[1]
+    blocks = re.findall(
+        r"```python\n(.*?)```", (root / "docs" / "descriptions.md").read_text(), re.S
+    )
+    assert len(blocks) == 1
+    monkeypatch.chdir(root)
+    ns: dict = {}
+    exec(compile(blocks[0], "descriptions.md", "exec"), ns)  # noqa: S102 - our own documentation
+    assert ns["run"].arm_record["description_format"] == "mjcf"

@@ -13,8 +13,10 @@ Example:
     >>> from pathlib import Path
     >>> [f.name for f in FORMATS]
     ['urdf', 'xacro', 'mjcf']
-    >>> format_of(Path("arm.urdf.xacro")).name
-    'xacro'
+    >>> format_named("mjcf").label
+    'MJCF'
+    >>> is_description_path(Path("ur5e.urdf.xacro")), is_description_path(Path("arm.yaml"))
+    (True, False)
 """
 
 from __future__ import annotations
