@@ -24,6 +24,7 @@ from fault_tolerance.analysis import batch  # noqa: E402
 from fault_tolerance.control.controller import Controller  # noqa: E402
 from fault_tolerance.errors import (  # noqa: E402
     AmbiguousFrame,
+    DescriptionError,
     FaultToleranceError,
     FolderLocked,
     FrameNotFound,
@@ -36,10 +37,12 @@ from fault_tolerance.errors import (  # noqa: E402
     InvalidScenario,
     InvalidTask,
     JointNotFound,
+    MJCFError,
     OutputError,
     PackageNotFound,
     RobotNotFound,
     StructurallyIntolerable,
+    UnknownFormat,
     UnsafeDescription,
     URDFError,
 )
@@ -129,6 +132,7 @@ __all__ = [
     "batch",
     # errors
     "AmbiguousFrame",
+    "DescriptionError",
     "FaultToleranceError",
     "FolderLocked",
     "FrameNotFound",
@@ -141,10 +145,12 @@ __all__ = [
     "InvalidScenario",
     "InvalidTask",
     "JointNotFound",
+    "MJCFError",
     "OutputError",
     "PackageNotFound",
     "RobotNotFound",
     "StructurallyIntolerable",
+    "UnknownFormat",
     "URDFError",
     "UnsafeDescription",
 ]

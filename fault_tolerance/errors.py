@@ -64,8 +64,28 @@ class AmbiguousFrame(FrameNotFound):
         )
 
 
-class URDFError(FaultToleranceError):
+class DescriptionError(FaultToleranceError):
+    """A robot description (URDF, xacro, MJCF) cannot be read or turned into an arm."""
+
+
+class URDFError(DescriptionError):
     """A URDF file cannot be read or turned into an arm."""
+
+
+class MJCFError(DescriptionError):
+    """A MuJoCo MJCF file cannot be read or turned into an arm."""
+
+
+class UnknownFormat(DescriptionError):
+    """A file is in none of the description formats the toolkit reads."""
+
+    def __init__(self, path, formats: Sequence[str]) -> None:
+        self.formats = list(formats)
+        super().__init__(
+            f"{path}: not a robot description the toolkit reads; the known formats are "
+            f"{self.formats} (URDF: .urdf or .xml with <robot>; xacro: .xacro, .urdf.xacro; "
+            "MJCF: .xml with <mujoco>)"
+        )
 
 
 class PackageNotFound(URDFError):

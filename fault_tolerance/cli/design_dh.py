@@ -92,8 +92,10 @@ def run_dh(args) -> int:
     from fault_tolerance.figures.design import plot_dh_design
     from fault_tolerance.resolution.indices import RCN_THRESHOLD
 
-    if args.robot or args.urdf:
-        raise InvalidInput("--vary dh takes its arm from --dh FILE|TEMPLATE, not --robot/--urdf")
+    if args.robot or args.description:
+        raise InvalidInput(
+            "--vary dh takes its arm from --dh FILE|TEMPLATE, not --robot/--description"
+        )
     table, template = _table(args)
     text = args.params or DEFAULT_PARAMS.get(template)
     if text is None:

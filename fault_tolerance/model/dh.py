@@ -36,6 +36,7 @@ from pathlib import Path
 import numpy as np
 
 from fault_tolerance.errors import InvalidInput
+from fault_tolerance.model.formats.registry import format_named
 from fault_tolerance.model.formats.urdf import read_urdf
 from fault_tolerance.model.loading import arm_from_description
 
@@ -245,7 +246,7 @@ def dh_urdf(table: DHTable) -> str:
 def arm_from_dh(table: DHTable, *, task: str | Sequence[str] = "position"):
     """The :class:`~fault_tolerance.model.arm.Arm` of a DH table (tip ``tool``), via its URDF."""
     desc = read_urdf(Path(f"{table.name}.urdf"), dh_urdf(table).encode("utf-8"))
-    return arm_from_description(desc, "tool", task, None, None, None)
+    return arm_from_description(format_named("urdf"), desc, "tool", task, None, None, None)
 
 
 # -- the --dh FILE format ---------------------------------------------------------------------
