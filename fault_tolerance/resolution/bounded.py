@@ -182,7 +182,8 @@ def resolve_bounded(name: str, J, xdot, lockable=None, *, bounds, **options) -> 
     from fault_tolerance.resolution.resolvers import OPTIONS, RESOLVERS, check_task, resolve
 
     if name not in RESOLVERS or set(options) - OPTIONS:
-        return BoundedRates(resolve(name, J, xdot, lockable, **options), 1.0, None, None)  # raises
+        resolve(name, J, xdot, lockable, **options)  # raises, naming the allowed names and options
+        raise AssertionError(f"resolve accepted {name!r} with options {sorted(options)}")
     J, xdot = check_task(J, xdot)
     n = J.shape[1]
     lo, hi = check_bounds(bounds, n)
