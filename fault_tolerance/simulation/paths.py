@@ -10,6 +10,7 @@ import csv
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import cast
 
 import numpy as np
 
@@ -172,7 +173,7 @@ class SampledPath(TaskPath):
 
     def xdot(self, t: float) -> np.ndarray:
         """Interpolated velocity at ``t``."""
-        return self._interp(self.v, t)
+        return self._interp(cast(np.ndarray, self.v), t)  # set by __post_init__
 
     def spec(self) -> dict:
         """JSON-able description."""
