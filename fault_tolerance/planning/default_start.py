@@ -365,7 +365,7 @@ def explain_intolerable(
     finally:
         _EXPLAINING = False
     why = "" if choice is None else f"{where}, tool at x0 = {np.round(choice.x0, 4).tolist()}"
-    return IntolerableAtStart(joints, err.pivot, None if choice is None else choice.q0, why)
+    return IntolerableAtStart(joints, err.pivot, None if choice is None else choice.q0.tolist(), why)
 
 
 def _try_start(arm, lockable, **options) -> StartChoice | None:
