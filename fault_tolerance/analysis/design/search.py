@@ -87,7 +87,7 @@ class Design:
     evaluated: dict = field(repr=False)
     workspace: object = field(repr=False, default=None)
 
-    def save(self, folder: str | Path, draw: Callable[[Design, Path], None] | None = None) -> Path:
+    def save(self, folder: str | Path, draw: Callable[[Design, Path], object] | None = None) -> Path:
         """Write ``design.json`` into ``folder``, and ``design.png`` with ``draw`` when given.
 
         ``draw`` is :func:`fault_tolerance.figures.design.plot_design` for the usual figure
