@@ -183,7 +183,10 @@ def resolve_bounded(name: str, J, xdot, lockable=None, *, bounds, **options) -> 
 
     if name not in RESOLVERS or set(options) - OPTIONS:
         resolve(name, J, xdot, lockable, **options)  # raises, naming the allowed names and options
-        raise AssertionError(f"resolve accepted {name!r} with options {sorted(options)}")
+        raise InvalidInput(  # not reached: resolve raises the same (kept for the checker)
+            f"resolver {name!r} with options {sorted(options)}: names are {sorted(RESOLVERS)}, "
+            f"options {sorted(OPTIONS)}"
+        )
     J, xdot = check_task(J, xdot)
     n = J.shape[1]
     lo, hi = check_bounds(bounds, n)
