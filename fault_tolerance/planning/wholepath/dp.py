@@ -47,7 +47,7 @@ def solve_banded(
         raise InvalidInput(f"objective {objective!r} is not one of ['mean', 'max']")
     S = len(costs)
     V = np.zeros(int(max(targets[-1].max(initial=-1) + 1, 1)) if S else 1)
-    best: list[np.ndarray] = [None] * S  # type: ignore[list-item]
+    best: list[np.ndarray] = [np.empty(0, dtype=np.intp)] * S  # every stage set below
     for s in range(S - 1, -1, -1):
         tgt = targets[s]
         nxt = np.where(tgt >= 0, V[np.maximum(tgt, 0)], np.inf)
