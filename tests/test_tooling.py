@@ -13,6 +13,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -75,3 +76,32 @@ def test_mypy_configuration_is_not_weakened():
         if re.search(r"#\s*type:\s*ignore(?!\[)", line)
     ]
     assert not bare, f"# type: ignore without an error code: {bare}"
+
+
+# -- guards the type checker asked for: what used to escape as AttributeError / TypeError ---------
+def test_require_planar_chain_names_an_arm_that_is_not_planar():
+    """A planar 3R has its chain; a spatial arm is refused with InvalidInput naming its task."""
+    import fault_tolerance as ft
+    from fault_tolerance.model.planar import require_planar_chain
+
+    chain = require_planar_chain(ft.load_arm("planar_3r"))
+    assert len(chain.lengths) == 3 and np.all(chain.lengths > 0)
+    with pytest.raises(ft.InvalidInput, match="is not a planar chain"):
+        require_planar_chain(ft.load_arm("panda", task="position"))
+
+
+def test_rollout_track_needs_its_reference():
+    """``rollout(mode="track")`` without ``q_ref`` raises InvalidInput; with it, it runs."""
+    import fault_tolerance as ft
+    from fault_tolerance.planning.wholepath.problem import build_problem, rollout
+    from fault_tolerance.simulation.paths import CirclePath
+
+    arm = ft.load_arm("planar_3r")
+    q0 = np.array([0.3, 1.2, 1.0])
+    path = CirclePath(arm.fk(q0), 0.1, 2 * np.pi, 0.02)
+    prob = build_problem(arm, path, dt=1e-3, steps=10, lockable=[1, 2])
+    with pytest.raises(ft.InvalidInput, match="'track' needs q_ref"):
+        rollout(prob, q0, "track")
+    plain = rollout(prob, q0, "jvja")
+    tracked = rollout(prob, q0, "track", q_ref=plain.q)
+    np.testing.assert_allclose(tracked.q, plain.q, atol=1e-9)
