@@ -125,10 +125,11 @@ def _jvja_rows(a, N, sc: Scenarios, good, response: str) -> np.ndarray:
         )
         return a - shift / W
     Wm = np.zeros_like(N)
-    for S, w in zip(sc.sets, weights, strict=True):
-        S = list(S)
+    for members, w in zip(sc.sets, weights, strict=True):
+        S = list(members)
         M = np.where(good[:, None, None], N[:, S][:, :, S], np.eye(len(S)))
-        Wm[np.ix_(np.arange(len(N)), S, S)] += w * np.linalg.inv(M)
+        cols = np.asarray(S)
+        Wm[np.ix_(np.arange(len(N)), cols, cols)] += w * np.linalg.inv(M)
     NWN = N @ Wm @ N
     rhs = np.einsum("bij,bj->bi", N @ Wm, a)
     z = -np.einsum("bij,bj->bi", np.linalg.pinv(NWN, rcond=1e-10, hermitian=True), rhs)

@@ -11,10 +11,14 @@ from __future__ import annotations
 
 import argparse
 import sys
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from fault_tolerance.errors import InvalidInput, RobotNotFound
+
+if TYPE_CHECKING:
+    from fault_tolerance.model.arm import Arm
 
 EXIT_OK = 0
 EXIT_FAILURE = 1
@@ -111,7 +115,7 @@ def add_source_options(g) -> None:
     )
 
 
-def load_robot(args) -> object:
+def load_robot(args) -> Arm:
     """The arm the robot options describe."""
     from fault_tolerance.model.formats.xacro import parse_xacro_args
     from fault_tolerance.model.loading import load_arm

@@ -12,6 +12,7 @@ the compiled solve refuses. See docs/MATH.md "Joint limits" and "Joint limits, c
 from __future__ import annotations
 
 from collections.abc import Callable
+from typing import Any, cast
 
 import numpy as np
 
@@ -100,7 +101,8 @@ def _reference_step(ctrl, name: str, inner: Callable, lim, prm) -> Callable:
         state[2:] = 0.0
         return out
 
-    step.slow, step.finish = slow, finish
+    carrier = cast(Any, step)  # a function that carries its two helpers as attributes
+    carrier.slow, carrier.finish = slow, finish
     step.__name__ = name
     step.__doc__ = f"{name} inside the rate box of the joint limits (reference route)."
     return step

@@ -10,6 +10,8 @@ reads the Controller's workspace (``model``, ``data``, ``frame_id``, ``n``, ``m`
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 import pinocchio as pin
 
@@ -45,6 +47,23 @@ _AD = _ad_tensor()
 
 class ControllerIndices:
     """RCN, its gradient and the kinematic Hessian on a Controller's workspace (a mixin)."""
+
+    if TYPE_CHECKING:  # the Controller's workspace this mixin reads (set by Controller.__init__)
+        model: pin.Model
+        data: pin.Data
+        frame_id: int
+        n: int
+        m: int
+        _rows: slice | np.ndarray
+        _keep: np.ndarray
+        _Jm: np.ndarray
+        _stack: np.ndarray
+        _upper: np.ndarray
+
+        @property
+        def f(self) -> int:
+            """Number of scenarios (the Controller's property)."""
+            ...
 
     # -- indices: RCN and its gradient --------------------------------------------------------
     def _reduced_gram(self, J: np.ndarray) -> np.ndarray:

@@ -18,13 +18,16 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from types import SimpleNamespace
-from typing import Protocol
+from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
 import pinocchio as pin
 
 from fault_tolerance.errors import FaultToleranceError
 from fault_tolerance.numerics.linalg import RANK_RTOL, SIGMA_EPS, projection
+
+if TYPE_CHECKING:
+    from fault_tolerance.resolution.scenarios import Scenarios
 
 __all__ = [
     "TRACE_MAX",
@@ -62,7 +65,7 @@ class Workspace(Protocol):
     tolerate: bool
     gain: float
     max_step: float
-    scenarios: object  # failures.Scenarios
+    scenarios: Scenarios
     _rows: slice | np.ndarray
     _la: SimpleNamespace
     _fw: np.ndarray
@@ -72,6 +75,7 @@ class Workspace(Protocol):
     _singletons: bool
     _uniform: bool
     _all_uniform: bool
+    _jvja_ws: list  # [P, Q, c] of the last JVJA step, N = I - PᵀQ (set by the kernels)
 
     def _fallback(self, name: str, J, xdot, out, q=None) -> np.ndarray: ...
     def _bad_call(self, err: Exception, q, xdot, out) -> Exception: ...

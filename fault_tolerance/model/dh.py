@@ -32,6 +32,7 @@ import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -127,7 +128,7 @@ class DHTable:
         """Number of joints."""
         return len(self.joints)
 
-    def with_joint(self, i: int, **changes: float) -> DHTable:
+    def with_joint(self, i: int, **changes: Any) -> DHTable:
         """The table with joint ``i`` (0-based) changed (``a=``, ``d=``, ``lower=``, …)."""
         joints = list(self.joints)
         joints[i] = replace(joints[i], **changes)

@@ -24,7 +24,7 @@ from fault_tolerance.simulation.simulate import simulate
 #: The design space of the synthesis: upper arm and forearm [m].
 PARAMS = "d3:0.25:0.55,a4:0.15:0.45"
 #: The search's budget (small: it runs inside ``reproduce``).
-BUDGET = {"popsize": 4, "generations": 2, "pattern_rounds": 2, "seed": 0}
+BUDGET: dict = {"popsize": 4, "generations": 2, "pattern_rounds": 2, "seed": 0}
 
 
 def synthesis(out: Path, *, progress: bool = False) -> dict:

@@ -182,7 +182,11 @@ def resolve_bounded(name: str, J, xdot, lockable=None, *, bounds, **options) -> 
     from fault_tolerance.resolution.resolvers import OPTIONS, RESOLVERS, check_task, resolve
 
     if name not in RESOLVERS or set(options) - OPTIONS:
-        return BoundedRates(resolve(name, J, xdot, lockable, **options), 1.0, None, None)  # raises
+        resolve(name, J, xdot, lockable, **options)  # raises, naming the allowed names and options
+        raise InvalidInput(  # not reached: resolve raises the same (kept for the checker)
+            f"resolver {name!r} with options {sorted(options)}: names are {sorted(RESOLVERS)}, "
+            f"options {sorted(OPTIONS)}"
+        )
     J, xdot = check_task(J, xdot)
     n = J.shape[1]
     lo, hi = check_bounds(bounds, n)

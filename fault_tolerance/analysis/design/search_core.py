@@ -96,7 +96,7 @@ def global_search(
             tol=0.0, atol=0.0, polish=False, updating="deferred", workers=de_map, init=init,
         )  # fmt: skip
     else:
-        run_round(init if start is not None else np.full((1, dims), 0.5), "de")
+        run_round(np.full((1, dims), 0.5) if isinstance(init, str) else init, "de")
     U, S = np.vstack(seen_u), np.concatenate(seen_s)
     best, best_s = _pattern(run_round, U, S, pattern_rounds)
     U, S = np.vstack(seen_u), np.concatenate(seen_s)

@@ -12,6 +12,7 @@ when it solves a bounded problem.
 from __future__ import annotations
 
 from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 import pinocchio as pin
@@ -105,8 +106,11 @@ def compiled_bounded_step(ctrl, name: str, inner: Callable, reference: Callable,
     return step
 
 
-def _mda_step(ctrl, inner: Callable, reference: Callable, F, Iw) -> Callable:
-    """MDA: its unbounded rates by ``inner`` (LAPACK), then the compiled box check and solve."""
+def _mda_step(ctrl, inner: Callable, reference: Any, F, Iw) -> Callable:
+    """MDA: its unbounded rates by ``inner`` (LAPACK), then the compiled box check and solve.
+
+    ``reference`` is the reference step, carrying ``slow`` and ``finish`` as attributes.
+    """
     from fault_tolerance.control.fast.bounded_solve import bounded_kernel
 
     slow, finish = reference.slow, reference.finish

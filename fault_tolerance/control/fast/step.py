@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 import pinocchio as pin
@@ -229,8 +230,10 @@ def floor_kernel(J, xdot, out, G, y):  # pragma: no cover - numba
 _COMPILED: dict[str, Callable] = {}
 
 
-def compiled_kernel(name: str = "step") -> Callable:
+def compiled_kernel(name: str = "step") -> Any:
     """:func:`step_kernel` compiled by numba, once (also ``"packed"`` and ``"floor"``).
+
+    The result is a numba dispatcher (untyped: it has ``disable_compile`` besides ``__call__``).
 
     ``"packed"``: :func:`packed_step_kernel`; ``"floor"``: :func:`floor_kernel`.
 

@@ -80,10 +80,10 @@ class DescriptionFormat:
     label: str
     suffixes: tuple[str, ...]
     detect: Callable[[Path, bytes], bool]
-    read: Callable[[Path, PackageDirs, Mapping[str, str] | None], Any]
+    read: Callable[[Path, Any, Mapping[str, str] | None], Any]
     from_text: Callable[[Path, bytes], Any]
     build_model: Callable[[Any], pin.Model]
-    build_visuals: Callable[[pin.Model, Any, PackageDirs], pin.GeometryModel | None]
+    build_visuals: Callable[[pin.Model, Any, Any], pin.GeometryModel | None]
     default_tip: Callable[[Any], str]
     confined_visuals: Callable[
         [pin.Model, Any, Sequence[Path]], tuple[pin.GeometryModel | None, list[str]]

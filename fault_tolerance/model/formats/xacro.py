@@ -154,7 +154,7 @@ def expand_xacro(
     return text.encode("utf-8"), notices
 
 
-def declared_xacro_args(path: Path) -> list[str]:
+def declared_xacro_args(path: Path) -> list[bytes]:
     """Names of the ``<xacro:arg name=...>`` of a file (for error messages)."""
     with contextlib.suppress(OSError):
         return re.findall(rb'<xacro:arg\s+name="([^"]+)"', path.read_bytes()[:2_000_000])

@@ -42,7 +42,7 @@ import stat
 import time
 import types
 from collections.abc import Callable, Iterator, Mapping, Sequence
-from typing import Any, NamedTuple
+from typing import Any, NamedTuple, cast
 
 from fault_tolerance.errors import FaultToleranceError, UnsafeDescription
 
@@ -428,7 +428,7 @@ class _Evaluator:
         if any(k is None for k in node.keys):
             raise _refuse("** unpacking is not allowed in xacro expressions")
         return {
-            self.value(k, depth): self.value(v, depth)
+            self.value(k, depth): self.value(v, depth)  # type: ignore[arg-type]  # None refused above
             for k, v in zip(node.keys, node.values, strict=True)
         }
 
@@ -526,7 +526,7 @@ def _xacro_function(name: str) -> Callable:
         "dotify": lambda d: xacro.YamlDictWrapper(dict(d)),
         "tokenize": tokenize,
     }
-    return table[name]
+    return cast("Callable[..., Any]", table[name])
 
 
 def evaluate(
@@ -730,7 +730,7 @@ class _Session:
         self.check_xml = check_xml
         self.budget = Budget(seconds)
         self.texts: dict[str, str] = {}  # file -> text read, for line numbers
-        self.original = {}
+        self.original: dict[str, Any] = {}
         self._loader = None
 
     def where(self, raw: str | None) -> str:
@@ -989,6 +989,7 @@ def confined(
             f"{top}: the installed xacro {getattr(xacro, '__version__', '')} lacks {missing}, "
             "which safe xacro expansion needs; install xacro 2.x (pip install 'xacro>=2.0,<3')"
         )
+    assert subst is not None  # checked above: "missing" names it when absent
     seconds = DEADLINE_SECONDS if seconds is None else seconds
     session = _Session(xacro, os.fspath(top), [os.fspath(r) for r in roots], check_xml, seconds)
     hooks = {

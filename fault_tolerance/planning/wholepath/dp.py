@@ -47,7 +47,7 @@ def solve_banded(
         raise InvalidInput(f"objective {objective!r} is not one of ['mean', 'max']")
     S = len(costs)
     V = np.zeros(int(max(targets[-1].max(initial=-1) + 1, 1)) if S else 1)
-    best: list[np.ndarray] = [None] * S  # type: ignore[list-item]
+    best: list[np.ndarray] = [np.empty(0, dtype=np.intp)] * S  # every stage set below
     for s in range(S - 1, -1, -1):
         tgt = targets[s]
         nxt = np.where(tgt >= 0, V[np.maximum(tgt, 0)], np.inf)
@@ -169,15 +169,15 @@ def trace_stages(
             q[idx] = qn
         halves.append(pts)
     stages = []
-    for b, k in enumerate(ks):
-        fwd, bwd = halves[0][b], halves[1][b]
-        Q = np.array(fwd if closed[b] else bwd[::-1] + fwd[1:])
-        if closed[b]:
+    for i, k in enumerate(ks):
+        fwd, bwd = halves[0][i], halves[1][i]
+        Q = np.array(fwd if closed[i] else bwd[::-1] + fwd[1:])
+        if closed[i]:
             Q = np.vstack([Q, Q[:1]])
-        Q = _subdivide(prob, Q, k, subdivide, closed[b])
+        Q = _subdivide(prob, Q, k, subdivide, closed[i])
         gaps = np.linalg.norm(np.diff(Q, axis=0), axis=1)
         sigma = np.concatenate([[0.0], np.cumsum(gaps)])
-        period = sigma[-1] + float(_wrapped_gap(prob, Q[-1], Q[0])) if closed[b] else np.inf
+        period = sigma[-1] + float(_wrapped_gap(prob, Q[-1], Q[0])) if closed[i] else np.inf
         stages.append(Stage(int(k), Q, sigma, period))
     return stages
 

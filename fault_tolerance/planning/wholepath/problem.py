@@ -189,6 +189,8 @@ def rollout(
     """
     if mode not in ("lnva", "jvja", "track"):
         raise InvalidInput(f"rollout mode {mode!r} is not one of ['lnva', 'jvja', 'track']")
+    if mode == "track" and q_ref is None:
+        raise InvalidInput("rollout mode 'track' needs q_ref, the reference (T+1, n)")
     T, n, dt = prob.T, prob.n, prob.dt
     arm = prob.arm
     model, data, fid, rows = arm.model, arm.data, arm.frame_id, arm.rows
@@ -205,7 +207,7 @@ def rollout(
         a = Jpinv @ xd
         if mode == "lnva":
             qd = a
-        elif mode == "track" and k < T:
+        elif mode == "track" and q_ref is not None and k < T:
             qd = a + N @ ((q_ref[k + 1] - q) / dt)
         else:
             qd = jvja_rates(a[None], N[None], post_rates(a[None], N[None], sc), w)[0]

@@ -16,6 +16,8 @@ of the reference (``tests/test_fastpath.py`` compares whole runs to 1e-9, with a
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 import pinocchio as pin
 
@@ -31,6 +33,9 @@ from fault_tolerance.simulation.fast.sample_bounded import (
     own_workspace,
     scratch,
 )
+
+if TYPE_CHECKING:
+    from fault_tolerance.control.controller import Controller
 
 _TASK_SCALED = 64  # run.FLAG_TASK_SCALED
 _LWA = pin.LOCAL_WORLD_ALIGNED
@@ -128,7 +133,9 @@ class Sampler:
         o = 3 * m * m + m * n
         self.a_ws, self.qd_ws = self.ws[o : o + n], self.ws[o + 4 * n : o + 5 * n]
         self.finish = sk.finish_kernel
-        self.boxed = None  # the Controller's bounded step, built at the first sample that needs it
+        self.boxed: Controller | None = (
+            None  # the Controller's bounded step, built at the first sample that needs it
+        )
         self.reduced_ws = None  # the compiled reduced robots' workspace (boxsolve), built likewise
         self.bounded_tables = None  # the compiled bounded sample's tables
         if self.ONE_CALL and s.limits and s.algorithm in ("jvja", "lnva"):
@@ -257,7 +264,7 @@ class Sampler:
             return self._bounded(state, k, J, xd_cmd, x, x_des, err, method)
         self.bounded_samples += 1
         self.bounded_compiled += 1
-        self.boxed.bounded_steps += int(info[0])
+        self._boxed().bounded_steps += int(info[0])
         self.reduced_compiled += int(info[1])
         return flag
 
@@ -357,7 +364,7 @@ class Sampler:
                                reduced_solve)  # fmt: skip
         return self.reduced_ws
 
-    def _boxed(self):
+    def _boxed(self) -> Controller:
         """The Controller whose bounded step solves the samples that meet a bound.
 
         Its fastest backend: with numba, the compiled bounded step of :mod:`fault_tolerance.control.fast.bounded_step`
