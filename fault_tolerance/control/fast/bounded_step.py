@@ -17,7 +17,7 @@ import numpy as np
 import pinocchio as pin
 
 from fault_tolerance.control.workspace import BOUNDED_STEPS, FALLBACKS, ControllerWorkspace
-from fault_tolerance.errors import FaultToleranceError
+from fault_tolerance.errors import FaultToleranceError, InvalidInput
 
 _LWA = pin.LOCAL_WORLD_ALIGNED
 _F64 = np.dtype(np.float64)
@@ -59,7 +59,12 @@ def compiled_bounded_step(
     """
     from fault_tolerance.control.fast.bounded_solve import JVJA_MULTI, bounded_kernel
 
-    F, I0, views = cw.box_tables  # built with the workspace (numba backend, limits on)
+    if cw.box_tables is None:
+        raise InvalidInput(
+            "the compiled bounded step needs a workspace built with limits=True and the numba "
+            "backend (ControllerWorkspace.box_tables)"
+        )
+    F, I0, views = cw.box_tables
     views["lim"][:] = lim
     views["prm"][:] = prm
     Iw = I0.copy()  # its own mode; the int scratch of the copy is its own too
