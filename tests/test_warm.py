@@ -19,8 +19,9 @@ from fault_tolerance.errors import InvalidInput
 
 @pytest.fixture
 def cache(tmp_path, monkeypatch):
-    """An empty numba cache folder (NUMBA_CACHE_DIR) for the markers."""
+    """An empty numba cache folder (NUMBA_CACHE_DIR) for the markers; the default policy."""
     monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path))
+    monkeypatch.delenv(warm.FIRST_RUN, raising=False)
     return tmp_path
 
 
@@ -106,6 +107,12 @@ def test_the_engine_of_a_first_run(cache, monkeypatch):
     long_ = SimpleNamespace(duration=100.0, dt=1e-3)
     assert cli_simulate.first_run_engine(long_, 3) == "auto"
     assert compiled == [("controller", "bounded", "simulate")]
+    monkeypatch.setenv(warm.FIRST_RUN, "on-use")  # numba compiles on use, as before
+    assert cli_simulate.first_run_engine(short, 3) == "auto" and len(compiled) == 1
+    monkeypatch.setenv(warm.FIRST_RUN, "later")
+    with pytest.raises(InvalidInput, match="FAULT_TOLERANCE_FIRST_RUN"):
+        cli_simulate.first_run_engine(short, 3)
+    monkeypatch.setenv(warm.FIRST_RUN, "ahead")
     for group in ("controller", "bounded", "simulate"):
         fast_cache.mark_warm(group)
     assert cli_simulate.first_run_engine(short, 3) == "auto"
@@ -116,6 +123,7 @@ def test_a_cold_simulate_compiles_nothing_and_says_so(tmp_path):
     cache = tmp_path / "numba"
     cache.mkdir()
     env = {**os.environ, "NUMBA_CACHE_DIR": str(cache), warm.NO_BACKGROUND: "1"}
+    env[warm.FIRST_RUN] = "ahead"  # the default (the test suite's conftest sets on-use)
     cmd = [sys.executable, "-m", "fault_tolerance", "simulate", "--robot", "planar_3r"]
     cmd += ["--algorithms", "lnva,jvja", "--duration", "0.3", "--no-progress"]
     res = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=600)

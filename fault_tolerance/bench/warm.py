@@ -35,6 +35,7 @@ __all__ = [
     "GROUPS",
     "Notice",
     "cold_groups",
+    "compile_ahead",
     "start_in_background",
     "warm",
 ]
@@ -45,6 +46,12 @@ QUIET_SECONDS = 2.0
 STALE_SECONDS = 900.0
 #: The env variable that stops :func:`start_in_background` (tests, CI).
 NO_BACKGROUND = "FAULT_TOLERANCE_NO_BACKGROUND_COMPILE"
+#: The env variable that chooses what a command does with a cold fast path: ``"ahead"``
+#: (default: compile ahead, with one line on stderr, or take the reference engine for a short
+#: run) or ``"on-use"`` (numba compiles each kernel at its first call, inside the command,
+#: silently: the behaviour before; the test suite, whose CLI tests compare stderr exactly).
+FIRST_RUN = "FAULT_TOLERANCE_FIRST_RUN"
+FIRST_RUN_POLICIES = ("ahead", "on-use")
 
 
 def _planar():
@@ -167,6 +174,14 @@ def _compiled(group: str) -> bool:
         return True
     kernels = KERNELS.get(group, ())
     return bool(kernels) and all(_cached(*k) for k in kernels)
+
+
+def compile_ahead() -> bool:
+    """Whether commands compile ahead (:data:`FIRST_RUN` is ``"ahead"``, the default)."""
+    policy = os.environ.get(FIRST_RUN, "ahead")
+    if policy not in FIRST_RUN_POLICIES:
+        raise InvalidInput(f"{FIRST_RUN}={policy!r} is not one of {list(FIRST_RUN_POLICIES)}")
+    return policy == "ahead"
 
 
 def cold_groups(groups: Sequence[str] = tuple(GROUPS)) -> list[str]:

@@ -135,7 +135,7 @@ def first_run_engine(args, runs: int) -> str:
     """
     from fault_tolerance.bench import warm
 
-    if not warm.cold_groups(SIMULATE_KERNELS):
+    if not warm.compile_ahead() or not warm.cold_groups(SIMULATE_KERNELS):
         return "auto"
     duration = args.duration if args.duration else 10.0  # the shipped paths are shorter
     if runs * duration / args.dt > SHORT_RUN:
