@@ -168,7 +168,7 @@ def floor_rows(case: Case) -> dict[str, Row]:
 
     ctrl, m = case.ctrl, case.arm.m
     kernel, cfj, lwa = compiled_kernel("floor"), pin.computeFrameJacobian, pin.LOCAL_WORLD_ALIGNED
-    model, data, fid, sel = ctrl.model, ctrl.model.createData(), ctrl.frame_id, ctrl._rows
+    model, data, fid, sel = ctrl.model, ctrl.model.createData(), ctrl.frame_id, ctrl.workspace.rows
     G, y = np.empty((m, m)), np.empty(m)
 
     def floor(q, xd, out):

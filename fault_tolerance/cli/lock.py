@@ -18,6 +18,7 @@ from fault_tolerance.cli.common import (
     load_robot,
     report_warnings,
 )
+from fault_tolerance.cli.simulate import announce_first_run, first_run_engine
 from fault_tolerance.cli.start_options import choose_start
 from fault_tolerance.errors import InvalidInput
 
@@ -118,6 +119,7 @@ def _run(args) -> int:
     servo = ServoModel(tau=args.tau, accel_limit=args.accel_limit)
     feedback = 10.0 if args.feedback is None else args.feedback
     gain = {} if args.gain is None else {"gain": args.gain}
+    gain["engine"] = first_run_engine(args, 3)  # with the gain, into every run (cli/simulate.py)
     # the start is checked with the planned (lock-free) run; the locking joint must be tolerable
     q0, path, lockable, choice = choose_start(
         args,
@@ -136,6 +138,7 @@ def _run(args) -> int:
             raise InvalidInput(f"lock time must be within [0, {duration}] s, got {t_at}")
     if choice is not None:
         print(choice.reason())
+    announce_first_run(gain["engine"])
     t_lock, planned = _lock_time(args, arm, path, q0, joint, duration, gain)
     progress = bar(int(round(duration / args.dt)) + 1, not args.no_progress, "lock")
     run_ = simulate(

@@ -1,7 +1,8 @@
 """The fast path of a simulated sample: a Controller workspace and the compiled sample kernel.
 
-The workspace is a :class:`~fault_tolerance.control.controller.Controller`'s (scenario tables, rank
-coefficient, MDA gradient); the kernel is :func:`~fault_tolerance.simulation.fast.sample.sample_kernel`.
+The workspace is a :class:`~fault_tolerance.control.controller.Controller`'s
+(:class:`~fault_tolerance.control.workspace.ControllerWorkspace`: scenario tables, rank coefficient,
+MDA gradient); the kernel is :func:`~fault_tolerance.simulation.fast.sample.sample_kernel`.
 
 :func:`fault_tolerance.simulation.simulate.simulate` builds one :class:`Sampler` per run (when numba is
 installed and the run is one it covers: single-joint scenarios) and calls :meth:`Sampler.step` at
@@ -21,6 +22,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 import pinocchio as pin
 
+from fault_tolerance.control.indices import djac, rcn_gradient
 from fault_tolerance.control.lapack_steps import TRACE_MAX
 from fault_tolerance.numerics.fast import sample_dense as sd
 from fault_tolerance.numerics.linalg import PIVOT_EPS
@@ -102,7 +104,8 @@ class Sampler:
         )  # fmt: skip (its workspace; the box check is the kernel's own)
         self.kernel = sk.compiled_sample_kernel()
         self.model, self.data, self.fid = arm.model, self.ctrl.data, arm.frame_id
-        self.rows = self.ctrl._rows
+        self.cw = self.ctrl.workspace
+        self.rows = self.cw.rows
         self.position_only = bool(np.all(np.asarray(arm.rows) < 3))
         self.full_pose = list(arm.rows) == [0, 1, 2, 3, 4, 5]
         self.trans_rows = np.asarray(arm.rows)
@@ -116,7 +119,7 @@ class Sampler:
         self.vmax = np.ascontiguousarray(s.vmax, dtype=float)
         self.params = np.zeros(sd.N_PARAMS)
         p = self.params
-        p[sk.P_TRACE], p[sd.P_PIVOT], p[sd.P_RANK] = TRACE_MAX, PIVOT_EPS, self.ctrl._rank_coef
+        p[sk.P_TRACE], p[sd.P_PIVOT], p[sd.P_RANK] = TRACE_MAX, PIVOT_EPS, self.cw.rank_coef
         p[sk.P_WSUM], p[sk.P_GAIN], p[sk.P_MAXSTEP] = float(sc.weights.sum()), s.gain, s.max_step
         p[sk.P_RCN_MAX], p[sk.P_CONT] = RCN_MAX, 1.0 if self.continuation else 0.0
         p[sk.P_LOCK] = -1 if s.lock_col is None else s.lock_col
@@ -162,7 +165,7 @@ class Sampler:
         Jw = pin.getFrameJacobian(model, data, fid, _WORLD)
         Jl = pin.getFrameJacobian(model, data, fid, _LWA)  # also updates data.oMf[fid]
         J = Jl[self.rows]
-        grad = self.ctrl.rcn_gradient(J, self.ctrl._djac(Jw, Jl, data.oMf[fid].translation))
+        grad = rcn_gradient(self.cw, J, djac(self.cw, Jw, Jl, data.oMf[fid].translation))
         return J, np.ascontiguousarray(grad)
 
     def _task(self, x_des: np.ndarray):
@@ -278,11 +281,12 @@ class Sampler:
             from fault_tolerance.control.fast.bounded_solve import JVJA, LNVA
 
             ctrl = self._boxed()
-            if getattr(ctrl, "_box_ws", None) is None:
+            tables = ctrl.workspace.box_tables
+            if tables is None:
                 self.bounded_tables = ()
                 return None
             mode = JVJA if self.s.algorithm == "jvja" else LNVA
-            F, Iw, views = own_workspace(*ctrl._box_ws[:2], mode)
+            F, Iw, views = own_workspace(*tables[:2], mode)
             self.box_views = views
             F2, Iw2 = self._reduced_workspace()[:2]
             TF, TI = scratch(len(self.cols), self.arm.n)
@@ -359,7 +363,7 @@ class Sampler:
             m, n = self.arm.m, self.arm.n
             sets = self.cols.reshape(-1, 1).copy()
             F, Iw, views = workspace(n, m, sets, self.cols, 1)
-            views["p3"][:] = TRACE_MAX, self.ctrl._pivot_threshold, self.ctrl._rank_coef
+            views["p3"][:] = TRACE_MAX, self.cw.pivot_threshold, self.cw.rank_coef
             self.reduced_ws = (F, Iw, views["buf"], np.zeros((len(sets), n)), np.zeros(len(sets)),
                                reduced_solve)  # fmt: skip
         return self.reduced_ws
