@@ -24,6 +24,7 @@ from fault_tolerance.analysis import batch  # noqa: E402
 from fault_tolerance.control.controller import Controller  # noqa: E402
 from fault_tolerance.errors import (  # noqa: E402
     AmbiguousFrame,
+    DescriptionError,
     FaultToleranceError,
     FolderLocked,
     FrameNotFound,
@@ -36,10 +37,13 @@ from fault_tolerance.errors import (  # noqa: E402
     InvalidScenario,
     InvalidTask,
     JointNotFound,
+    MJCFError,
     OutputError,
     PackageNotFound,
     RobotNotFound,
     StructurallyIntolerable,
+    UnknownFormat,
+    UnsafeDescription,
     URDFError,
 )
 from fault_tolerance.model.arm import Arm, parse_task  # noqa: E402
@@ -127,6 +131,7 @@ __all__ = [
     "batch",
     # errors
     "AmbiguousFrame",
+    "DescriptionError",
     "FaultToleranceError",
     "FolderLocked",
     "FrameNotFound",
@@ -139,11 +144,14 @@ __all__ = [
     "InvalidScenario",
     "InvalidTask",
     "JointNotFound",
+    "MJCFError",
     "OutputError",
     "PackageNotFound",
     "RobotNotFound",
     "StructurallyIntolerable",
+    "UnknownFormat",
     "URDFError",
+    "UnsafeDescription",
 ]
 
 

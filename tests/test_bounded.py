@@ -7,6 +7,7 @@ from scipy.optimize import linprog
 
 import fault_tolerance as ft
 from fault_tolerance.errors import InfeasibleBounds, IntolerableUnderLimits, InvalidInput
+from fault_tolerance.model import joint_limits
 from fault_tolerance.resolution import bounded, limits
 
 REL = 1e-6
@@ -246,9 +247,9 @@ def test_arm_rate_bounds_and_inspect():
     q = arm.q_reference.copy()
     q[3] = arm.upper[3] - 0.01  # 1 cm rad from the upper limit
     lo, hi = arm.rate_bounds(q)
-    assert hi[3] == pytest.approx(0.01 / bounded.RATE_HORIZON)
+    assert hi[3] == pytest.approx(0.01 / joint_limits.RATE_HORIZON)
     assert np.allclose(lo, -arm.velocity_limit) and np.all(hi <= arm.velocity_limit)
-    assert np.all(limits.outside_limits(arm, q) == False)  # noqa: E712
+    assert np.all(joint_limits.outside_limits(arm, q) == False)  # noqa: E712
     from fault_tolerance.analysis.inspection import inspect_text
 
     text = inspect_text("panda")
@@ -258,7 +259,7 @@ def test_arm_rate_bounds_and_inspect():
 def test_velocity_defaults_where_urdf_has_none():
     arm = ft.load_arm("planar_3r")
     arm.model.velocityLimit = np.array([0.0, np.inf, 2.0])
-    assert np.allclose(limits.velocity_limits(arm), [np.pi, np.pi, 2.0])
+    assert np.allclose(joint_limits.velocity_limits(arm), [np.pi, np.pi, 2.0])
 
 
 #: A configuration of the bench's chain_14 pool (inside the limits) whose reduced robot of joint 8

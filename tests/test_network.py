@@ -68,7 +68,6 @@ def test_live_replay_server_listens_on_loopback_only(saved_run):
 def test_replay_command_serves_on_loopback_only(saved_run):
     """`fault-tolerance replay RUN --open` (replay_main): while it waits, every socket it listens
     on is on 127.0.0.1, and it says so."""
-    from fault_tolerance.viz import server as viz
 
     _, _, folder = saved_run
     seen = []
@@ -77,7 +76,9 @@ def test_replay_command_serves_on_loopback_only(saved_run):
     def wait():  # called while the server runs, instead of sleeping until Ctrl-C
         seen.extend(own_listening())
 
-    assert viz.replay_main(folder, open=True, fps=10, wait=wait, stdout=out) == 0
+    from fault_tolerance.viz import replay_main
+
+    assert replay_main(folder, open=True, fps=10, wait=wait, stdout=out) == 0
     assert seen and {ip for ip, _ in seen} == {"127.0.0.1"}, seen
     assert "127.0.0.1" in out.getvalue()
 

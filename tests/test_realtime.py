@@ -168,7 +168,7 @@ def test_kernel_as_plain_python(robot, draw_q, draw_xdot, rng):
 
     ctrl = _controllers(robot, "numpy")
     n = robot.n
-    ws, (params, *_) = single_kernel.workspace(ctrl)
+    ws, (params, *_) = single_kernel.workspace(ctrl.workspace)
     params[1] = PIVOT_TOL
     kernel = single_kernel.packed_step_kernel.py_func
     for q, xd in _samples(robot, draw_q, draw_xdot, rng, k=3):

@@ -8,6 +8,7 @@ import pytest
 import fault_tolerance as ft
 from fault_tolerance.numerics.linalg import projection
 from fault_tolerance.planning import start_checks as st
+from fault_tolerance.planning.default_start import check_start
 from fault_tolerance.planning.posture import lockable_scenarios
 from fault_tolerance.simulation.run import FLAG_NEAR_SINGULAR
 
@@ -104,7 +105,7 @@ def test_structurally_intolerable_joint_is_named_so():
     assert st.intolerable_everywhere(arm, ["joint1", "joint4"]) == [("joint4",)]
     q = np.array([0.3, 0.4, 0.5, 1.0])
     with pytest.raises(ft.StructurallyIntolerable, match="structurally"):
-        st.check_start(arm, lockable_scenarios(arm, ["joint1", "joint4"]), q)
+        check_start(arm, lockable_scenarios(arm, ["joint1", "joint4"]), q)
 
 
 def test_intolerable_at_this_start_proposes_a_start_that_works():
@@ -112,7 +113,7 @@ def test_intolerable_at_this_start_proposes_a_start_that_works():
     arm = ft.load_arm("panda", task="position")
     sc = lockable_scenarios(arm, [("panda_joint2", "panda_joint4")])
     with pytest.raises(ft.IntolerableAtStart, match="at this start only.*--q0 ") as info:
-        st.check_start(arm, sc, arm.q_reference, algorithms=("lnva",))
+        check_start(arm, sc, arm.q_reference, algorithms=("lnva",))
     assert not isinstance(info.value, ft.StructurallyIntolerable)
     q0 = np.array(info.value.q0)
     assert sc.pivots(projection(arm.jacobian(q0)).N).min() >= st.PIVOT_MARGIN
@@ -125,5 +126,5 @@ def test_proposal_keeps_the_start_point_when_it_can():
     sc = lockable_scenarios(arm, [("panda_joint2", "panda_joint4")])
     x0 = arm.fk(arm.q_reference)
     with pytest.raises(ft.IntolerableAtStart, match="same start point") as info:
-        st.check_start(arm, sc, arm.q_reference, x0=x0, algorithms=("lnva",))
+        check_start(arm, sc, arm.q_reference, x0=x0, algorithms=("lnva",))
     np.testing.assert_allclose(arm.fk(np.array(info.value.q0)), x0, atol=1e-8)

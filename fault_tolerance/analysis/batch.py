@@ -28,8 +28,12 @@ import numpy as np
 
 from fault_tolerance.analysis.fast import batch as batch_kernel
 from fault_tolerance.errors import IntolerableFailure, InvalidInput
-from fault_tolerance.numerics.linalg import DAMPING, PIVOT_TOL, RANK_RTOL, SIGMA_EPS
-from fault_tolerance.resolution.indices import RCN_MAX, RESPONSES
+from fault_tolerance.numerics.linalg import PIVOT_TOL, projection, reduced_rates
+from fault_tolerance.resolution.indices import (
+    RESPONSES,
+    condition_numbers,
+    reduced_singular_values,
+)
 from fault_tolerance.resolution.registry import KERNEL_JVJA, KERNEL_LNVA, get, names
 from fault_tolerance.resolution.scenarios import Scenarios, scenarios
 
@@ -91,33 +95,9 @@ def _option(intolerable: str) -> str:
     return intolerable
 
 
-def projections(Js: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """``J⁺`` (B, n, m) and ``N`` (B, n, n) of every row, as :func:`.linalg.projection` does it."""
-    B, m, n = Js.shape
-    lam, V = np.linalg.eigh(Js @ Js.transpose(0, 2, 1))  # ascending, lam = σ²
-    lam = np.maximum(lam, 0.0)
-    smin = np.sqrt(lam[:, 0])
-    mu2 = np.where(smin < SIGMA_EPS, DAMPING**2 * (1.0 - (smin / SIGMA_EPS) ** 2), 0.0)
-    d = lam + mu2[:, None]
-    Jpinv = Js.transpose(0, 2, 1) @ ((V / (d + (d == 0.0))[:, None, :]) @ V.transpose(0, 2, 1))
-    keep = lam > (RANK_RTOL**2) * np.maximum(lam[:, -1:], 1e-300)
-    w = np.where(keep, 1.0 / np.sqrt(np.where(keep, lam, 1.0)), 0.0)
-    U = Js.transpose(0, 2, 1) @ (V * w[:, None, :])  # (B, n, m), zero columns where dropped
-    N = np.eye(n)[None] - U @ U.transpose(0, 2, 1)
-    return Jpinv, N
-
-
-def _pivots(N: np.ndarray, sc: Scenarios) -> np.ndarray:
-    """Smallest eigenvalue of ``N[S, S]`` per row and scenario, shape (B, f)."""
-    if sc.singletons:
-        c = sc.columns
-        return N[:, c, c]
-    return np.stack([np.linalg.eigvalsh(N[:, S][:, :, S])[:, 0] for S in map(list, sc.sets)], 1)
-
-
 def _tolerable(N: np.ndarray, sc: Scenarios, intolerable: str) -> np.ndarray:
     """Rows whose every scenario is tolerable; raise on the first bad one when asked to."""
-    piv = _pivots(N, sc)
+    piv = sc.pivots(N)
     good = np.all(piv >= PIVOT_TOL, axis=1)
     if intolerable == "raise" and not good.all():
         b = int(np.argmin(good))
@@ -127,18 +107,11 @@ def _tolerable(N: np.ndarray, sc: Scenarios, intolerable: str) -> np.ndarray:
 
 
 def _reduced(base: np.ndarray, N: np.ndarray, S: list[int], good: np.ndarray) -> np.ndarray:
-    """(G1) ``base − N[:, S] N[S, S]⁻¹ base[S]`` per row, zero in S, shape (B, n)."""
-    if len(S) == 1:
-        i = S[0]
-        piv = np.where(good, N[:, i, i], 1.0)
-        out = base - (base[:, i] / piv)[:, None] * N[:, :, i]
-    else:
-        M = N[:, S][:, :, S]
-        M = np.where(good[:, None, None], M, np.eye(len(S)))
-        z = np.linalg.solve(M, base[:, S][:, :, None])[:, :, 0]
-        out = base - np.einsum("bns,bs->bn", N[:, :, S], z)
-    out[:, S] = 0.0
-    return out
+    """(G1) per row: :func:`~fault_tolerance.numerics.linalg.reduced_rates` on the stack.
+
+    Rows not ``good`` (an intolerable scenario) get ``N = I``: finite numbers the caller drops.
+    """
+    return reduced_rates(base, np.where(good[:, None, None], N, np.eye(N.shape[-1])), S)
 
 
 def _jvja_rows(a, N, sc: Scenarios, good, response: str) -> np.ndarray:
@@ -157,10 +130,11 @@ def _jvja_rows(a, N, sc: Scenarios, good, response: str) -> np.ndarray:
         )
         return a - shift / W
     Wm = np.zeros_like(N)
-    for S, w in zip(sc.sets, weights, strict=True):
-        S = list(S)
+    for members, w in zip(sc.sets, weights, strict=True):
+        S = list(members)
         M = np.where(good[:, None, None], N[:, S][:, :, S], np.eye(len(S)))
-        Wm[np.ix_(np.arange(len(N)), S, S)] += w * np.linalg.inv(M)
+        cols = np.asarray(S)
+        Wm[np.ix_(np.arange(len(N)), cols, cols)] += w * np.linalg.inv(M)
     NWN = N @ Wm @ N
     rhs = np.einsum("bij,bj->bi", N @ Wm, a)
     z = -np.einsum("bij,bj->bi", np.linalg.pinv(NWN, rcond=1e-10, hermitian=True), rhs)
@@ -282,7 +256,8 @@ def _stacked(Js, xdots, sc: Scenarios | None, response, intolerable, chunk) -> n
     out = np.empty((B, n))
     for s in range(0, B, max(int(chunk), 1)):
         e = min(s + max(int(chunk), 1), B)
-        Jpinv, N = projections(Js[s:e])
+        P = projection(Js[s:e])
+        Jpinv, N = P.Jpinv, P.N
         a = np.einsum("bnm,bm->bn", Jpinv, xdots[s:e])
         if sc is None:
             out[s:e] = a
@@ -323,7 +298,8 @@ def jvj(
     step = max(int(chunk), 1)
     for s in range(0, B, step):
         e = min(s + step, B)
-        Jpinv, N = projections(Js[s:e])
+        P = projection(Js[s:e])
+        Jpinv, N = P.Jpinv, P.N
         good = _tolerable(N, sc, intolerable)
         qd = qds[s:e]
         base = np.einsum("bnm,bm->bn", Jpinv, xdots[s:e]) if response == "least_norm" else qd
@@ -367,29 +343,14 @@ def rcn_stacked(
 
 
 def _rcn_stacked(Js: np.ndarray, sc: Scenarios, chunk: int) -> np.ndarray:
-    B, m, n = Js.shape
+    """(15) of every row by :func:`~fault_tolerance.resolution.indices.rcn`'s own functions."""
+    B = Js.shape[0]
     out = np.empty((B, sc.f))
     step = max(int(chunk), 1)
     for s in range(0, B, step):
         e = min(s + step, B)
-        J = Js[s:e]
-        G = J @ J.transpose(0, 2, 1)  # (b, m, m)
-        stack = np.empty((e - s, sc.f, m, m))
-        for k, S in enumerate(sc.sets):
-            C = J[:, :, list(S)]
-            stack[:, k] = G - C @ C.transpose(0, 2, 1)
-        sigma = np.sqrt(np.maximum(np.linalg.eigvalsh(stack), 0.0))
-        out[s:e] = _condition(sigma)
+        out[s:e] = condition_numbers(reduced_singular_values(Js[s:e], sc))
     return out
-
-
-def _condition(sigma: np.ndarray) -> np.ndarray:
-    """``σ_max/σ_min`` of ascending singular values, capped at RCN_MAX (as the scalar API)."""
-    smax = sigma[..., -1]
-    smin = np.maximum(sigma[..., 0], smax / RCN_MAX)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        k = np.where(smax > 0, smax / np.where(smin > 0, smin, 1.0), RCN_MAX)
-    return np.minimum(k, RCN_MAX)
 
 
 def square_sum_rcn(Js: np.ndarray, lockable=None, **options) -> np.ndarray:

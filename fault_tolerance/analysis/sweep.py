@@ -23,6 +23,7 @@ import os
 import tempfile
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any, cast
 
 import numpy as np
 
@@ -47,7 +48,7 @@ def _save(path: Path, chunk: Chunk) -> None:
     fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=".tmp-", suffix=".npz")
     try:
         with os.fdopen(fd, "wb") as fh:
-            np.savez(fh, **chunk)
+            np.savez(fh, **cast(dict[str, Any], chunk))  # str keys: the stub fears allow_pickle
         os.replace(tmp, path)
     except BaseException:
         if os.path.exists(tmp):

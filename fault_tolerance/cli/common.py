@@ -11,10 +11,14 @@ from __future__ import annotations
 
 import argparse
 import sys
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from fault_tolerance.errors import InvalidInput, RobotNotFound
+
+if TYPE_CHECKING:
+    from fault_tolerance.model.arm import Arm
 
 EXIT_OK = 0
 EXIT_FAILURE = 1
@@ -51,7 +55,7 @@ def names(text: str | None) -> list[str] | None:
 
 
 def add_robot_options(p: argparse.ArgumentParser) -> None:
-    """``--robot | --urdf PATH [--package-dir DIR]``, ``--tip``, ``--task``, ``--joints``, ``--lockable``."""
+    """``--robot | --description PATH [--package-dir DIR]``, ``--tip``, ``--task``, ``--joints``, ``--lockable``."""
     g = p.add_argument_group("robot")
     src = g.add_mutually_exclusive_group()
     src.add_argument(
@@ -59,9 +63,7 @@ def add_robot_options(p: argparse.ArgumentParser) -> None:
         default=None,
         help="shipped or example-robot-data arm (see `fault-tolerance robots`)",
     )
-    src.add_argument(
-        "--urdf", default=None, help="path of a URDF or xacro file (.urdf, .xacro, .urdf.xacro)"
-    )
+    add_description_option(src)
     add_source_options(g)
     g.add_argument(
         "--tip", default=None, help="tip frame (default: the catalog's, or the last frame)"
@@ -79,6 +81,19 @@ def add_robot_options(p: argparse.ArgumentParser) -> None:
         help="joints that may lock: all | none | joint2,joint3 | joint1+joint2,joint3 (+ joins a "
         "multi-joint scenario; none: only where a command can run without them) (default: the "
         "shipped arm's set (robots/catalog.json), else every active joint)",
+    )
+
+
+DESCRIPTION_HELP = (
+    "path of a robot description: URDF (.urdf, or .xml with <robot>), xacro (.xacro, "
+    ".urdf.xacro) or MuJoCo MJCF (.xml with <mujoco>); --urdf PATH is an alias"
+)
+
+
+def add_description_option(group, help_text: str = DESCRIPTION_HELP) -> None:
+    """``--description PATH`` with its alias ``--urdf`` (one destination, ``args.description``)."""
+    group.add_argument(
+        "--description", "--urdf", dest="description", default=None, metavar="PATH", help=help_text
     )
 
 
@@ -100,20 +115,21 @@ def add_source_options(g) -> None:
     )
 
 
-def load_robot(args) -> object:
+def load_robot(args) -> Arm:
     """The arm the robot options describe."""
     from fault_tolerance.model.formats.xacro import parse_xacro_args
     from fault_tolerance.model.loading import load_arm
 
-    if args.robot is None and args.urdf is None:
+    if args.robot is None and args.description is None:
         raise InvalidInput(
-            "name a robot with --robot NAME or --urdf PATH (see `fault-tolerance robots`)"
+            "name a robot with --robot NAME or --description PATH (URDF, xacro or MJCF; see "
+            "`fault-tolerance robots`)"
         )
     from fault_tolerance.cli.suits import robot_not_found
 
     try:
         return load_arm(
-            args.urdf or args.robot,
+            args.description or args.robot,
             tip=args.tip,
             task=args.task,
             joints=names(args.joints),

@@ -1,4 +1,4 @@
-"""``fault-tolerance design``: artificial limits (and links) of a planar 3R for fault tolerance."""
+"""``fault-tolerance design``: limits and links of a planar 3R, or DH parameters of a spatial arm."""
 
 from __future__ import annotations
 
@@ -14,15 +14,19 @@ from fault_tolerance.cli.common import (
     load_robot,
     lockable_of,
 )
+from fault_tolerance.cli.design_dh import add_arguments as add_dh_arguments
+from fault_tolerance.cli.design_dh import run_dh
 from fault_tolerance.cli.workspace import DASK_HELP, add_dask_options, singletons
 from fault_tolerance.errors import InvalidInput
 
 NAME = "design"
-HELP = "artificial limits (and links) of a planar 3R for fault tolerance"
+HELP = "design for fault tolerance: planar 3R limits/links, or a spatial arm's DH parameters"
 EXAMPLE = (
     "fault-tolerance design --robot planar_3r --vary limits --objective ftw-area --out out/d\n"
     "  fault-tolerance design --robot planar_3r --vary links,limits --objective jvj "
-    "--rcn-max 40 --task circle --workers 2 --out out/d_jvj"
+    "--rcn-max 40 --task circle --workers 2 --out out/d_jvj\n"
+    "  fault-tolerance design --vary dh --dh spatial_4r --params d3:0.2:0.6,a4:0.1:0.5 "
+    "--rcn-max 100 --out out/d_4r"
 )
 
 
@@ -32,11 +36,22 @@ def add_parser(sub) -> argparse.ArgumentParser:
         NAME, help=HELP, description=DASK_HELP, epilog=epilog(EXAMPLE), formatter_class=FORMATTER
     )
     add_robot_options(s)
-    s.add_argument("--vary", default="limits", help="limits | links,limits (default limits)")
     s.add_argument(
-        "--objective", default="ftw-area", help="ftw-area | jvj | rcn (default ftw-area)"
+        "--vary",
+        default="limits",
+        help="limits | links,limits (planar 3R) | dh | dh,limits (a DH arm) (default limits)",
     )
-    s.add_argument("--x0", default=None, help="circle start x,y [m] (default: the catalog's)")
+    s.add_argument(
+        "--objective",
+        default=None,
+        help="ftw-area | jvj | rcn for a planar 3R (default ftw-area); mean-jvj | max-jvj | "
+        "manipulability for --vary dh (default mean-jvj)",
+    )
+    s.add_argument(
+        "--x0",
+        default=None,
+        help="circle start x,y [m] (x,y,z for --vary dh) (default: the catalog's)",
+    )
     s.add_argument(
         "--radius", type=float, default=None, help="circle radius [m] (default: the catalog's)"
     )
@@ -44,7 +59,8 @@ def add_parser(sub) -> argparse.ArgumentParser:
         "--rcn-max",
         type=float,
         default=None,
-        help="require max K <= this on the task (default: no requirement)",
+        help="require max K <= this on the task (default: no requirement); --vary dh: max k_S "
+        "<= this (default 100, the paper's threshold)",
     )
     s.add_argument("--candidates", type=int, default=128, help="quasi-random designs (default 128)")
     s.add_argument("--rounds", type=int, default=4, help="pattern-search rounds (default 4)")
@@ -55,6 +71,7 @@ def add_parser(sub) -> argparse.ArgumentParser:
         "--seed", type=int, default=0, help="seed of the quasi-random designs (default 0)"
     )
     add_dask_options(s)
+    add_dh_arguments(s)
     s.set_defaults(func=run)
     return s
 
@@ -81,7 +98,14 @@ def run(args) -> int:
 
 
 def _run(args) -> int:
+    from fault_tolerance.analysis.design.planar import VARY
     from fault_tolerance.analysis.design.search import design
+
+    if args.vary in ("dh", "dh,limits"):
+        return run_dh(args)
+    if args.vary not in VARY:
+        raise InvalidInput(f"--vary '{args.vary}' is not one of {[*VARY, 'dh', 'dh,limits']}")
+    args.objective = args.objective or "ftw-area"
 
     if args.task not in (None, "circle", "planar"):  # design's --task names the task path
         raise InvalidInput(

@@ -19,6 +19,7 @@ from fault_tolerance.cli.common import (
     report_warnings,
     resolver_options,
 )
+from fault_tolerance.cli.simulate import announce_first_run, first_run_engine
 from fault_tolerance.cli.start_options import choose_start
 from fault_tolerance.errors import InvalidInput
 
@@ -124,6 +125,7 @@ def _run(args) -> int:
     resolver = resolver_options(args, [args.algorithm])  # --option, checked before any work
     if resolver:
         gain["options"] = resolver
+    gain["engine"] = first_run_engine(args, 3)  # with the gain, into every run (cli/simulate.py)
     # the start is checked with the planned (lock-free) run; the locking joint must be tolerable
     q0, path, lockable, choice = choose_start(
         args,
@@ -142,6 +144,7 @@ def _run(args) -> int:
             raise InvalidInput(f"lock time must be within [0, {duration}] s, got {t_at}")
     if choice is not None:
         print(choice.reason())
+    announce_first_run(gain["engine"])
     t_lock, planned = _lock_time(args, arm, path, q0, joint, duration, gain)
     progress = bar(int(round(duration / args.dt)) + 1, not args.no_progress, "lock")
     run_ = simulate(

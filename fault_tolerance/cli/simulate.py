@@ -31,7 +31,7 @@ EXAMPLE = (
     "  fault-tolerance simulate --robot panda --task position --lockable panda_joint2,panda_joint4 "
     "--radius 0.05 --rows y,z --out out/panda\n"
     "  fault-tolerance simulate --robot panda --algorithms jvja --no-limits --out out/panda_paper\n"
-    "  fault-tolerance simulate --urdf my_arm.urdf --tip tool0 --task position --csv path.csv --out out/mine"
+    "  fault-tolerance simulate --description my_arm.urdf --tip tool0 --task position --csv path.csv --out out/mine"
 )
 
 
@@ -102,6 +102,7 @@ def _sim_options(args, algs: list[str]) -> tuple[dict, dict]:
         "response": args.response,
         "gain": MDA_GAIN if args.gain is None else args.gain,
         "limits": not args.no_limits,  # the default start's checks run the same formulation
+        "engine": first_run_engine(args, len(algs)),
     }
     if resolver:
         options["options"] = resolver
@@ -133,6 +134,48 @@ def run(args) -> int:
         return _run(args, out)
 
 
+#: Samples (all runs together) up to which a first run takes the reference engine rather than
+#: compiling the fast path first (the reference does ~2000-5000 samples/s on the Panda).
+SHORT_RUN = 60_000
+#: What a first run with the reference engine says (one line on stderr).
+REFERENCE_NOTICE = (
+    "fault-tolerance: the compiled fast path is not in numba's cache yet; this run takes the "
+    "reference engine (the same numbers to 1e-6) and the fast path compiles in the background "
+    "for the next runs"
+)
+
+
+#: The kernel groups a run of ``simulate`` or ``lock`` uses (:mod:`fault_tolerance.bench.warm`).
+SIMULATE_KERNELS = ("controller", "bounded", "simulate")
+
+
+def first_run_engine(args, runs: int) -> str:
+    """``"auto"``, or ``"reference"`` for a short run while the fast path is not compiled yet.
+
+    A long run (more than :data:`SHORT_RUN` samples) compiles the fast path first, saying so on
+    one line of stderr; a short one takes the reference engine (then call
+    :func:`announce_first_run` once the inputs are checked; docs/performance.md "First run").
+    """
+    from fault_tolerance.bench import warm
+
+    if not warm.compile_ahead() or not warm.cold_groups(SIMULATE_KERNELS):
+        return "auto"
+    duration = args.duration if args.duration else 10.0  # the shipped paths are shorter
+    if runs * duration / args.dt > SHORT_RUN:
+        warm.warm(SIMULATE_KERNELS)
+        return "auto"
+    return "reference"
+
+
+def announce_first_run(engine: str) -> None:
+    """For a first run on the reference engine: one line on stderr, the compilation started."""
+    from fault_tolerance.bench import warm
+
+    if engine == "reference":
+        print(REFERENCE_NOTICE, file=sys.stderr)
+        warm.start_in_background(SIMULATE_KERNELS)
+
+
 def _run(args, out: Path | None) -> int:
     from fault_tolerance.resolution.registry import names as registered
     from fault_tolerance.resolution.scenarios import scenarios
@@ -154,6 +197,7 @@ def _run(args, out: Path | None) -> int:
     steps = check_run(args.dt, duration, arm.n, arm.m, f, runs=len(algs))  # all kept in memory
     if choice is not None:
         print(choice.reason())
+    announce_first_run(options["engine"])
     progress = bar(steps * len(algs), not args.no_progress, "simulate")
     runs, saved, found = {}, [], {}
     try:

@@ -23,7 +23,7 @@ def plot_workspace(ws, path: str | Path) -> Path:
     if ws.spatial:
         N = len(ws.axes[2])
         zs = sorted({N // 4, N // 2, (3 * N) // 4})
-        slices = [(slice(None), slice(None), k) for k in zs]
+        slices: list[tuple] = [(slice(None), slice(None), k) for k in zs]
         titles = [f"z = {ws.axes[2][k]:.3f} m" for k in zs]
     else:
         slices, titles = [(slice(None), slice(None))], [""]

@@ -10,12 +10,16 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from functools import cached_property
+from typing import TYPE_CHECKING
 
 import numpy as np
 import pinocchio as pin
 
 from fault_tolerance.errors import InvalidInput, InvalidTask, JointNotFound, URDFError
 from fault_tolerance.model.chains import frame_id, joint_kind
+
+if TYPE_CHECKING:
+    from fault_tolerance.model.formats.urdf import URDFDescription
 
 TASK_ROWS = ("x", "y", "z", "rx", "ry", "rz")
 TASKS = {
@@ -107,7 +111,10 @@ class Arm:
         self.source = source
         self.package_dirs = [str(d) for d in package_dirs]
         self.xacro_args: dict[str, str] = {}  # set by load_arm for xacro sources
-        self.description = None  # the checked URDFDescription, when loaded from a file
+        self.description: URDFDescription | None = (
+            None  # the checked URDFDescription, when loaded from a file
+        )
+        self.description_format: str | None = None  # its format's name (formats/registry.py)
         self.joint_names: list[str] = [
             model.names[j] for j in range(1, model.njoints) if model.joints[j].nv > 0
         ]

@@ -284,7 +284,7 @@ def default_start(
 def _task_maker(arm: Arm, path, x0):
     """``(make, x0)``: ``make(point)`` is the task checked from ``point``; a TaskPath fixes x0."""
     if hasattr(path, "x") and hasattr(path, "xdot"):  # a ready TaskPath fixes the start point
-        fixed, x0 = path, np.asarray(path.x0, dtype=float)  # type: ignore[union-attr]
+        fixed, x0 = path, np.asarray(path.x0, dtype=float)
         return (lambda _x0: fixed), x0
     return (path if path is not None else (lambda p: default_path(arm, p))), x0
 
@@ -370,7 +370,9 @@ def explain_intolerable(
     finally:
         _EXPLAINING = False
     why = "" if choice is None else f"{where}, tool at x0 = {np.round(choice.x0, 4).tolist()}"
-    return IntolerableAtStart(joints, err.pivot, None if choice is None else choice.q0, why)
+    return IntolerableAtStart(
+        joints, err.pivot, None if choice is None else choice.q0.tolist(), why
+    )
 
 
 def _try_start(arm, lockable, **options) -> StartChoice | None:

@@ -9,6 +9,7 @@ box of the joint limits (``Arm.rate_bounds(q)``; docs/MATH.md "Joint limits"). W
 from __future__ import annotations
 
 from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 
@@ -73,7 +74,9 @@ def jvj(
         >>> ft.jvj(J, xd, ft.resolve("jvja", J, xd)) <= ft.jvj(J, xd, ft.resolve("lnva", J, xd))
         True
     """
-    opts = dict(weights=weights, response=response, per_joint=per_joint, joint_names=joint_names)
+    opts: dict[str, Any] = dict(
+        weights=weights, response=response, per_joint=per_joint, joint_names=joint_names
+    )
     if bounds is None:
         return unbounded_jvj(J, xdot, qd, lockable, **opts)
     return jvj_under_limits(J, xdot, qd, lockable, bounds=bounds, **opts)

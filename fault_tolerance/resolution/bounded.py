@@ -201,7 +201,7 @@ def bounded_nearest(rates):
         f"{getattr(rates, '__name__', 'rates')} inside the box, (L2) (bounded_nearest)."
     )
     # the keywords the registry may pass: those of rates (it filters the context by them)
-    bounded.__signature__ = inspect.Signature(  # type: ignore[attr-defined]
+    bounded.__signature__ = inspect.Signature(
         [inspect.Parameter(p, inspect.Parameter.KEYWORD_ONLY) for p in sorted(takes | {"proj"})]
     )
     return bounded

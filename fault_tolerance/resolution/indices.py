@@ -126,14 +126,16 @@ def reduced_singular_values(J: np.ndarray, sc: Scenarios) -> np.ndarray:
     """Singular values of every reduced Jacobian ``J_S``, ascending, shape (f, m).
 
     ``J_S J_Sᵀ = J Jᵀ - J[:, S] J[:, S]ᵀ``: the f small ``m x m`` matrices go to one batched
-    ``eigvalsh`` call.
+    ``eigvalsh`` call. A stack of Jacobians (..., m, n) gives (..., f, m), each row what it
+    would give alone (the batched API and the whole-path planner call it on stacks).
     """
-    G = J @ J.T
+    G = J @ np.swapaxes(J, -1, -2)
     if sc.singletons:
-        cols = J[:, sc.columns].T  # (f, m)
-        stack = G[None, :, :] - cols[:, :, None] * cols[:, None, :]
+        cols = np.swapaxes(J[..., :, sc.columns], -1, -2)  # (..., f, m)
+        stack = G[..., None, :, :] - cols[..., :, None] * cols[..., None, :]
     else:
-        stack = np.array([G - J[:, list(S)] @ J[:, list(S)].T for S in sc.sets])
+        parts = [J[..., :, list(S)] for S in sc.sets]
+        stack = np.stack([G - C @ np.swapaxes(C, -1, -2) for C in parts], axis=-3)
     lam = np.linalg.eigvalsh(stack)
     return np.sqrt(np.maximum(lam, 0.0))
 

@@ -218,7 +218,7 @@ class Run:
         np.savez_compressed(buf, meta=np.array(to_json(self.meta)), **arrays)
         (folder / "run.npz").write_bytes(buf.getvalue())
         (folder / "run.csv").write_text(self.to_csv(), encoding="utf-8")
-        record = {"meta": self.meta, "summary": self.summary()}
+        record: dict[str, object] = {"meta": self.meta, "summary": self.summary()}
         if warnings is not None:
             record["warnings"] = list(warnings)
         (folder / "summary.json").write_text(to_json(record), encoding="utf-8")

@@ -236,7 +236,9 @@ def sample_path(path: TaskPath, ts: np.ndarray, m: int) -> tuple[np.ndarray, np.
 
 def _maybe_lock(s: _Setup, state: _State, t: float) -> None:
     """Lock the joint when its time has come (it stops at once: a brake)."""
-    if s.lock_col is not None and not state.locked and t >= s.lock_time - 1e-12:
+    if s.lock_col is None or s.lock_time is None:  # no lock in this run
+        return
+    if not state.locked and t >= s.lock_time - 1e-12:
         state.locked = True
         state.keep = np.array([j for j in range(s.arm.n) if j != s.lock_col])
         state.qd[s.lock_col] = 0.0

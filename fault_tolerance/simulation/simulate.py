@@ -14,6 +14,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from dataclasses import replace
+from typing import cast
 
 import numpy as np
 
@@ -163,6 +164,7 @@ def simulate(
         return PATH_PLANNERS[algorithm](
             arm, path, q0=q0, plan_options=plan_options, progress=progress, loop=_simulate, **sim
         )
+    q0 = cast(np.ndarray, q0)  # not None: _check_call refused that
     sim.update(progress=progress, engine=engine, options=options)
     return _simulate(arm, path, algorithm, q0=q0, **sim)
 
@@ -285,7 +287,7 @@ def _finish(s: _Setup, state: _State, rec: dict, q0) -> Run:
     }
     if s.user_options:  # a resolver's own options, as given (absent: its defaults)
         meta["options"] = dict(s.user_options)
-    if s.lock_col is not None:
+    if s.lock_col is not None and s.lock_time is not None:
         meta["lock"] = {
             "joint": arm.joint_names[s.lock_col],
             "index": s.lock_col,

@@ -95,7 +95,8 @@ def _build_page(
 ) -> _Page:
     """Scenes and plots of ``run`` (one run, or the runs of a folder / list / dict)."""
     items = collect_runs(run)
-    scenes, charts, warnings, taken = [], [], [], set()
+    scenes, charts, warnings = [], [], []
+    taken: set[str] = set()
     for i, (label, item) in enumerate(items):
         scene = _build_scene(
             item, arm, speed=speed, fps=fps, meshes=meshes, dt=dt, package_dirs=package_dirs

@@ -23,7 +23,7 @@ from fault_tolerance.analysis.design.planar import (
 from fault_tolerance.analysis.sweep import run
 from fault_tolerance.errors import InvalidInput
 from fault_tolerance.model.arm_spec import arm_of, robot_spec
-from fault_tolerance.model.planar import planar_chain
+from fault_tolerance.model.planar import planar_chain, require_planar_chain
 
 
 def _bounds(arm, vary: str, objective: str) -> np.ndarray:
@@ -53,7 +53,7 @@ def _baseline(arm, vary: str) -> np.ndarray:
     lo, hi = arm.lower, arm.upper
     p = np.ravel(np.stack([(lo + hi) / 2, (hi - lo) / 2], 1))
     if vary == "links,limits":
-        L = planar_chain(arm).lengths
+        L = require_planar_chain(arm).lengths
         p = np.concatenate([p, L[:2] / L.sum()])
     return p
 
@@ -87,7 +87,9 @@ class Design:
     evaluated: dict = field(repr=False)
     workspace: object = field(repr=False, default=None)
 
-    def save(self, folder: str | Path, draw: Callable[[Design, Path], None] | None = None) -> Path:
+    def save(
+        self, folder: str | Path, draw: Callable[[Design, Path], object] | None = None
+    ) -> Path:
         """Write ``design.json`` into ``folder``, and ``design.png`` with ``draw`` when given.
 
         ``draw`` is :func:`fault_tolerance.figures.design.plot_design` for the usual figure

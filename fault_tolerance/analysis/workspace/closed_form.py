@@ -38,7 +38,13 @@ from fault_tolerance.analysis.sweep import run
 from fault_tolerance.analysis.workspace.result import DEFINITION, Workspace
 from fault_tolerance.errors import InvalidInput
 from fault_tolerance.model.arm_spec import arm_of, robot_spec
-from fault_tolerance.model.planar import full_turn, planar_chain, reach_2r, rigid_pair
+from fault_tolerance.model.planar import (
+    full_turn,
+    planar_chain,
+    reach_2r,
+    require_planar_chain,
+    rigid_pair,
+)
 
 #: Default sample counts of the planar-3R method.
 SAMPLES = 120  # joint-3 values for W(A) and the self-motion maps
@@ -214,7 +220,7 @@ def _index_table(arm, chain, lock_cols, v2, v3, valid):
 def planar_chunk(spec: dict, k: int) -> dict[str, np.ndarray]:
     """Masks and maps of the points in chunk ``k`` of a planar-3R spec (a sweep's compute)."""
     arm = arm_of(spec)
-    chain = planar_chain(arm)
+    chain = require_planar_chain(arm)
     order, keys, chunk = radius_layout(spec["grid"], spec["chunks"])
     mine = chunk == k
     idx, keys = order[mine], keys[mine]
@@ -291,7 +297,7 @@ def assemble_planar(spec: dict, chunks: list[dict]) -> Workspace:
     x, y, h = planar_grid(spec)
     ftw = pre & locks.all(axis=0)
     S, A = spec["samples"], np.asarray(spec["limits"])
-    chain = planar_chain(arm_of(spec))
+    chain = require_planar_chain(arm_of(spec))
     band = chain.lengths[2] * (A[2, 1] - A[2, 0]) / max(S - 1, 1) / 2
     error = (
         f"grid cell {h:.4g} m (area error up to about the boundary length x {h / 2:.3g} m); "

@@ -92,7 +92,7 @@ class Workspace:
         return out
 
     def save(
-        self, folder: str | Path, draw: Callable[[Workspace, Path], None] | None = None
+        self, folder: str | Path, draw: Callable[[Workspace, Path], object] | None = None
     ) -> Path:
         """Write ``workspace.json``, ``workspace.npz``, and ``workspace.png`` with ``draw``.
 

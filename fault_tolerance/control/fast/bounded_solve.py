@@ -83,7 +83,8 @@ def workspace(n: int, m: int, sets: np.ndarray, cols: np.ndarray, mode: int):
     F = np.zeros(sum(sizes_f))
     Iw = np.zeros(_HEAD + len(_FLOAT) + len(_INT) + sum(sizes_i), dtype=np.int64)
     Iw[:6] = n, m, f, s, mode, k
-    views, o = {}, 0
+    views: dict[str, np.ndarray] = {}
+    o = 0
     for t, ((name, code), size) in enumerate(zip(_FLOAT, sizes_f, strict=True)):
         Iw[_HEAD + t] = o
         views[name] = F[o : o + size].reshape(shapes[code])
