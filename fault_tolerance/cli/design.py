@@ -62,7 +62,12 @@ def add_parser(sub) -> argparse.ArgumentParser:
         help="require max K <= this on the task (default: no requirement); --vary dh: max k_S "
         "<= this (default 100, the paper's threshold)",
     )
-    s.add_argument("--candidates", type=int, default=128, help="quasi-random designs (default 128)")
+    s.add_argument(
+        "--candidates",
+        type=int,
+        default=128,
+        help="designs in the first population (quasi-random, the baseline first) (default 128)",
+    )
     s.add_argument("--rounds", type=int, default=4, help="pattern-search rounds (default 4)")
     s.add_argument(
         "--grid", type=int, default=201, help="grid of the chosen design's map (default 201)"
@@ -123,6 +128,7 @@ def _run(args) -> int:
         rcn_max=args.rcn_max,
         candidates=args.candidates,
         rounds=args.rounds,
+        generations=2 if args.generations is None else args.generations,
         grid=args.grid,
         seed=args.seed,
         workers=args.workers or 0,

@@ -39,7 +39,13 @@ def add_arguments(s: argparse.ArgumentParser) -> None:
         "base arm's) | free | a number [m] (default fixed)",
     )
     g.add_argument("--popsize", type=int, default=6, help="DE population per parameter (default 6)")
-    g.add_argument("--generations", type=int, default=8, help="DE generations (default 8)")
+    g.add_argument(
+        "--generations",
+        type=int,
+        default=None,
+        help="differential-evolution generations after the first population (default 8 for "
+        "--vary dh, 2 for a planar 3R)",
+    )
     g.add_argument(
         "--search-dt", type=float, default=1e-2, help="time step of the search's runs [s] (the "
         "chosen design is re-run at 1 ms) (default 0.01)",
@@ -111,8 +117,9 @@ def run_dh(args) -> int:
         rcn_max=RCN_THRESHOLD if args.rcn_max is None else args.rcn_max,
         total_length=_total(args.total_length, table), search_dt=args.search_dt,
     )  # fmt: skip
+    generations = 8 if args.generations is None else args.generations
     d = dh_design(
-        spec, seed=args.seed, popsize=args.popsize, generations=args.generations,
+        spec, seed=args.seed, popsize=args.popsize, generations=generations,
         pattern_rounds=args.rounds, workers=args.workers or 0, scheduler=args.scheduler,
         folder=args.out, progress=not args.no_progress,
     )  # fmt: skip
