@@ -28,6 +28,7 @@ import numpy as np
 
 from fault_tolerance.analysis.fast import batch as batch_kernel
 from fault_tolerance.errors import IntolerableFailure, InvalidInput
+from fault_tolerance.numerics.checks import finite
 from fault_tolerance.numerics.linalg import DAMPING, PIVOT_TOL, RANK_RTOL, SIGMA_EPS
 from fault_tolerance.resolution.indices import RCN_MAX, RESPONSES
 from fault_tolerance.resolution.scenarios import Scenarios, scenarios
@@ -70,8 +71,9 @@ def _check(Js, *vectors) -> tuple[np.ndarray, ...]:
         if v.shape != (B, size):
             raise InvalidInput(f"{name} must have shape ({B}, {size}), got {v.shape}")
         outs.append(v)
-    if not all(np.all(np.isfinite(a)) for a in outs):
-        raise InvalidInput("Js and the rate arrays must be finite")
+    finite(Js, "Js")
+    for (name, _, _), v in zip(vectors, outs[1:], strict=True):
+        finite(v, name)
     return tuple(outs)
 
 
