@@ -14,7 +14,7 @@ from fault_tolerance.cli.common import (
     load_robot,
     lockable_of,
 )
-from fault_tolerance.cli.workspace import DASK_HELP, add_dask_options, singletons
+from fault_tolerance.cli.workspace import DASK_HELP, add_dask_options, singletons, sweep_output
 from fault_tolerance.errors import InvalidInput
 
 NAME = "design"
@@ -74,9 +74,9 @@ def _task(args, arm):
 
 def run(args) -> int:
     """Design search into ``--out``: design.json and design.png."""
-    from fault_tolerance.storage.folder_lock import FolderLock
+    from fault_tolerance.analysis.design.search import DESIGN_FILES
 
-    with FolderLock(args.out):  # a second writer of --out exits 2 naming this one
+    with sweep_output(args.out, DESIGN_FILES):
         return _run(args)
 
 

@@ -345,6 +345,10 @@ def _check_replaceable(target: Path, replaceable: set[str]) -> None:
     ours = set(replaceable) | {RECORD, IN_PROGRESS}
     with contextlib.suppress(IncompleteResult):
         ours |= set(read_record(target)["files"])
+    refuse_link(target, folder=True)
+    for rel in files_below(target):  # a link or FIFO where a result's file was: refuse, name it
+        if not any(fnmatch.fnmatchcase(rel, p) for p in replaceable if "*" in p):
+            refuse_link(target / rel)
     foreign = sorted(
         rel
         for rel in files_below(target)
