@@ -178,8 +178,10 @@ def check_scheduler(address: str) -> str:
 
 
 def _connect(Client, scheduler: str):
-    """``Client(scheduler)`` within :data:`CONNECT_TIMEOUT` (a service that is not a scheduler,
-    e.g. an HTTP server, makes Dask retry its handshake for ever): else ``TimeoutError``."""
+    """``Client(scheduler)`` within :data:`CONNECT_TIMEOUT`, else ``TimeoutError``.
+
+    A service that is not a scheduler (an HTTP server) makes Dask retry its handshake for ever.
+    """
     import threading
 
     box: list = []
