@@ -30,6 +30,7 @@ from fault_tolerance.errors import FaultToleranceError, IncompleteResult, Output
 from fault_tolerance.storage.atomic import output_folder, write_atomic
 from fault_tolerance.storage.folder_lock import FolderLock, in_progress, lock_path
 from fault_tolerance.storage.result_folder import (
+    RECORD,
     staged_folder,
     verify_folder,
 )
@@ -714,3 +715,17 @@ def test_bad_numbers_raise_the_toolkits_error_naming_the_argument(name, call):
     with pytest.raises(FaultToleranceError) as info:
         call()
     assert name in str(info.value), str(info.value)
+
+
+def test_the_security_page_examples_run(tmp_path, monkeypatch):
+    """Every ```python block of docs/security.md runs, in order, in one namespace."""
+    import re
+
+    text = (ROOT / "docs" / "security.md").read_text(encoding="utf-8")
+    blocks = re.findall(r"```python\n(.*?)```", text, flags=re.S)
+    assert len(blocks) >= 2
+    monkeypatch.chdir(tmp_path)
+    ns: dict = {}
+    for block in blocks:
+        exec(compile(block, "docs/security.md", "exec"), ns)  # noqa: S102 - our own documentation
+    assert (tmp_path / "out" / "ws_doc" / RECORD).is_file()
