@@ -24,7 +24,8 @@ def as_floats(value, name: str, shape: tuple | None = None, ndim: int | None = N
     if shape is not None and (
         a.ndim != len(shape) or any(s != -1 and s != d for s, d in zip(shape, a.shape, strict=True))
     ):
-        want = "(" + ", ".join("any" if s == -1 else str(s) for s in shape) + ")"
+        want = "(" + ", ".join("any" if s == -1 else str(s) for s in shape)
+        want += ",)" if len(shape) == 1 else ")"
         raise InvalidInput(f"{name} must have shape {want}, got {a.shape}")
     return a
 

@@ -155,8 +155,11 @@ def mda(
 
 def check_task(J, xdot) -> tuple[np.ndarray, np.ndarray]:
     """``J`` (m, n) and ``ẋ`` (m,) as finite float arrays, or :class:`InvalidInput`."""
-    J = finite(J, "J", ndim=2)
-    return J, finite(xdot, "xdot", (J.shape[0],))
+    J = np.asarray(J, dtype=float)
+    xdot = np.asarray(xdot, dtype=float)
+    if J.ndim != 2 or xdot.shape != (J.shape[0],):
+        raise InvalidInput(f"J must be (m, n) and xdot (m,); got {J.shape} and {xdot.shape}")
+    return finite(J, "J"), finite(xdot, "xdot")
 
 
 RESOLVERS: dict[str, Callable[..., np.ndarray]] = {"lnva": lnva, "jvja": jvja, "mda": mda}
