@@ -24,8 +24,10 @@ is refused (``OutputError``).
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import json
+import logging
 import os
 import re
 import shutil
@@ -316,6 +318,30 @@ def _open_chunk_folder(folder: str | Path, spec: dict) -> tuple[Path, bool]:
 
 
 def _run_dask(compute, spec, todo, workers, scheduler, finished) -> None:
+    with _quiet_dask():  # a lost scheduler is our one line, not Dask's logged tracebacks
+        _run_on(compute, spec, todo, workers, scheduler, finished)
+
+
+@contextlib.contextmanager
+def _quiet_dask():
+    """Dask's loggers silenced; restored when the block ends normally.
+
+    After a lost scheduler the client's reconnect task may still log while the process ends.
+    Dask sets its loggers' levels when it is imported, so it is imported first.
+    """
+    import distributed.client  # noqa: F401 - creates and configures the loggers
+
+    names = [n for n in logging.root.manager.loggerDict if n.startswith("distributed.")]
+    logs = [logging.getLogger(n) for n in ["distributed", *names]]
+    levels = [log.level for log in logs]
+    for log in logs:
+        log.setLevel(logging.CRITICAL + 1)
+    yield
+    for log, level in zip(logs, levels, strict=True):
+        log.setLevel(level)
+
+
+def _run_on(compute, spec, todo, workers, scheduler, finished) -> None:
     client = client_for(max(int(workers), 1), scheduler)
     futures = []
     try:
@@ -335,8 +361,10 @@ def _collect(client, futures, index, finished, scheduler) -> None:
     """Hand each future's chunk to ``finished`` as it completes; a lost scheduler is one line."""
     from concurrent.futures import CancelledError
 
+    import distributed.client as dc
     from dask.distributed import wait
 
+    lost = (CancelledError, OSError, getattr(dc, "FuturesCancelledError", CancelledError))
     pending, lost_since = set(futures), None
     where = scheduler or "the local cluster"
     while pending:
@@ -344,12 +372,14 @@ def _collect(client, futures, index, finished, scheduler) -> None:
             done, pending = wait(pending, timeout=1.0, return_when="FIRST_COMPLETED")
         except TimeoutError:
             done = set()
+        except lost as err:
+            raise _lost(where, err) from None
         for fut in done:
             if fut.status == "error":
                 fut.result()  # the chunk's own error, as it is
             try:
                 chunk = fut.result()
-            except (CancelledError, OSError, TimeoutError) as err:
+            except (*lost, TimeoutError) as err:
                 raise _lost(where, err) from None
             finished(index[fut.key], chunk)
         if client.status == "running" and not any(f.status == "cancelled" for f in pending):
