@@ -16,7 +16,7 @@ from fault_tolerance.cli.common import (
 )
 from fault_tolerance.cli.design_dh import add_arguments as add_dh_arguments
 from fault_tolerance.cli.design_dh import run_dh
-from fault_tolerance.cli.workspace import DASK_HELP, add_dask_options, singletons
+from fault_tolerance.cli.workspace import DASK_HELP, add_dask_options, singletons, sweep_output
 from fault_tolerance.errors import InvalidInput
 
 NAME = "design"
@@ -96,9 +96,9 @@ def _task(args, arm):
 
 def run(args) -> int:
     """Design search into ``--out``: design.json and design.png."""
-    from fault_tolerance.storage.folder_lock import FolderLock
+    from fault_tolerance.analysis.design.search import DESIGN_FILES
 
-    with FolderLock(args.out):  # a second writer of --out exits 2 naming this one
+    with sweep_output(args.out, DESIGN_FILES):
         return _run(args)
 
 

@@ -123,8 +123,7 @@ def run_dh(args) -> int:
         pattern_rounds=args.rounds, workers=args.workers or 0, scheduler=args.scheduler,
         folder=args.out, progress=not args.no_progress,
     )  # fmt: skip
-    d.save(args.out, draw=plot_dh_design)
-    _replay(d, spec, Path(args.out))
+    d.save(args.out, draw=plot_dh_design, extra=lambda tmp: _replay(d, spec, tmp))
     r, b = d.record, d.record["baseline"]
     names = ", ".join(f"{k} = {v:.4g}" for k, v in r["parameters"].items())
     print(

@@ -226,8 +226,9 @@ def _run(args, out: Path | None) -> int:
         print(f"{alg}: {limits_line(run_)}")
     if out:
         from fault_tolerance.figures import runs as plots
+        from fault_tolerance.figures.text import plain
 
-        title = f"{arm.name}: {', '.join(algs)}"
+        title = plain(f"{arm.name}: {', '.join(algs)}")  # names are data, not mathtext
         plots.save_figure(plots.plot_comparison(runs, title), out / "comparison")
         print(f"wrote {out}/ (run.npz, run.csv, summary.json per algorithm; comparison.png/.svg)")
     return 0

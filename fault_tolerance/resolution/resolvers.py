@@ -14,6 +14,7 @@ from typing import NamedTuple
 import numpy as np
 
 from fault_tolerance.errors import InvalidInput
+from fault_tolerance.numerics.checks import finite
 from fault_tolerance.numerics.linalg import Projection, damped_pivots, pivot_block, projection
 from fault_tolerance.resolution.indices import RESPONSES, jvj, rcn_gradient
 from fault_tolerance.resolution.scenarios import Scenarios, scenarios
@@ -158,9 +159,7 @@ def check_task(J, xdot) -> tuple[np.ndarray, np.ndarray]:
     xdot = np.asarray(xdot, dtype=float)
     if J.ndim != 2 or xdot.shape != (J.shape[0],):
         raise InvalidInput(f"J must be (m, n) and xdot (m,); got {J.shape} and {xdot.shape}")
-    if not (np.all(np.isfinite(J)) and np.all(np.isfinite(xdot))):
-        raise InvalidInput("J and xdot must be finite")
-    return J, xdot
+    return finite(J, "J"), finite(xdot, "xdot")
 
 
 RESOLVERS: dict[str, Callable[..., np.ndarray]] = {"lnva": lnva, "jvja": jvja, "mda": mda}

@@ -114,7 +114,7 @@ def simulate(
         >>> bool(np.allclose(run.q, ref.q, rtol=0, atol=1e-12))
         True
     """
-    _check_call(engine, algorithm, plan_options, q0)
+    q0 = _check_call(arm, engine, algorithm, plan_options, q0)
     sim = dict(
         lockable=lockable, weights=weights, response=response, dt=dt, duration=duration,
         feedback_gain=feedback_gain, gain=gain, lock_joint=lock_joint, lock_time=lock_time,
@@ -132,18 +132,21 @@ def simulate(
     return _simulate(arm, path, algorithm, q0=q0, progress=progress, engine=engine, **sim)
 
 
-def _check_call(engine: str, algorithm: str, plan_options, q0) -> None:
-    """The options of :func:`simulate` that decide the route, checked before any work."""
+def _check_call(arm, engine: str, algorithm: str, plan_options, q0):
+    """The options of :func:`simulate` that decide the route, checked before any work; ``q0``."""
     if engine not in ENGINES:
         raise InvalidInput(f"engine {engine!r} is not one of {list(ENGINES)}")
+    if q0 is not None:
+        q0 = arm.check_q(q0, "q0")
     if algorithm == GLOBAL:
-        return
+        return q0
     if plan_options is not None:
         raise InvalidInput(f"plan_options are options of algorithm 'global', not of '{algorithm}'")
     if q0 is None:
         raise InvalidInput(
             f"simulate needs q0 for algorithm '{algorithm}' (only 'global' chooses its own start)"
         )
+    return q0
 
 
 def _simulate(

@@ -331,18 +331,27 @@ class DHDesign:
     record: dict
     evaluated: dict
 
-    def save(self, folder, draw=None):
-        """Write ``design.json`` and ``design.urdf`` into ``folder`` (``design.png`` with ``draw``)."""
+    def save(self, folder, draw=None, extra=None):
+        """Write ``design.json`` and ``design.urdf`` into ``folder``, whole or absent.
+
+        ``draw(design, path)`` writes ``design.png`` and ``extra(staging_folder)`` more files
+        (the CLI's replay page), both inside the staged folder, so the completion record lists
+        them; finished chunks (``chunks-*/``) are kept.
+        """
         from pathlib import Path
 
+        from fault_tolerance.analysis.design.search import DESIGN_FILES
         from fault_tolerance.model.dh import dh_urdf
+        from fault_tolerance.storage.result_folder import staged_folder
 
         folder = Path(folder)
-        folder.mkdir(parents=True, exist_ok=True)
-        (folder / "design.urdf").write_text(dh_urdf(self.table))
-        (folder / "design.json").write_text(json.dumps(self.record, indent=2) + "\n")
-        if draw is not None:
-            draw(self, folder / "design.png")
+        with staged_folder(folder, replaceable=DESIGN_FILES, aside=("chunks-*",)) as tmp:
+            (tmp / "design.urdf").write_text(dh_urdf(self.table))
+            (tmp / "design.json").write_text(json.dumps(self.record, indent=2) + "\n")
+            if draw is not None:
+                draw(self, tmp / "design.png")
+            if extra is not None:
+                extra(tmp)
         return folder
 
 

@@ -24,6 +24,11 @@ from fault_tolerance.analysis.sweep import run
 from fault_tolerance.errors import InvalidInput
 from fault_tolerance.model.arm_spec import arm_of, robot_spec
 from fault_tolerance.model.planar import planar_chain, require_planar_chain
+from fault_tolerance.storage.budget import check_design
+from fault_tolerance.storage.result_folder import staged_folder
+
+#: Files of a saved design (an existing result with these is replaced whole).
+DESIGN_FILES = ("design.json", "design.png", "design.urdf", "replay.html")
 
 
 def _bounds(arm, vary: str, objective: str) -> np.ndarray:
@@ -112,13 +117,15 @@ class Design:
         """Write ``design.json`` into ``folder``, and ``design.png`` with ``draw`` when given.
 
         ``draw`` is :func:`fault_tolerance.figures.design.plot_design` for the usual figure
-        (figures sit above the analyses, so the caller passes it).
+        (figures sit above the analyses, so the caller passes it). Whole or absent like a run:
+        staged beside ``folder`` with a completion record, then renamed into place; finished
+        chunks (``chunks-*/``) are kept.
         """
         folder = Path(folder)
-        folder.mkdir(parents=True, exist_ok=True)
-        (folder / "design.json").write_text(json.dumps(self.record, indent=2) + "\n")
-        if draw is not None:
-            draw(self, folder / "design.png")
+        with staged_folder(folder, replaceable=DESIGN_FILES, aside=("chunks-*",)) as tmp:
+            (tmp / "design.json").write_text(json.dumps(self.record, indent=2) + "\n")
+            if draw is not None:
+                draw(self, tmp / "design.png")
         return folder
 
 
@@ -160,15 +167,11 @@ def design(
             f"design needs a planar 3R (three revolute joints about parallel z axes, planar "
             f"task); {arm.name} has {arm.n} joints and task {'/'.join(arm.task)}"
         )
-    if (
-        candidates < 1
-        or rounds < 0
-        or generations < 0
-        or (rcn_max is not None and not rcn_max >= 1)
-    ):
-        raise InvalidInput(
-            "candidates >= 1, rounds >= 0, generations >= 0 and rcn_max >= 1 are required"
-        )
+    candidates, rounds, grid = check_design(candidates, rounds, grid)
+    if generations < 0:
+        raise InvalidInput(f"generations must be >= 0 (--generations), got {generations}")
+    if rcn_max is not None and not (np.isfinite(rcn_max) and rcn_max >= 1):
+        raise InvalidInput(f"rcn_max must be a finite number >= 1 (--rcn-max), got {rcn_max}")
     t0 = time.perf_counter()
     task = task or default_task(arm)
     spec = {
