@@ -128,7 +128,7 @@ def _run(args) -> int:
         rcn_max=args.rcn_max,
         candidates=args.candidates,
         rounds=args.rounds,
-        generations=2 if args.generations is None else args.generations,
+        generations=0 if args.generations is None else args.generations,
         grid=args.grid,
         seed=args.seed,
         workers=args.workers or 0,

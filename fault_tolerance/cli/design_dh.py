@@ -44,7 +44,7 @@ def add_arguments(s: argparse.ArgumentParser) -> None:
         type=int,
         default=None,
         help="differential-evolution generations after the first population (default 8 for "
-        "--vary dh, 2 for a planar 3R)",
+        "--vary dh, 0 for a planar 3R: its quasi-random first population and the pattern search)",
     )
     g.add_argument(
         "--search-dt", type=float, default=1e-2, help="time step of the search's runs [s] (the "

@@ -147,7 +147,7 @@ def design(
     rcn_max=None,
     candidates: int = 128,
     rounds: int = 4,
-    generations: int = 2,
+    generations: int = 0,
     grid: int = 201,
     search_dt: float = 2e-3,
     seed: int = 0,
