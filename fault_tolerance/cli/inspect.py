@@ -9,7 +9,7 @@ from fault_tolerance.cli.common import FORMATTER, add_source_options, epilog, na
 NAME = "inspect"
 HELP = "kinematic tree, chosen chain and task, intolerable joints"
 EXAMPLE = (
-    "fault-tolerance inspect spatial_4r\n  fault-tolerance inspect my_arm.urdf --tip tool0\n"
+    "fault-tolerance inspect spatial_4r\n  fault-tolerance inspect my_arm.urdf --tip tool\n"
     "  fault-tolerance inspect ur_description/urdf/ur5e.xacro --package-dir . --tip tool0"
 )
 
