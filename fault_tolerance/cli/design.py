@@ -36,6 +36,7 @@ def add_parser(sub) -> argparse.ArgumentParser:
         NAME, help=HELP, description=DASK_HELP, epilog=epilog(EXAMPLE), formatter_class=FORMATTER
     )
     add_robot_options(s)
+    _task_help(s)
     s.add_argument(
         "--vary",
         default="limits",
@@ -79,6 +80,13 @@ def add_parser(sub) -> argparse.ArgumentParser:
     add_dh_arguments(s)
     s.set_defaults(func=run)
     return s
+
+
+def _task_help(s: argparse.ArgumentParser) -> None:
+    """``--task`` of ``design`` names the task path, and only ``circle`` is one: say so."""
+    action = next(a for a in s._actions if "--task" in a.option_strings)
+    action.help = "the task path: circle, the only one ('planar' means the same) (default: circle)"
+    action.metavar = "circle"
 
 
 def _task(args, arm):

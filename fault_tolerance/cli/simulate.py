@@ -30,7 +30,7 @@ EXAMPLE = (
     "  fault-tolerance simulate --robot panda --task position --lockable panda_joint2,panda_joint4 "
     "--radius 0.05 --rows y,z --out out/panda\n"
     "  fault-tolerance simulate --robot panda --algorithms jvja --no-limits --out out/panda_paper\n"
-    "  fault-tolerance simulate --description my_arm.urdf --tip tool0 --task position --csv path.csv --out out/mine"
+    "  fault-tolerance simulate --description my_arm.urdf --tip tool --task position --lockable joint1,joint2,joint3 --csv path.csv --out out/mine"
 )
 
 
