@@ -34,6 +34,9 @@ SHORTER = {
                "--no-progress": None},
     "bench": {"--steps": "3", "--warmup": "1", "--batch-configurations": "0"},
 }  # fmt: skip
+#: The same for a DH design (``design --vary dh``): one population, no pattern search.
+SHORTER_DH = {"--popsize": "4", "--generations": "0", "--rounds": "0", "--workers": "0",
+              "--no-progress": None}  # fmt: skip
 #: Commands the tests cannot run here, by what they need: a live viewer, a Dask cluster.
 NOT_RUN = ("--open", "--scheduler")
 
@@ -73,7 +76,9 @@ def commands(code: str) -> list[tuple[list[str], list[str]]]:
 def shorten(argv: list[str]) -> list[str]:
     """``argv`` with the options of :data:`SHORTER` for its command."""
     out = list(argv)
-    for opt, value in SHORTER.get(argv[1], {}).items():
+    vary = argv[argv.index("--vary") + 1] if "--vary" in argv[:-1] else ""
+    dh = argv[1] == "design" and vary.startswith("dh")
+    for opt, value in (SHORTER_DH if dh else SHORTER.get(argv[1], {})).items():
         if opt in out:
             if value is not None:
                 out[out.index(opt) + 1] = value

@@ -14,8 +14,8 @@ from fault_tolerance.cli.common import (
     load_robot,
     lockable_of,
 )
+from fault_tolerance.cli.design_dh import DH_ONLY, run_dh
 from fault_tolerance.cli.design_dh import add_arguments as add_dh_arguments
-from fault_tolerance.cli.design_dh import run_dh
 from fault_tolerance.cli.workspace import DASK_HELP, add_dask_options, singletons, sweep_output
 from fault_tolerance.errors import InvalidInput
 
@@ -66,12 +66,16 @@ def add_parser(sub) -> argparse.ArgumentParser:
     s.add_argument(
         "--candidates",
         type=int,
-        default=128,
-        help="designs in the first population (quasi-random, the baseline first) (default 128)",
+        default=None,
+        help="planar 3R: designs in the first population (quasi-random, the baseline first) "
+        "(default 128)",
     )
     s.add_argument("--rounds", type=int, default=4, help="pattern-search rounds (default 4)")
     s.add_argument(
-        "--grid", type=int, default=201, help="grid of the chosen design's map (default 201)"
+        "--grid",
+        type=int,
+        default=None,
+        help="planar 3R: grid of the chosen design's map (default 201)",
     )
     s.add_argument(
         "--seed", type=int, default=0, help="seed of the quasi-random designs (default 0)"
@@ -118,6 +122,9 @@ def _run(args) -> int:
         return run_dh(args)
     if args.vary not in VARY:
         raise InvalidInput(f"--vary '{args.vary}' is not one of {[*VARY, 'dh', 'dh,limits']}")
+    dh_only = [o for o, v in DH_ONLY.items() if getattr(args, v) is not None]
+    if dh_only:
+        raise InvalidInput(f"{', '.join(dh_only)}: options of --vary dh, not of --vary {args.vary}")
     args.objective = args.objective or "ftw-area"
 
     if args.task not in (None, "circle", "planar"):  # design's --task names the task path
@@ -134,10 +141,10 @@ def _run(args) -> int:
         args.objective,
         task=_task(args, arm),
         rcn_max=args.rcn_max,
-        candidates=args.candidates,
+        candidates=128 if args.candidates is None else args.candidates,
         rounds=args.rounds,
         generations=0 if args.generations is None else args.generations,
-        grid=args.grid,
+        grid=201 if args.grid is None else args.grid,
         seed=args.seed,
         workers=args.workers or 0,
         scheduler=args.scheduler,
