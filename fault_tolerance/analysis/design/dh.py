@@ -413,6 +413,11 @@ def dh_design(
     return DHDesign(chosen, _dh_record(spec, chosen, base, found, seen, seed), seen)
 
 
+def _values(table: DHTable, params: Sequence[DHParam]) -> dict[str, float]:
+    """The varied parameters' values in ``table`` (after a fixed total length's scaling)."""
+    return {p.name: float(getattr(table.joints[p.joint - 1], p.field)) for p in params}
+
+
 def _dh_record(spec, chosen: DHTable, base: DHTable, found, seen: dict, seed: int) -> dict:
     """design.json: the chosen table and values, the baseline, the Pareto front, the settings."""
     task = DHTask(
@@ -428,7 +433,7 @@ def _dh_record(spec, chosen: DHTable, base: DHTable, found, seen: dict, seed: in
         "kind": "dh",
         "objective": spec["objective"],
         "dh": table_dict(chosen),
-        "parameters": {p.name: p.value(u) for p, u in zip(params, found.u, strict=True)},
+        "parameters": _values(chosen, params),
         "mean_jvj": final.get("mean_jvj"),
         "max_jvj": final.get("max_jvj"),
         "rcn_max": final.get("rcn_max"),
@@ -443,9 +448,9 @@ def _dh_record(spec, chosen: DHTable, base: DHTable, found, seen: dict, seed: in
         },  # fmt: skip
         "pareto": [
             {
-                "parameters": {
-                    p.name: p.value(u) for p, u in zip(params, seen["u"][i], strict=True)
-                },
+                "parameters": _values(
+                    candidate_table(base, params, seen["u"][i], spec["total_length"]), params
+                ),
                 "mean_jvj": float(pts[i, 0]),
                 "rcn_max": float(pts[i, 1]),
             }
