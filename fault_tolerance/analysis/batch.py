@@ -28,6 +28,7 @@ import numpy as np
 
 from fault_tolerance.analysis.fast import batch as batch_kernel
 from fault_tolerance.errors import IntolerableFailure, InvalidInput
+from fault_tolerance.numerics.checks import finite
 from fault_tolerance.numerics.linalg import PIVOT_TOL, projection, reduced_rates
 from fault_tolerance.resolution.indices import (
     RESPONSES,
@@ -75,8 +76,9 @@ def _check(Js, *vectors) -> tuple[np.ndarray, ...]:
         if v.shape != (B, size):
             raise InvalidInput(f"{name} must have shape ({B}, {size}), got {v.shape}")
         outs.append(v)
-    if not all(np.all(np.isfinite(a)) for a in outs):
-        raise InvalidInput("Js and the rate arrays must be finite")
+    finite(Js, "Js")
+    for (name, _, _), v in zip(vectors, outs[1:], strict=True):
+        finite(v, name)
     return tuple(outs)
 
 

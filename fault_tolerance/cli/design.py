@@ -14,9 +14,9 @@ from fault_tolerance.cli.common import (
     load_robot,
     lockable_of,
 )
+from fault_tolerance.cli.design_dh import DH_ONLY, run_dh
 from fault_tolerance.cli.design_dh import add_arguments as add_dh_arguments
-from fault_tolerance.cli.design_dh import run_dh
-from fault_tolerance.cli.workspace import DASK_HELP, add_dask_options, singletons
+from fault_tolerance.cli.workspace import DASK_HELP, add_dask_options, singletons, sweep_output
 from fault_tolerance.errors import InvalidInput
 
 NAME = "design"
@@ -36,6 +36,7 @@ def add_parser(sub) -> argparse.ArgumentParser:
         NAME, help=HELP, description=DASK_HELP, epilog=epilog(EXAMPLE), formatter_class=FORMATTER
     )
     add_robot_options(s)
+    _task_help(s)
     s.add_argument(
         "--vary",
         default="limits",
@@ -62,10 +63,19 @@ def add_parser(sub) -> argparse.ArgumentParser:
         help="require max K <= this on the task (default: no requirement); --vary dh: max k_S "
         "<= this (default 100, the paper's threshold)",
     )
-    s.add_argument("--candidates", type=int, default=128, help="quasi-random designs (default 128)")
+    s.add_argument(
+        "--candidates",
+        type=int,
+        default=None,
+        help="planar 3R: designs in the first population (quasi-random, the baseline first) "
+        "(default 128)",
+    )
     s.add_argument("--rounds", type=int, default=4, help="pattern-search rounds (default 4)")
     s.add_argument(
-        "--grid", type=int, default=201, help="grid of the chosen design's map (default 201)"
+        "--grid",
+        type=int,
+        default=None,
+        help="planar 3R: grid of the chosen design's map (default 201)",
     )
     s.add_argument(
         "--seed", type=int, default=0, help="seed of the quasi-random designs (default 0)"
@@ -74,6 +84,13 @@ def add_parser(sub) -> argparse.ArgumentParser:
     add_dh_arguments(s)
     s.set_defaults(func=run)
     return s
+
+
+def _task_help(s: argparse.ArgumentParser) -> None:
+    """``--task`` of ``design`` names the task path, and only ``circle`` is one: say so."""
+    action = next(a for a in s._actions if "--task" in a.option_strings)
+    action.help = "the task path: circle, the only one ('planar' means the same) (default: circle)"
+    action.metavar = "circle"
 
 
 def _task(args, arm):
@@ -91,9 +108,9 @@ def _task(args, arm):
 
 def run(args) -> int:
     """Design search into ``--out``: design.json and design.png."""
-    from fault_tolerance.storage.folder_lock import FolderLock
+    from fault_tolerance.analysis.design.search import DESIGN_FILES
 
-    with FolderLock(args.out):  # a second writer of --out exits 2 naming this one
+    with sweep_output(args.out, DESIGN_FILES):
         return _run(args)
 
 
@@ -105,6 +122,9 @@ def _run(args) -> int:
         return run_dh(args)
     if args.vary not in VARY:
         raise InvalidInput(f"--vary '{args.vary}' is not one of {[*VARY, 'dh', 'dh,limits']}")
+    dh_only = [o for o, v in DH_ONLY.items() if getattr(args, v) is not None]
+    if dh_only:
+        raise InvalidInput(f"{', '.join(dh_only)}: options of --vary dh, not of --vary {args.vary}")
     args.objective = args.objective or "ftw-area"
 
     if args.task not in (None, "circle", "planar"):  # design's --task names the task path
@@ -121,9 +141,10 @@ def _run(args) -> int:
         args.objective,
         task=_task(args, arm),
         rcn_max=args.rcn_max,
-        candidates=args.candidates,
+        candidates=128 if args.candidates is None else args.candidates,
         rounds=args.rounds,
-        grid=args.grid,
+        generations=0 if args.generations is None else args.generations,
+        grid=201 if args.grid is None else args.grid,
         seed=args.seed,
         workers=args.workers or 0,
         scheduler=args.scheduler,

@@ -12,6 +12,11 @@ from fault_tolerance.errors import InvalidInput
 
 #: The parameters varied by default on the paper's 4R: upper arm and forearm, total length fixed.
 DEFAULT_PARAMS = {"spatial_4r": "d3:0.2:0.6,a4:0.1:0.5"}
+#: Options of --vary dh alone (flag -> argparse dest); a planar design refuses them.
+DH_ONLY = {"--dh": "dh", "--params": "params", "--total-length": "total_length",
+           "--popsize": "popsize", "--search-dt": "search_dt"}  # fmt: skip
+#: Options of a planar design alone; --vary dh refuses them.
+PLANAR_ONLY = {"--candidates": "candidates", "--grid": "grid"}
 #: Default task of a template: the paper's Fig. 6 circle for the 4R.
 DEFAULT_TASKS = {"spatial_4r": ((0.09, 0.21, 0.27), 0.075)}
 
@@ -21,7 +26,7 @@ def add_arguments(s: argparse.ArgumentParser) -> None:
     g = s.add_argument_group("DH design (--vary dh)")
     g.add_argument(
         "--dh",
-        default="spatial_4r",
+        default=None,
         help="the base arm: a DH file (.json or .csv, docs/design.md) or a template "
         "(spatial_4r | anthropomorphic_7r) (default spatial_4r)",
     )
@@ -34,14 +39,22 @@ def add_arguments(s: argparse.ArgumentParser) -> None:
     )
     g.add_argument(
         "--total-length",
-        default="fixed",
+        default=None,
         help="fixed (every length scaled so that the sum of |a|, |d| and the tool offset is the "
         "base arm's) | free | a number [m] (default fixed)",
     )
-    g.add_argument("--popsize", type=int, default=6, help="DE population per parameter (default 6)")
-    g.add_argument("--generations", type=int, default=8, help="DE generations (default 8)")
     g.add_argument(
-        "--search-dt", type=float, default=1e-2, help="time step of the search's runs [s] (the "
+        "--popsize", type=int, default=None, help="DE population per parameter (default 6)"
+    )
+    g.add_argument(
+        "--generations",
+        type=int,
+        default=None,
+        help="differential-evolution generations after the first population (default 8 for "
+        "--vary dh, 0 for a planar 3R: its quasi-random first population and the pattern search)",
+    )
+    g.add_argument(
+        "--search-dt", type=float, default=None, help="time step of the search's runs [s] (the "
         "chosen design is re-run at 1 ms) (default 0.01)",
     )  # fmt: skip
 
@@ -92,6 +105,13 @@ def run_dh(args) -> int:
     from fault_tolerance.figures.design import plot_dh_design
     from fault_tolerance.resolution.indices import RCN_THRESHOLD
 
+    planar = [o for o, v in PLANAR_ONLY.items() if getattr(args, v) is not None]
+    if planar:
+        raise InvalidInput(f"{', '.join(planar)}: options of a planar design, not of --vary dh")
+    args.dh = args.dh or "spatial_4r"
+    args.total_length = args.total_length or "fixed"
+    args.popsize = 6 if args.popsize is None else args.popsize
+    args.search_dt = 1e-2 if args.search_dt is None else args.search_dt
     if args.robot or args.description:
         raise InvalidInput(
             "--vary dh takes its arm from --dh FILE|TEMPLATE, not --robot/--description"
@@ -111,13 +131,13 @@ def run_dh(args) -> int:
         rcn_max=RCN_THRESHOLD if args.rcn_max is None else args.rcn_max,
         total_length=_total(args.total_length, table), search_dt=args.search_dt,
     )  # fmt: skip
+    generations = 8 if args.generations is None else args.generations
     d = dh_design(
-        spec, seed=args.seed, popsize=args.popsize, generations=args.generations,
+        spec, seed=args.seed, popsize=args.popsize, generations=generations,
         pattern_rounds=args.rounds, workers=args.workers or 0, scheduler=args.scheduler,
         folder=args.out, progress=not args.no_progress,
     )  # fmt: skip
-    d.save(args.out, draw=plot_dh_design)
-    _replay(d, spec, Path(args.out))
+    d.save(args.out, draw=plot_dh_design, extra=lambda tmp: _replay(d, spec, tmp))
     r, b = d.record, d.record["baseline"]
     names = ", ".join(f"{k} = {v:.4g}" for k, v in r["parameters"].items())
     print(

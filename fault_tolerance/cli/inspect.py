@@ -15,9 +15,8 @@ from fault_tolerance.cli.common import (
 NAME = "inspect"
 HELP = "kinematic tree, chosen chain and task, intolerable joints"
 EXAMPLE = (
-    "fault-tolerance inspect spatial_4r\n  fault-tolerance inspect my_arm.urdf --tip tool0\n"
-    "  fault-tolerance inspect ur_description/urdf/ur5e.xacro --package-dir . --tip tool0\n"
-    "  fault-tolerance inspect universal_robots_ur5e/ur5e.xml   (MuJoCo MJCF)"
+    "fault-tolerance inspect spatial_4r\n  fault-tolerance inspect my_arm.urdf --tip tool\n"
+    "  fault-tolerance inspect ur_description/urdf/ur5e.xacro --package-dir . --tip tool0"
 )
 
 

@@ -31,7 +31,7 @@ EXAMPLE = (
     "  fault-tolerance simulate --robot panda --task position --lockable panda_joint2,panda_joint4 "
     "--radius 0.05 --rows y,z --out out/panda\n"
     "  fault-tolerance simulate --robot panda --algorithms jvja --no-limits --out out/panda_paper\n"
-    "  fault-tolerance simulate --description my_arm.urdf --tip tool0 --task position --csv path.csv --out out/mine"
+    "  fault-tolerance simulate --description my_arm.urdf --tip tool --task position --lockable joint1,joint2,joint3 --csv path.csv --out out/mine"
 )
 
 
@@ -243,8 +243,9 @@ def _run(args, out: Path | None) -> int:
         print(f"{alg}: {limits_line(run_)}")
     if out:
         from fault_tolerance.figures import runs as plots
+        from fault_tolerance.figures.text import plain
 
-        title = f"{arm.name}: {', '.join(algs)}"
+        title = plain(f"{arm.name}: {', '.join(algs)}")  # names are data, not mathtext
         plots.save_figure(plots.plot_comparison(runs, title), out / "comparison")
         print(f"wrote {out}/ (run.npz, run.csv, summary.json per algorithm; comparison.png/.svg)")
     return 0

@@ -6,6 +6,8 @@ from pathlib import Path
 
 import numpy as np
 
+from fault_tolerance.figures.text import plain
+
 
 def plot_design(d, path: str | Path) -> Path:
     """Two panels: W(A)/FTW of the chosen design; candidates (mean λ vs mean K, or area)."""
@@ -60,7 +62,7 @@ def plot_design(d, path: str | Path) -> Path:
         b.set_ylabel("mean K")
         b.legend(fontsize=8)
         b.set_title(f"{rec['evaluations']} designs, objective {rec['objective']}")
-    fig.suptitle(f"{rec['robot']}: design ({rec['vary']})")
+    fig.suptitle(f"{plain(rec['robot'])}: design ({plain(rec['vary'])})")
     fig.tight_layout()
     fig.savefig(path, dpi=90)
     plt.close(fig)

@@ -6,6 +6,8 @@ from pathlib import Path
 
 import numpy as np
 
+from fault_tolerance.figures.text import plain
+
 
 def _mask_image(ws, sl):
     """0 outside W(A), 1 in W(A) only, 2 in the failure-tolerant workspace."""
@@ -53,7 +55,8 @@ def plot_workspace(ws, path: str | Path) -> Path:
             a.set_ylabel("y [m]")
             a.set_aspect("equal")
     fig.suptitle(
-        f"{ws.spec['robot']['source']}: failure-tolerant workspace, lockable {ws.spec['lockable']}"
+        f"{plain(ws.spec['robot']['source'])}: failure-tolerant workspace, lockable "
+        f"{plain(ws.spec['lockable'])}"
     )
     fig.tight_layout()
     fig.savefig(path, dpi=90)

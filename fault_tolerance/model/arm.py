@@ -197,16 +197,19 @@ class Arm:
             return self.joint_names.index(joint)
         raise JointNotFound(str(joint), self.joint_names)
 
-    def check_q(self, q: np.ndarray | Sequence[float]) -> np.ndarray:
-        """``q`` as a float array of shape (n,), or :class:`InvalidInput` saying what is wrong."""
-        q = np.asarray(q, dtype=float)
+    def check_q(self, q: np.ndarray | Sequence[float], name: str = "q") -> np.ndarray:
+        """``q`` as a float array of shape (n,), or :class:`InvalidInput` naming ``name``."""
+        try:
+            q = np.asarray(q, dtype=float)
+        except (TypeError, ValueError):
+            raise InvalidInput(f"{name} must be {self.n} numbers, got {q!r}") from None
         if q.shape != (self.n,):
             raise InvalidInput(
-                f"q has shape {q.shape}; {self.name} needs shape ({self.n},) for joints "
+                f"{name} has shape {q.shape}; {self.name} needs shape ({self.n},) for joints "
                 f"{self.joint_names}"
             )
         if not np.all(np.isfinite(q)):
-            raise InvalidInput(f"q must be finite, got {q.tolist()}")
+            raise InvalidInput(f"{name} must be finite, got {q.tolist()}")
         return q
 
     # -- kinematics (all from Pinocchio) ----------------------------------------------------

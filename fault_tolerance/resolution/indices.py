@@ -11,6 +11,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from fault_tolerance.errors import InvalidInput
+from fault_tolerance.numerics.checks import finite
 from fault_tolerance.numerics.linalg import projection, reduced_rates
 from fault_tolerance.resolution.scenarios import Scenarios, scenarios
 
@@ -88,11 +89,12 @@ def jvj(
         >>> ft.jvj(J, xd, ft.resolve("jvja", J, xd)) <= ft.jvj(J, xd, ft.resolve("lnva", J, xd))
         True
     """
-    J = np.asarray(J, dtype=float)
+    J = finite(J, "J", ndim=2)
+    m, n = J.shape
+    xdot, qd = finite(xdot, "xdot", (m,)), finite(qd, "qd", (n,))
     sc = _scenarios(J, lockable, weights, joint_names)
     proj = projection(J)
     sc.check_tolerable(proj.N)
-    xdot, qd = np.asarray(xdot, dtype=float), np.asarray(qd, dtype=float)
     if response == "continuation":
         _check_rates(J, xdot, qd)
     post = post_failure_rates(proj.Jpinv @ xdot, proj.N, sc, qd, response)
@@ -151,7 +153,7 @@ def condition_numbers(sigma: np.ndarray) -> np.ndarray:
 
 def rcn(J: np.ndarray, lockable=None, *, joint_names: Sequence[str] = ()) -> np.ndarray:
     """Reduced condition numbers ``k_S = σ_max(J_S)/σ_min(J_S) >= 1``, eq. (15), shape (f,)."""
-    J = np.asarray(J, dtype=float)
+    J = finite(J, "J", ndim=2)
     return condition_numbers(reduced_singular_values(J, _scenarios(J, lockable, None, joint_names)))
 
 
@@ -171,8 +173,9 @@ def rcn_gradient(
     :math:`\partial k/\partial q_j = (\sigma_{max}' \sigma_{min} - \sigma_{max}\sigma_{min}')/\sigma_{min}^2`.
     ``dJ`` is ``Arm.jacobian_derivatives(q)``, shape (n, m, n).
     """
-    J = np.asarray(J, dtype=float)
+    J = finite(J, "J", ndim=2)
     m, n = J.shape
+    dJ = finite(dJ, "dJ", (n, m, n))
     sc = _scenarios(J, lockable, None, joint_names)
     grad = np.zeros(n)
     for S in sc.sets:
@@ -189,11 +192,11 @@ def rcn_gradient(
 
 def fault_tolerance_measure(J: np.ndarray, lockable=None) -> float:
     """``k_f = min_S σ_min(J_S)`` (Roberts & Maciejewski): worst-case reduced dexterity."""
-    J = np.asarray(J, dtype=float)
+    J = finite(J, "J", ndim=2)
     return float(reduced_singular_values(J, _scenarios(J, lockable))[:, 0].min())
 
 
 def reduced_manipulability(J: np.ndarray, lockable=None) -> np.ndarray:
     """``w_S = √det(J_S J_Sᵀ)`` per scenario, shape (f,)."""
-    J = np.asarray(J, dtype=float)
+    J = finite(J, "J", ndim=2)
     return np.prod(reduced_singular_values(J, _scenarios(J, lockable)), axis=1)

@@ -32,6 +32,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from fault_tolerance.errors import InvalidInput
+from fault_tolerance.numerics.checks import finite
 
 #: Keywords a caller passes as context, not as the resolver's options (see the module doc).
 CONTEXT = frozenset({"proj", "tolerate", "joint_names", "arm", "q", "dJ"})
@@ -209,6 +210,4 @@ def check_task(J, xdot) -> tuple[np.ndarray, np.ndarray]:
     xdot = np.asarray(xdot, dtype=float)
     if J.ndim != 2 or xdot.shape != (J.shape[0],):
         raise InvalidInput(f"J must be (m, n) and xdot (m,); got {J.shape} and {xdot.shape}")
-    if not (np.all(np.isfinite(J)) and np.all(np.isfinite(xdot))):
-        raise InvalidInput("J and xdot must be finite")
-    return J, xdot
+    return finite(J, "J"), finite(xdot, "xdot")

@@ -154,7 +154,7 @@ def simulate(
         >>> bool(np.allclose(run.q, ref.q, rtol=0, atol=1e-12))
         True
     """
-    _check_call(engine, algorithm, plan_options, q0, options)
+    q0 = _check_call(arm, engine, algorithm, plan_options, q0, options)
     sim = dict(
         lockable=lockable, weights=weights, response=response, dt=dt, duration=duration,
         feedback_gain=feedback_gain, gain=gain, lock_joint=lock_joint, lock_time=lock_time,
@@ -169,10 +169,12 @@ def simulate(
     return _simulate(arm, path, algorithm, q0=q0, **sim)
 
 
-def _check_call(engine: str, algorithm: str, plan_options, q0, options=None) -> None:
-    """The options of :func:`simulate` that decide the route, checked before any work."""
+def _check_call(arm, engine: str, algorithm: str, plan_options, q0, options=None):
+    """The options of :func:`simulate` that decide the route, checked before any work; ``q0``."""
     if engine not in ENGINES:
         raise InvalidInput(f"engine {engine!r} is not one of {list(ENGINES)}")
+    if q0 is not None:
+        q0 = arm.check_q(q0, "q0")
     if algorithm == GLOBAL and GLOBAL not in PATH_PLANNERS:
         raise InvalidInput(
             f"algorithm '{GLOBAL}' needs the whole-path planner: import fault_tolerance"
@@ -182,7 +184,7 @@ def _check_call(engine: str, algorithm: str, plan_options, q0, options=None) -> 
             raise InvalidInput(
                 f"options are a step resolver's; '{algorithm}' takes plan_options instead"
             )
-        return
+        return q0
     if algorithm not in names():
         raise InvalidInput(f"algorithm {algorithm!r} is not one of {list(algorithms())}")
     if plan_options is not None:
@@ -191,6 +193,7 @@ def _check_call(engine: str, algorithm: str, plan_options, q0, options=None) -> 
         raise InvalidInput(
             f"simulate needs q0 for algorithm '{algorithm}' (only 'global' chooses its own start)"
         )
+    return q0
 
 
 def _simulate(

@@ -331,18 +331,27 @@ class DHDesign:
     record: dict
     evaluated: dict
 
-    def save(self, folder, draw=None):
-        """Write ``design.json`` and ``design.urdf`` into ``folder`` (``design.png`` with ``draw``)."""
+    def save(self, folder, draw=None, extra=None):
+        """Write ``design.json`` and ``design.urdf`` into ``folder``, whole or absent.
+
+        ``draw(design, path)`` writes ``design.png`` and ``extra(staging_folder)`` more files
+        (the CLI's replay page), both inside the staged folder, so the completion record lists
+        them; finished chunks (``chunks-*/``) are kept.
+        """
         from pathlib import Path
 
+        from fault_tolerance.analysis.design.search import DESIGN_FILES
         from fault_tolerance.model.dh import dh_urdf
+        from fault_tolerance.storage.result_folder import staged_folder
 
         folder = Path(folder)
-        folder.mkdir(parents=True, exist_ok=True)
-        (folder / "design.urdf").write_text(dh_urdf(self.table))
-        (folder / "design.json").write_text(json.dumps(self.record, indent=2) + "\n")
-        if draw is not None:
-            draw(self, folder / "design.png")
+        with staged_folder(folder, replaceable=DESIGN_FILES, aside=("chunks-*",)) as tmp:
+            (tmp / "design.urdf").write_text(dh_urdf(self.table))
+            (tmp / "design.json").write_text(json.dumps(self.record, indent=2) + "\n")
+            if draw is not None:
+                draw(self, tmp / "design.png")
+            if extra is not None:
+                extra(tmp)
         return folder
 
 
@@ -404,6 +413,11 @@ def dh_design(
     return DHDesign(chosen, _dh_record(spec, chosen, base, found, seen, seed), seen)
 
 
+def _values(table: DHTable, params: Sequence[DHParam]) -> dict[str, float]:
+    """The varied parameters' values in ``table`` (after a fixed total length's scaling)."""
+    return {p.name: float(getattr(table.joints[p.joint - 1], p.field)) for p in params}
+
+
 def _dh_record(spec, chosen: DHTable, base: DHTable, found, seen: dict, seed: int) -> dict:
     """design.json: the chosen table and values, the baseline, the Pareto front, the settings."""
     task = DHTask(
@@ -419,7 +433,7 @@ def _dh_record(spec, chosen: DHTable, base: DHTable, found, seen: dict, seed: in
         "kind": "dh",
         "objective": spec["objective"],
         "dh": table_dict(chosen),
-        "parameters": {p.name: p.value(u) for p, u in zip(params, found.u, strict=True)},
+        "parameters": _values(chosen, params),
         "mean_jvj": final.get("mean_jvj"),
         "max_jvj": final.get("max_jvj"),
         "rcn_max": final.get("rcn_max"),
@@ -434,9 +448,9 @@ def _dh_record(spec, chosen: DHTable, base: DHTable, found, seen: dict, seed: in
         },  # fmt: skip
         "pareto": [
             {
-                "parameters": {
-                    p.name: p.value(u) for p, u in zip(params, seen["u"][i], strict=True)
-                },
+                "parameters": _values(
+                    candidate_table(base, params, seen["u"][i], spec["total_length"]), params
+                ),
                 "mean_jvj": float(pts[i, 0]),
                 "rcn_max": float(pts[i, 1]),
             }

@@ -45,6 +45,7 @@ from fault_tolerance.model.planar import (
     require_planar_chain,
     rigid_pair,
 )
+from fault_tolerance.storage.budget import check_workspace
 
 #: Default sample counts of the planar-3R method.
 SAMPLES = 120  # joint-3 values for W(A) and the self-motion maps
@@ -348,28 +349,26 @@ def failure_tolerant_workspace(
             sampled method, ``seed``).
     """
     spec = workspace_spec(arm, limits, lockable, **options)
-    if spec["method"] == "planar-3r":
-        chunks = run(
-            planar_chunk,
-            spec,
-            spec["chunks"],
-            folder=folder,
-            workers=workers,
-            scheduler=scheduler,
-            progress=progress,
-            desc="workspace",
-        )
-        return assemble_planar(spec, chunks)
-    from fault_tolerance.analysis.workspace.sampled import assemble_sampled, n_chunks, sampled_chunk
+    from fault_tolerance.analysis.workspace import sampled
 
+    f, points = len(spec["lockable"]), spec["grid"] ** len(spec["center"])
+    if spec["method"] == "planar-3r":
+        count, compute, assemble = spec["chunks"], planar_chunk, assemble_planar
+        bound = points * (25 + f)  # index, jump, rcn (8 bytes), pre (1), locks (f): every point
+    else:
+        per = -(-int(spec["samples"]) // sampled.CHUNK_SAMPLES)
+        count = per * (1 + f * int(spec["theta_samples"]))
+        compute, assemble, bound = sampled.sampled_chunk, sampled.assemble_sampled, points * 17
+    check_workspace(spec, count)  # every size refused before any chunk runs
     chunks = run(
-        sampled_chunk,
+        compute,
         spec,
-        n_chunks(spec),
+        count if spec["method"] == "planar-3r" else sampled.n_chunks(spec),
         folder=folder,
         workers=workers,
         scheduler=scheduler,
         progress=progress,
         desc="workspace",
+        chunk_bytes=bound + (1 << 16),
     )
-    return assemble_sampled(spec, chunks)
+    return assemble(spec, chunks)
