@@ -24,6 +24,7 @@ from fault_tolerance.analysis import batch  # noqa: E402
 from fault_tolerance.control.controller import Controller  # noqa: E402
 from fault_tolerance.errors import (  # noqa: E402
     AmbiguousFrame,
+    DescriptionError,
     DynamicsUnavailable,
     FaultToleranceError,
     FolderLocked,
@@ -37,10 +38,13 @@ from fault_tolerance.errors import (  # noqa: E402
     InvalidScenario,
     InvalidTask,
     JointNotFound,
+    MJCFError,
     OutputError,
     PackageNotFound,
     RobotNotFound,
     StructurallyIntolerable,
+    UnknownFormat,
+    UnsafeDescription,
     URDFError,
 )
 from fault_tolerance.model.arm import Arm, parse_task  # noqa: E402
@@ -55,6 +59,7 @@ from fault_tolerance.numerics.linalg import (  # noqa: E402
 from fault_tolerance.planning.default_start import StartChoice, default_start  # noqa: E402
 from fault_tolerance.planning.posture import initial_posture  # noqa: E402
 from fault_tolerance.planning.wholepath import run as _global_planner  # noqa: E402, F401 - registers "global"
+from fault_tolerance.resolution import registry  # noqa: E402 - the resolvers by name
 from fault_tolerance.resolution.api import jvj, resolve  # noqa: E402
 from fault_tolerance.resolution.bounded import BoundedRates, resolve_bounded  # noqa: E402
 from fault_tolerance.resolution.indices import (  # noqa: E402
@@ -64,14 +69,11 @@ from fault_tolerance.resolution.indices import (  # noqa: E402
     reduced_manipulability,
     square_sum_rcn,
 )
-from fault_tolerance.resolution.resolvers import (  # noqa: E402
-    RESOLVERS,
-    jump_reduction,
-    jvja,
-    jvja_explicit,
-    lnva,
-    mda,
-)
+from fault_tolerance.resolution.jvja import jvja, jvja_explicit  # noqa: E402
+from fault_tolerance.resolution.lnva import lnva  # noqa: E402
+from fault_tolerance.resolution.mda import mda  # noqa: E402
+from fault_tolerance.resolution.registry import ResolverEntry  # noqa: E402
+from fault_tolerance.resolution.resolvers import jump_reduction  # noqa: E402
 from fault_tolerance.resolution.scenarios import Scenarios, scenarios  # noqa: E402
 from fault_tolerance.simulation.paths import (  # noqa: E402
     CirclePath,
@@ -105,7 +107,8 @@ __all__ = [
     "pinv",
     "projection",
     "reduced_rates",
-    "RESOLVERS",
+    "registry",
+    "ResolverEntry",
     "jvja",
     "jvja_explicit",
     "lnva",
@@ -129,6 +132,7 @@ __all__ = [
     "batch",
     # errors
     "AmbiguousFrame",
+    "DescriptionError",
     "DynamicsUnavailable",
     "FaultToleranceError",
     "FolderLocked",
@@ -142,11 +146,14 @@ __all__ = [
     "InvalidScenario",
     "InvalidTask",
     "JointNotFound",
+    "MJCFError",
     "OutputError",
     "PackageNotFound",
     "RobotNotFound",
     "StructurallyIntolerable",
+    "UnknownFormat",
     "URDFError",
+    "UnsafeDescription",
 ]
 
 

@@ -64,8 +64,28 @@ class AmbiguousFrame(FrameNotFound):
         )
 
 
-class URDFError(FaultToleranceError):
+class DescriptionError(FaultToleranceError):
+    """A robot description (URDF, xacro, MJCF) cannot be read or turned into an arm."""
+
+
+class URDFError(DescriptionError):
     """A URDF file cannot be read or turned into an arm."""
+
+
+class MJCFError(DescriptionError):
+    """A MuJoCo MJCF file cannot be read or turned into an arm."""
+
+
+class UnknownFormat(DescriptionError):
+    """A file is in none of the description formats the toolkit reads."""
+
+    def __init__(self, path, formats: Sequence[str]) -> None:
+        self.formats = list(formats)
+        super().__init__(
+            f"{path}: not a robot description the toolkit reads; the known formats are "
+            f"{self.formats} (URDF: .urdf or .xml with <robot>; xacro: .xacro, .urdf.xacro; "
+            "MJCF: .xml with <mujoco>)"
+        )
 
 
 class PackageNotFound(URDFError):
@@ -80,6 +100,16 @@ class PackageNotFound(URDFError):
             f"folder that holds '{package}/' or whose package.xml names it with package_dirs=[...] "
             "(--package-dir DIR, repeatable)"
         )
+
+
+class UnsafeDescription(URDFError):
+    """A description that would run code, read a file it should not, or expand without bound.
+
+    Raised for a xacro ``${...}`` expression outside the accepted ones (docs/xacro.md), a read
+    outside the folders the user named, or an expansion past one of the limits of
+    :mod:`fault_tolerance.xacro_eval`. The message names the file, the line where it can be had
+    and the expression or file refused.
+    """
 
 
 class InvalidTask(FaultToleranceError):

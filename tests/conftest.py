@@ -12,6 +12,7 @@ Every robot fixture is a :class:`RobotCase`: the arm and the lockable set the te
 
 from __future__ import annotations
 
+import os
 import zlib
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -20,7 +21,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-import fault_tolerance as ft
+# The CLI tests compare stderr line by line: numba compiles on use there, silently, whatever
+# the state of the cache (tests/test_warm.py tests the default, compiling ahead).
+os.environ.setdefault("FAULT_TOLERANCE_FIRST_RUN", "on-use")
+
+import fault_tolerance as ft  # noqa: E402
 from fault_tolerance.numerics.linalg import min_pivot
 
 #: Base seed of every RNG in the suite.

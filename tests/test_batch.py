@@ -115,6 +115,8 @@ def test_bad_input_is_refused():
     with pytest.raises(InvalidInput, match="xdots"):
         batch.resolve("lnva", Js, np.ones((3, 2)))
     with pytest.raises(InvalidInput, match="not one of"):
+        batch.resolve("fastest", Js, np.ones((4, 2)))
+    with pytest.raises(InvalidInput, match="needs the configuration"):
         batch.resolve("mda", Js, np.ones((4, 2)))
     with pytest.raises(InvalidInput, match="finite"):
         batch.rcn(np.full((2, 2, 3), np.nan))

@@ -152,12 +152,16 @@ def test_errors_unchanged():
         with pytest.raises(InvalidInput, match="xdots"):
             fn("lnva", Js, np.ones((3, 2)))
         with pytest.raises(InvalidInput, match="not one of"):
-            fn("mda", Js, np.ones((4, 2)))
+            fn("fastest", Js, np.ones((4, 2)))
         with pytest.raises(InvalidInput, match="intolerable"):
             fn("jvja", Js, np.ones((4, 2)), intolerable="x")
         with pytest.raises(InvalidInput, match="finite"):
             fn("jvja", np.full((4, 2, 3), np.nan), np.ones((4, 2)))
     assert batch.resolve("jvja", np.ones((0, 2, 3)), np.ones((0, 2))).shape == (0, 3)
+    with pytest.raises(InvalidInput, match="needs the configuration"):  # MDA: no arm, no q
+        batch.resolve("mda", Js, np.ones((4, 2)))
+    with pytest.raises(InvalidInput, match="not one of"):  # the stacked code is LNVA and JVJA's
+        batch.resolve_stacked("mda", Js, np.ones((4, 2)))
 
 
 def test_kernel_runs_as_plain_python():

@@ -6,6 +6,7 @@ No timing is asserted here: timing lives in the benchmark itself.
 from __future__ import annotations
 
 import json
+import re
 import subprocess
 import sys
 
@@ -16,7 +17,7 @@ import fault_tolerance as ft
 from fault_tolerance.bench import command as bench_command
 from fault_tolerance.bench import report as bench_report
 from fault_tolerance.bench import routes as bench_routes
-from fault_tolerance.resolution.resolvers import jvja_explicit
+from fault_tolerance.resolution.jvja import jvja_explicit
 
 ROOT = __import__("pathlib").Path(__file__).resolve().parents[1]
 TINY = ["--robots", "planar_3r", "--steps", "4", "--warmup", "1", "--batch-configurations", "200"]
@@ -174,3 +175,59 @@ def test_two_bound_pool_is_the_same_without_quadprog(key, monkeypatch):
     for (qa, xa), (qb, xb) in zip(with_qp, without, strict=True):
         np.testing.assert_array_equal(qa, qb)
         np.testing.assert_array_equal(xa, xb)
+
+
+QUICK = ["--robots", "planar_3r", "--steps", "3", "--warmup", "1", "--batch-configurations", "0"]
+
+
+def _failing_target(always: bool, monkeypatch):
+    """Make the JVJA / LNVA target of the planar 3R fail (every time, or in the first measurement
+    only) and count the arm's measurements."""
+    calls = {"targets": 0, "arm": 0}
+    real_targets, real_arm = bench_command.targets, bench_command.bench_arm
+
+    def targets(results):
+        calls["targets"] += 1
+        items = real_targets(results)
+        for t in items:
+            if t["name"] == "jvja_over_lnva" and (always or calls["targets"] == 1):
+                t["pass"] = False
+        return items
+
+    def bench_arm(*a, **k):
+        calls["arm"] += 1
+        return real_arm(*a, **k)
+
+    monkeypatch.setattr(bench_command, "targets", targets)
+    monkeypatch.setattr(bench_command, "bench_arm", bench_arm)
+    return calls
+
+
+def test_check_exits_1_when_a_target_fails_after_its_second_measurement(monkeypatch, capsys):
+    """--check: exit 1 when a target fails; it was measured twice, and its FAIL line shows the
+    load average and the first value. Without --check the same run exits 0."""
+    calls = _failing_target(True, monkeypatch)
+    assert bench_command.main([*QUICK, "--check"]) == 1
+    assert calls["arm"] == 2  # the failed target's arm was timed once more, not more
+    fail = next(line for line in capsys.readouterr().out.splitlines() if line.startswith("FAIL"))
+    assert "JVJA step / LNVA step" in fail and "measured twice, first" in fail
+    assert re.search(r"load average \d+\.\d\d$", fail)
+    assert bench_command.main(QUICK) == 0
+
+
+def test_a_target_that_passes_when_measured_again_is_not_reported_fail(monkeypatch, capsys):
+    """A target that fails once and passes on its re-measurement is reported PASS."""
+    calls = _failing_target(False, monkeypatch)
+    bench_command.main(QUICK)
+    assert calls["arm"] == 2
+    out = capsys.readouterr().out
+    line = next(x for x in out.splitlines() if "JVJA step / LNVA step" in x)
+    assert line.startswith("PASS") and "measured twice, first" in line
+
+
+def test_check_exits_0_when_every_target_passes(monkeypatch):
+    """--check with no failed target: exit 0, and nothing is measured twice."""
+    real = bench_command.targets
+    monkeypatch.setattr(bench_command, "targets",
+                        lambda res: [t for t in real(res) if False])  # fmt: skip
+    assert bench_command.main([*QUICK, "--check"]) == 0

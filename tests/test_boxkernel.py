@@ -181,8 +181,9 @@ def test_controller_compiled_step_equals_reference(robot, task, lockable, weight
         xd = rng.normal(size=arm.m) * (0.05 if trial % 2 else 0.5)
         opts = {"dJ": arm.jacobian_derivatives(q)} if method == "mda" else {}
         try:
-            ref = ft.resolve_bounded(method, J, xd, ctrl.scenarios, bounds=arm.rate_bounds(q),
-                                     weights=weights, **opts)  # fmt: skip
+            ref = ft.resolve_bounded(  # the weights are ctrl.scenarios' (lnva, mda take none)
+                method, J, xd, ctrl.scenarios, bounds=arm.rate_bounds(q), **opts
+            )
         except ft.FaultToleranceError:
             continue
         qd = ctrl.step(q, xd)

@@ -16,8 +16,8 @@ from fault_tolerance.model.arm_record import (
     arm_from_record,
     arm_record,
     check_record,
-    confine_meshes,
 )
+from fault_tolerance.model.formats.build import confine_meshes
 
 STL = """solid t
 facet normal 0 0 1

@@ -8,7 +8,7 @@ import pytest
 import fault_tolerance as ft
 from fault_tolerance.control import lapack_steps as kernels
 from fault_tolerance.control.controller import Controller
-from fault_tolerance.resolution.resolvers import MDA_MAX_STEP
+from fault_tolerance.resolution.mda import MDA_MAX_STEP
 
 
 def test_numpy_backend_reports_singular_factors_instead_of_raising():

@@ -97,7 +97,7 @@ def test_resolve_takes_the_inertia_from_the_arm():
         jvja_inertia(J, xd, [1, 3], M=M),
         atol=1e-12,
     )
-    with pytest.raises(InvalidInput, match="needs the inertia"):
+    with pytest.raises(InvalidInput, match="needs the configuration.*M="):
         ft.resolve("jvja_inertia", J, xd, lockable=[1, 3])
 
 
@@ -139,3 +139,19 @@ def test_controller_step_equals_the_resolver(limits):
     np.testing.assert_allclose(ctrl.step(q, xd), want, atol=1e-10)
     with pytest.raises(InvalidInput):
         ctrl.step(q, np.zeros(2))
+
+
+def test_registered_like_the_other_resolvers():
+    """Its registry entry: bounded variant, needs the configuration, options checked, M as context."""
+    from fault_tolerance.resolution import registry
+    from fault_tolerance.resolution.inertia_jvja import JvjaInertiaOptions, bounded_jvja_inertia
+
+    entry = registry.get("jvja_inertia")
+    assert entry.bounded is bounded_jvja_inertia and entry.options is JvjaInertiaOptions
+    assert entry.needs_configuration and entry.compiled is None and entry.colour.startswith("#")
+    J, xd, M = _problem(2, 5, 3)
+    np.testing.assert_allclose(
+        ft.resolve("jvja_inertia", J, xd, [0, 1], M=M), jvja_inertia(J, xd, [0, 1], M=M), atol=1e-12
+    )
+    with pytest.raises(InvalidInput, match="unknown option"):
+        ft.resolve("jvja_inertia", J, xd, [0, 1], M=M, response="continuation")

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 import fault_tolerance as ft
 from fault_tolerance.numerics import linalg
@@ -166,3 +167,42 @@ def test_damping_factor_is_continuous_and_bounded():
     s = np.linspace(0, eps, 50)
     mu = np.array([linalg.damping_factor(x) for x in s])
     assert np.all(np.diff(mu) <= 0)
+
+
+def test_stacks_get_what_each_matrix_gets_alone():
+    """projection, reduced_rates (exact and damped), min_pivot, the scenarios' pivots and the
+    reduced singular values on a stack (B, m, n) equal the one-matrix calls row by row (one
+    implementation serves the scalar API, the batched API and the whole-path planner)."""
+    from fault_tolerance.numerics.linalg import min_pivot, projection, reduced_rates
+    from fault_tolerance.resolution.indices import condition_numbers, reduced_singular_values
+    from fault_tolerance.resolution.scenarios import scenarios
+
+    rng = np.random.default_rng(7)
+    Js = rng.normal(size=(25, 3, 6))
+    Js[0, 2] = Js[0, 1]  # singular: damped
+    Js[1, :, 4] = 0.0  # a zero column: locking joint 4 is free, N[4, 4] = 1
+    xds = rng.normal(size=(25, 3))
+    P = projection(Js)
+    a = np.einsum("bij,bj->bi", P.Jpinv, xds)
+    assert P.sigma_min.shape == (25,) and P.damped[0] and not P.damped[2]
+    sc = scenarios([(0, 3), 2, (1, 4, 5)], 6, r=3)
+    for b in range(len(Js)):
+        one = projection(Js[b])
+        np.testing.assert_allclose(P.Jpinv[b], one.Jpinv, rtol=0, atol=1e-14)
+        np.testing.assert_allclose(P.N[b], one.N, rtol=0, atol=1e-14)
+        assert P.sigma_min[b] == pytest.approx(one.sigma_min, abs=1e-15)
+        np.testing.assert_allclose(sc.pivots(P.N)[b], sc.pivots(one.N), rtol=0, atol=1e-14)
+        np.testing.assert_allclose(
+            condition_numbers(reduced_singular_values(Js, sc))[b],
+            condition_numbers(reduced_singular_values(Js[b], sc)),
+            rtol=1e-13,
+        )
+        for S in sc.sets:
+            assert min_pivot(P.N, S)[b] == pytest.approx(min_pivot(one.N, S), abs=1e-14)
+            for damp in (False, True):
+                np.testing.assert_allclose(
+                    reduced_rates(a, P.N, S, damp)[b],
+                    reduced_rates(a[b], one.N, S, damp),
+                    rtol=1e-12,
+                    atol=1e-12,
+                )

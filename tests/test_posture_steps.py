@@ -14,7 +14,7 @@ import fault_tolerance as ft
 from fault_tolerance.numerics.linalg import SIGMA_EPS, projection
 from fault_tolerance.planning.posture import initial_posture, inverse_kinematics, self_motion_curve
 from fault_tolerance.planning.posture_steps import FastSteps, ReferenceSteps, norm, square_sum
-from fault_tolerance.planning.wholepath.problem import kinematics, projections
+from fault_tolerance.planning.wholepath.problem import kinematics
 from fault_tolerance.resolution.scenarios import scenarios
 
 ARMS = [
@@ -200,7 +200,7 @@ def test_post_rates_of_all_scenarios_at_once_equal_one_by_one(name, task):
     rng = np.random.default_rng(2)
     sc = scenarios(None, arm.n, r=arm.redundancy)
     J = np.array([arm.jacobian(arm.random_q(rng)) for _ in range(30)])
-    N = projections(J).N
+    N = projection(J).N
     N[0] = np.eye(arm.n) * 1e-6  # tiny pivots: damped
     a = rng.standard_normal((30, arm.n))
     got, ref = post_rates(a, N, sc), _post_rates_one_by_one(a, N, sc)

@@ -6,12 +6,12 @@ import numpy as np
 import pytest
 
 import fault_tolerance as ft
-from fault_tolerance.control import controller as realtime
 from fault_tolerance.control.controller import BACKENDS, Controller, available_backends
 from fault_tolerance.numerics.linalg import PIVOT_TOL, SIGMA_EPS
-from fault_tolerance.resolution import resolvers as planner
+from fault_tolerance.resolution import jvja as jvja_module
+from fault_tolerance.resolution import mda as mda_module
 from fault_tolerance.resolution.indices import rcn_gradient
-from fault_tolerance.resolution.resolvers import jvja_explicit
+from fault_tolerance.resolution.jvja import jvja_explicit
 
 AVAILABLE = available_backends()
 ATOL = 1e-10
@@ -78,7 +78,7 @@ def test_jvja_matches_resolve_and_explicit(robot, backend, draw_q, draw_xdot, rn
 def test_step_is_the_chosen_method(planar_3r, draw_q, draw_xdot, rng):
     """Controller.step is the method named at construction; JVJA by default."""
     q, xd = draw_q(planar_3r, rng), draw_xdot(rng, 2)
-    for method in realtime.METHODS:
+    for method in ("lnva", "jvja", "mda"):  # the built-ins, with their compiled steps
         ctrl = Controller(planar_3r.arm, "all", method=method, limits=False)
         np.testing.assert_array_equal(ctrl.step(q, xd), getattr(ctrl, method)(q, xd))
     default = Controller(planar_3r.arm, limits=False)
@@ -168,7 +168,7 @@ def test_kernel_as_plain_python(robot, draw_q, draw_xdot, rng):
 
     ctrl = _controllers(robot, "numpy")
     n = robot.n
-    ws, (params, *_) = single_kernel.workspace(ctrl)
+    ws, (params, *_) = single_kernel.workspace(ctrl.workspace)
     params[1] = PIVOT_TOL
     kernel = single_kernel.packed_step_kernel.py_func
     for q, xd in _samples(robot, draw_q, draw_xdot, rng, k=3):
@@ -296,7 +296,7 @@ def test_tolerate_damps_pivots_like_the_planner(spatial_4r, backend, draw_q, dra
         J = spatial_4r.arm.jacobian(q)
         qd = ctrl.jvja(q, xd)
         assert np.all(np.isfinite(qd))
-        assert_close(qd, planner.jvja(J, xd, "all", tolerate=True))
+        assert_close(qd, jvja_module.jvja(J, xd, "all", tolerate=True))
     # away from small pivots the fast path is taken and equals the plain JVJA
     ctrl = Controller(
         spatial_4r.arm, list(spatial_4r.lockable), tolerate=True, backend=backend, limits=False
@@ -312,7 +312,7 @@ def test_mda_step_is_capped_like_the_planner(robot, draw_q, draw_xdot, rng):
     """A huge MDA gain is capped at max_step, as planner.mda caps it."""
     ctrl = _controllers(robot, "auto", gain=1e3, max_step=0.25)
     q, xd = draw_q(robot, rng), draw_xdot(rng, robot.m)
-    ref = planner.mda(
+    ref = mda_module.mda(
         robot.arm.jacobian(q), xd, list(robot.lockable), arm=robot.arm, q=q, gain=1e3, max_step=0.25
     )
     qd = ctrl.mda(q, xd)

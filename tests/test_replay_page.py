@@ -21,6 +21,8 @@ from fault_tolerance.simulation.simulate import simulate
 
 viz = pytest.importorskip("fault_tolerance.viz")
 from fault_tolerance.viz import charts  # noqa: E402
+from fault_tolerance.viz.page import embed, export_html  # noqa: E402
+from fault_tolerance.viz.server import serve  # noqa: E402
 
 CHROMIUM = Path("/usr/bin/chromium")
 CHROMIUM_ARGS = ["--no-sandbox", "--disable-gpu", "--enable-unsafe-swiftshader"]
@@ -53,12 +55,12 @@ def folder(planar_runs, tmp_path_factory) -> Path:
 @pytest.fixture(scope="module")
 def lock_html(planar_runs, tmp_path_factory) -> Path:
     arm, _, lock = planar_runs
-    return viz.export_html(lock, tmp_path_factory.mktemp("lock") / "lock.html", arm)
+    return export_html(lock, tmp_path_factory.mktemp("lock") / "lock.html", arm)
 
 
 @pytest.fixture(scope="module")
 def folder_html(folder, tmp_path_factory) -> Path:
-    return viz.export_html(folder, tmp_path_factory.mktemp("multi") / "fig2.html")
+    return export_html(folder, tmp_path_factory.mktemp("multi") / "fig2.html")
 
 
 def plots_of(html: str) -> str:
@@ -148,7 +150,7 @@ def test_runs_of_different_arms_are_refused(planar_runs, tmp_path):
         tmp_path / "b"
     )
     with pytest.raises(ft.FaultToleranceError, match="different arms"):
-        viz.export_html(tmp_path, tmp_path / "x.html")
+        export_html(tmp_path, tmp_path / "x.html")
 
 
 def test_replay_lists_the_runs_of_a_folder(folder):
@@ -166,7 +168,7 @@ def test_page_lists_the_runs_warnings(planar_runs, tmp_path):
     q0 = initial_posture(arm, [0.35, 0.0]).q
     path = CirclePath([0.35, 0.0], 0.1, 40 * np.pi, 0.05)
     fast = simulate(arm, path, "lnva", q0=q0, limits=False)  # the paper's: no joint limits
-    html = viz.export_html(fast, tmp_path / "fast.html", arm).read_text()
+    html = export_html(fast, tmp_path / "fast.html", arm).read_text()
     assert re.search(r'class="ft-warning"[^>]*>\d+ of \d+ samples over the velocity limit', html)
 
 
@@ -311,7 +313,7 @@ def test_several_runs_switch_the_arm_shown(chromium, folder_html):
 def test_live_viewer_and_notebook_embed_have_the_plots(chromium, planar_runs):
     """The live page on 127.0.0.1 and the notebook iframe show the plots, synced to the animation."""
     arm, _, lock = planar_runs
-    url, server = viz.serve(lock, arm, fps=25)
+    url, server = serve(lock, arm, fps=25)
     try:
         page, errors = open_page(chromium, url)
         page.wait_for_function("() => viewer.animator.duration > 0.5")
@@ -323,7 +325,7 @@ def test_live_viewer_and_notebook_embed_have_the_plots(chromium, planar_runs):
         page.close()
     finally:
         server.close()
-    markup = viz.embed(lock, arm, height=500)._repr_html_()
+    markup = embed(lock, arm, height=500)._repr_html_()
     page = chromium.new_page(viewport=VIEWPORT)
     page.set_content(f"<!DOCTYPE html><html><body>{markup}</body></html>")
     frame = page.frames[1]

@@ -22,7 +22,7 @@ from fault_tolerance.numerics.linalg import (
     projection,
 )
 from fault_tolerance.resolution.indices import RCN_MAX, post_failure_rates
-from fault_tolerance.resolution.resolvers import MDA_MAX_STEP
+from fault_tolerance.resolution.mda import MDA_MAX_STEP
 from fault_tolerance.simulation.paths import CirclePath, FunctionPath
 from fault_tolerance.simulation.run import (
     FLAG_NEAR_INTOLERABLE,

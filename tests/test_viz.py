@@ -30,6 +30,9 @@ from fault_tolerance.simulation.run import Run
 from fault_tolerance.simulation.simulate import simulate
 
 viz = pytest.importorskip("fault_tolerance.viz")
+from fault_tolerance.viz.geometry import LOCK_COLOR, TRACE_COLOR  # noqa: E402
+from fault_tolerance.viz.page import embed, export_html, scene_commands  # noqa: E402
+from fault_tolerance.viz.server import serve  # noqa: E402
 
 CHROMIUM = Path("/usr/bin/chromium")
 CHROMIUM_ARGS = [
@@ -81,7 +84,7 @@ def planar():
 @pytest.fixture(scope="module")
 def planar_html(planar, tmp_path_factory) -> Path:
     arm, run = planar
-    return viz.export_html(run, tmp_path_factory.mktemp("html") / "planar.html", arm)
+    return export_html(run, tmp_path_factory.mktemp("html") / "planar.html", arm)
 
 
 # -- the package stays light ----------------------------------------------------------------
@@ -102,7 +105,7 @@ def test_missing_meshcat_says_what_to_install(monkeypatch, planar, tmp_path):
     monkeypatch.setitem(sys.modules, "meshcat", None)
     arm, run = planar
     with pytest.raises(ImportError, match=r"pip install 'meshcat"):
-        viz.export_html(run, tmp_path / "r.html", arm)
+        export_html(run, tmp_path / "r.html", arm)
 
 
 # -- the HTML export ------------------------------------------------------------------------
@@ -110,7 +113,7 @@ def test_missing_meshcat_says_what_to_install(monkeypatch, planar, tmp_path):
 
 def animation_of(html: str) -> dict:
     """The set_animation command embedded in a page."""
-    commands = viz.scene_commands(html)
+    commands = scene_commands(html)
     anims = [c for c in commands if c["type"] == "set_animation"]
     assert len(anims) == 1, "one animation, sent once"
     assert commands[-1]["type"] == "set_animation", "sent after the objects it animates"
@@ -128,7 +131,7 @@ def track_times(track: dict) -> np.ndarray:
 def test_html_is_self_contained_and_animated(robot, tmp_path):
     """The page inlines the viewer and an animation of every link over the run, and is small."""
     arm, run = lock_run(robot)
-    path = viz.export_html(run, tmp_path / "replay.html", arm)
+    path = export_html(run, tmp_path / "replay.html", arm)
     html = path.read_text(encoding="utf-8")
     size = path.stat().st_size
     assert size < SHIPPED_HTML_LIMIT, f"{robot}: {size} bytes"
@@ -170,7 +173,7 @@ def test_html_is_self_contained_and_animated(robot, tmp_path):
 def test_html_of_the_panda_with_meshes(tmp_path):
     """The Panda's meshes replay too, compact by default (a few MB for a 1 s run)."""
     arm, run = lock_run("panda")
-    path = viz.export_html(run, tmp_path / "panda.html", arm)
+    path = export_html(run, tmp_path / "panda.html", arm)
     assert path.stat().st_size < PANDA_HTML_LIMIT, path.stat().st_size
     html = path.read_text(encoding="utf-8")
     clips = {a["path"] for a in animation_of(html)["animations"]}
@@ -181,7 +184,7 @@ def test_html_of_the_panda_with_meshes(tmp_path):
 def test_speed_and_frame_rate(planar, tmp_path):
     """speed=2 halves the replay's length; fps sets the number of frames."""
     arm, run = planar
-    html = viz.export_html(run, tmp_path / "fast.html", arm, speed=2.0, fps=30.0).read_text()
+    html = export_html(run, tmp_path / "fast.html", arm, speed=2.0, fps=30.0).read_text()
     clip = next(
         a["clip"] for a in animation_of(html)["animations"] if a["path"].endswith("link1_0")
     )
@@ -189,20 +192,20 @@ def test_speed_and_frame_rate(planar, tmp_path):
     np.testing.assert_allclose(times[-1], 0.5, atol=1e-6)
     assert len(times) == 16  # 0, 1/30, ..., 0.5
     with pytest.raises(InvalidInput, match="speed"):
-        viz.export_html(run, tmp_path / "bad.html", arm, speed=0.0)
+        export_html(run, tmp_path / "bad.html", arm, speed=0.0)
 
 
 def test_export_from_a_saved_run_and_from_arrays(planar, tmp_path):
     """A saved run folder rebuilds its arm from its metadata; arrays of q need the arm and dt."""
     arm, run = planar
     run.save(tmp_path / "run")
-    assert viz.export_html(tmp_path / "run", tmp_path / "saved.html").stat().st_size > 0
+    assert export_html(tmp_path / "run", tmp_path / "saved.html").stat().st_size > 0
     q = run.q[::10]
-    assert viz.export_html(q, tmp_path / "q.html", arm, dt=0.01).stat().st_size > 0
+    assert export_html(q, tmp_path / "q.html", arm, dt=0.01).stat().st_size > 0
     with pytest.raises(InvalidInput, match="arm"):
-        viz.export_html(q, tmp_path / "q.html", dt=0.01)
+        export_html(q, tmp_path / "q.html", dt=0.01)
     with pytest.raises(InvalidInput, match="shape"):
-        viz.export_html(q[:, :2], tmp_path / "q.html", arm, dt=0.01)
+        export_html(q[:, :2], tmp_path / "q.html", arm, dt=0.01)
 
 
 def test_export_is_atomic(planar, tmp_path, monkeypatch):
@@ -216,7 +219,7 @@ def test_export_is_atomic(planar, tmp_path, monkeypatch):
 
     monkeypatch.setattr("fault_tolerance.storage.atomic.os.replace", fail)
     with pytest.raises(OSError, match="disk full"):
-        viz.export_html(run, target, arm)
+        export_html(run, target, arm)
     assert target.read_text() == "previous replay"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["replay.html"]
 
@@ -224,7 +227,7 @@ def test_export_is_atomic(planar, tmp_path, monkeypatch):
 def test_embed_for_notebooks(planar):
     """embed() gives notebook HTML: the whole page in an iframe srcdoc, of modest size."""
     arm, run = planar
-    markup = viz.embed(run, arm, height=320)._repr_html_()
+    markup = embed(run, arm, height=320)._repr_html_()
     assert markup.count("<iframe") == 1 and "srcdoc=" in markup and "320px" in markup
     assert "http://" not in markup.split("srcdoc=")[0]
     assert len(markup) < 2_000_000
@@ -264,7 +267,7 @@ def listening_sockets(pid: int) -> list[tuple[str, int]]:
 def live(planar):
     """A live replay of the planar run; stopped at the end of the module."""
     arm, run = planar
-    url, server = viz.serve(run, arm)
+    url, server = serve(run, arm)
     yield url, server
     server.close()
 
@@ -287,7 +290,7 @@ def test_live_server_listens_on_localhost_only(live):
 def test_server_close_stops_it(planar):
     """close() ends the server process; a second close() is harmless."""
     arm, run = planar
-    url, server = viz.serve(run, arm, fps=10)
+    url, server = serve(run, arm, fps=10)
     assert server.running
     server.close()
     assert not server.running
@@ -304,7 +307,7 @@ def test_busy_port_is_reported(planar):
         taken.listen()
         port = taken.getsockname()[1]
         with pytest.raises(ft.FaultToleranceError, match=f"port {port}"):
-            viz.serve(run, arm, fps=10, port=port)
+            serve(run, arm, fps=10, port=port)
 
 
 def test_replay_main(planar, tmp_path):
@@ -456,8 +459,8 @@ def check_replay_frames(page, info: dict) -> dict:
         "link1": (0.85, 0.2, 0.2),
         "link2": (0.2, 0.7, 0.3),
         "link3": (0.2, 0.4, 0.9),
-        "lock": viz.LOCK_COLOR,
-        "trace": viz.TRACE_COLOR,
+        "lock": LOCK_COLOR,
+        "trace": TRACE_COLOR,
     }
     lock_tau = info["lock"]["replay_time"]
     before, after = seek(page, 0.8 * lock_tau), seek(page, min(lock_tau + 0.3, info["duration"]))
@@ -520,7 +523,7 @@ def test_live_replay_in_chromium(chromium, live):
 def test_notebook_embed_plays_in_chromium(chromium, planar):
     """The notebook embed (iframe srcdoc) runs the same replay inside a host page."""
     arm, run = planar
-    markup = viz.embed(run, arm, height=500)._repr_html_()
+    markup = embed(run, arm, height=500)._repr_html_()
     page = chromium.new_page(viewport=VIEWPORT)
     page.set_content(f"<!DOCTYPE html><html><body>{markup}</body></html>")
     frame = page.frames[1]

@@ -19,7 +19,6 @@ from fault_tolerance.planning.wholepath.plan import plan_path
 from fault_tolerance.planning.wholepath.problem import (
     build_problem,
     kinematics,
-    projections,
     rollout,
 )
 from fault_tolerance.planning.wholepath.scp import scp
@@ -167,18 +166,6 @@ def test_velocity_limits_are_kept_when_they_bind():
     out = scp(tight, rollout(tight, q0, "lnva"), iterations=4)
     assert out.best.violation == 0.0
     assert np.all(np.abs(out.best.qd) <= vmax)
-
-
-def test_batched_projection_matches_linalg():
-    """problem.projections equals linalg.projection row by row (pseudo-inverse and projector)."""
-    rng = np.random.default_rng(0)
-    J = rng.normal(size=(20, 3, 5))
-    J[0, 2] = J[0, 1]  # one singular Jacobian (damped)
-    P = projections(J)
-    for b in range(len(J)):
-        ref = ft.projection(J[b])
-        np.testing.assert_allclose(P.Jpinv[b], ref.Jpinv, atol=1e-10)
-        np.testing.assert_allclose(P.N[b], ref.N, atol=1e-10)
 
 
 def test_bad_options_are_refused():

@@ -28,8 +28,14 @@ import numpy as np
 
 from fault_tolerance.analysis.fast import batch as batch_kernel
 from fault_tolerance.errors import IntolerableFailure, InvalidInput
-from fault_tolerance.numerics.linalg import DAMPING, PIVOT_TOL, RANK_RTOL, SIGMA_EPS
-from fault_tolerance.resolution.indices import RCN_MAX, RESPONSES
+from fault_tolerance.numerics.checks import finite
+from fault_tolerance.numerics.linalg import PIVOT_TOL, projection, reduced_rates
+from fault_tolerance.resolution.indices import (
+    RESPONSES,
+    condition_numbers,
+    reduced_singular_values,
+)
+from fault_tolerance.resolution.registry import KERNEL_JVJA, KERNEL_LNVA, get, names
 from fault_tolerance.resolution.scenarios import Scenarios, scenarios
 
 #: Rows per chunk: temporaries are O(CHUNK · n²) floats, whatever B is.
@@ -70,8 +76,9 @@ def _check(Js, *vectors) -> tuple[np.ndarray, ...]:
         if v.shape != (B, size):
             raise InvalidInput(f"{name} must have shape ({B}, {size}), got {v.shape}")
         outs.append(v)
-    if not all(np.all(np.isfinite(a)) for a in outs):
-        raise InvalidInput("Js and the rate arrays must be finite")
+    finite(Js, "Js")
+    for (name, _, _), v in zip(vectors, outs[1:], strict=True):
+        finite(v, name)
     return tuple(outs)
 
 
@@ -80,39 +87,19 @@ def _scenarios(Js: np.ndarray, lockable, weights, joint_names) -> Scenarios:
     return scenarios(lockable, n, r=n - m, weights=weights, joint_names=joint_names)
 
 
+#: The kernel modes this module batches by stacked NumPy (and the compiled step): LNVA, JVJA.
+BATCHED = (KERNEL_LNVA, KERNEL_JVJA)
+
+
 def _option(intolerable: str) -> str:
     if intolerable not in INTOLERABLE:
         raise InvalidInput(f"intolerable={intolerable!r} is not one of {INTOLERABLE}")
     return intolerable
 
 
-def projections(Js: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """``J⁺`` (B, n, m) and ``N`` (B, n, n) of every row, as :func:`.linalg.projection` does it."""
-    B, m, n = Js.shape
-    lam, V = np.linalg.eigh(Js @ Js.transpose(0, 2, 1))  # ascending, lam = σ²
-    lam = np.maximum(lam, 0.0)
-    smin = np.sqrt(lam[:, 0])
-    mu2 = np.where(smin < SIGMA_EPS, DAMPING**2 * (1.0 - (smin / SIGMA_EPS) ** 2), 0.0)
-    d = lam + mu2[:, None]
-    Jpinv = Js.transpose(0, 2, 1) @ ((V / (d + (d == 0.0))[:, None, :]) @ V.transpose(0, 2, 1))
-    keep = lam > (RANK_RTOL**2) * np.maximum(lam[:, -1:], 1e-300)
-    w = np.where(keep, 1.0 / np.sqrt(np.where(keep, lam, 1.0)), 0.0)
-    U = Js.transpose(0, 2, 1) @ (V * w[:, None, :])  # (B, n, m), zero columns where dropped
-    N = np.eye(n)[None] - U @ U.transpose(0, 2, 1)
-    return Jpinv, N
-
-
-def _pivots(N: np.ndarray, sc: Scenarios) -> np.ndarray:
-    """Smallest eigenvalue of ``N[S, S]`` per row and scenario, shape (B, f)."""
-    if sc.singletons:
-        c = sc.columns
-        return N[:, c, c]
-    return np.stack([np.linalg.eigvalsh(N[:, S][:, :, S])[:, 0] for S in map(list, sc.sets)], 1)
-
-
 def _tolerable(N: np.ndarray, sc: Scenarios, intolerable: str) -> np.ndarray:
     """Rows whose every scenario is tolerable; raise on the first bad one when asked to."""
-    piv = _pivots(N, sc)
+    piv = sc.pivots(N)
     good = np.all(piv >= PIVOT_TOL, axis=1)
     if intolerable == "raise" and not good.all():
         b = int(np.argmin(good))
@@ -122,18 +109,11 @@ def _tolerable(N: np.ndarray, sc: Scenarios, intolerable: str) -> np.ndarray:
 
 
 def _reduced(base: np.ndarray, N: np.ndarray, S: list[int], good: np.ndarray) -> np.ndarray:
-    """(G1) ``base − N[:, S] N[S, S]⁻¹ base[S]`` per row, zero in S, shape (B, n)."""
-    if len(S) == 1:
-        i = S[0]
-        piv = np.where(good, N[:, i, i], 1.0)
-        out = base - (base[:, i] / piv)[:, None] * N[:, :, i]
-    else:
-        M = N[:, S][:, :, S]
-        M = np.where(good[:, None, None], M, np.eye(len(S)))
-        z = np.linalg.solve(M, base[:, S][:, :, None])[:, :, 0]
-        out = base - np.einsum("bns,bs->bn", N[:, :, S], z)
-    out[:, S] = 0.0
-    return out
+    """(G1) per row: :func:`~fault_tolerance.numerics.linalg.reduced_rates` on the stack.
+
+    Rows not ``good`` (an intolerable scenario) get ``N = I``: finite numbers the caller drops.
+    """
+    return reduced_rates(base, np.where(good[:, None, None], N, np.eye(N.shape[-1])), S)
 
 
 def _jvja_rows(a, N, sc: Scenarios, good, response: str) -> np.ndarray:
@@ -152,10 +132,11 @@ def _jvja_rows(a, N, sc: Scenarios, good, response: str) -> np.ndarray:
         )
         return a - shift / W
     Wm = np.zeros_like(N)
-    for S, w in zip(sc.sets, weights, strict=True):
-        S = list(S)
+    for members, w in zip(sc.sets, weights, strict=True):
+        S = list(members)
         M = np.where(good[:, None, None], N[:, S][:, :, S], np.eye(len(S)))
-        Wm[np.ix_(np.arange(len(N)), S, S)] += w * np.linalg.inv(M)
+        cols = np.asarray(S)
+        Wm[np.ix_(np.arange(len(N)), cols, cols)] += w * np.linalg.inv(M)
     NWN = N @ Wm @ N
     rhs = np.einsum("bij,bj->bi", N @ Wm, a)
     z = -np.einsum("bij,bj->bi", np.linalg.pinv(NWN, rcond=1e-10, hermitian=True), rhs)
@@ -173,18 +154,28 @@ def resolve(
     joint_names: Sequence[str] = (),
     intolerable: str = "raise",
     chunk: int = CHUNK,
+    options: dict | None = None,
 ) -> np.ndarray:
-    """Rates of resolver ``name`` (``"lnva"`` or ``"jvja"``) for every row, shape (B, n).
+    """Rates of the registered resolver ``name`` for every row, shape (B, n).
 
     Row b equals ``ft.resolve(name, Js[b], xdots[b], lockable, ...)``. ``intolerable="nan"``
-    fills rows with an intolerable scenario with NaN (jvja) instead of raising. MDA needs the
-    configurations and Jacobian derivatives; it is not batched (use :func:`ft.resolve` per row).
+    fills rows with an intolerable scenario with NaN instead of raising. LNVA and JVJA are
+    batched (below); another registered resolver runs its reference rates row by row, with its
+    ``options`` (``weights`` and ``response`` fill options of those names). A resolver that needs
+    the configuration (MDA: the Jacobian derivatives at each row's ``q``) is refused: use
+    :func:`ft.resolve` per row.
 
     With numba, LNVA and least-norm single-joint JVJA run the Controller's compiled step on
     every row (:mod:`.batch_kernel`); the rows it refuses (near a singularity, a small pivot, an
     ill-conditioned ``J Jᵀ``), multi-joint scenarios and the continuation response take
     :func:`resolve_stacked`, the stacked NumPy code.
     """
+    entry = get(name)
+    if entry.compiled not in BATCHED or options:
+        run = {"weights": weights, "response": response}
+        return _per_row(
+            entry, Js, xdots, lockable, entry.options_with(options, run), joint_names, intolerable
+        )
     Js, xdots, sc = _resolve_input(
         name, Js, xdots, lockable, weights, response, intolerable, joint_names
     )
@@ -194,6 +185,27 @@ def resolve(
     redo = np.flatnonzero(status)
     if redo.size:
         out[redo] = _stacked(Js[redo], xdots[redo], sc, response, intolerable, chunk)
+    return out
+
+
+def _per_row(entry, Js, xdots, lockable, options, joint_names, intolerable) -> np.ndarray:
+    """Rates of a resolver the batch does not know, by its reference rates row by row."""
+    if entry.needs_configuration:
+        raise InvalidInput(
+            f"batched resolver '{entry.name}' needs the configuration of every row (arm and q); "
+            f"batched resolvers are {[n for n in names() if not get(n).needs_configuration]}; "
+            "call ft.resolve per row"
+        )
+    _option(intolerable)
+    Js, xdots = _check(Js, ("xdots", xdots, np.shape(Js)[1]))
+    out = np.empty((Js.shape[0], Js.shape[2]))
+    for b in range(Js.shape[0]):
+        try:
+            out[b] = entry.call(Js[b], xdots[b], lockable, joint_names=joint_names, **options)
+        except IntolerableFailure:
+            if intolerable == "raise":
+                raise
+            out[b] = np.nan
     return out
 
 
@@ -225,14 +237,19 @@ def resolve_stacked(
 
 def _resolve_input(name, Js, xdots, lockable, weights, response, intolerable, joint_names):
     """Validated ``Js``, ``xdots`` and the scenarios (None for LNVA) of :func:`resolve`."""
-    if name not in ("lnva", "jvja"):
-        raise InvalidInput(f"batched resolver '{name}' is not one of ['jvja', 'lnva']")
+    mode = get(name).compiled
+    if mode not in BATCHED:
+        raise InvalidInput(f"stacked resolver '{name}' is not one of {_stacked_names()}")
     if response not in RESPONSES:
         raise InvalidInput(f"response {response!r} is not one of {RESPONSES}")
     _option(intolerable)
     Js, xdots = _check(Js, ("xdots", xdots, np.shape(Js)[1]))
-    sc = _scenarios(Js, lockable, weights, joint_names) if name == "jvja" else None
+    sc = _scenarios(Js, lockable, weights, joint_names) if mode == KERNEL_JVJA else None
     return Js, xdots, sc
+
+
+def _stacked_names() -> list[str]:
+    return [n for n in names() if get(n).compiled in BATCHED]
 
 
 def _stacked(Js, xdots, sc: Scenarios | None, response, intolerable, chunk) -> np.ndarray:
@@ -241,7 +258,8 @@ def _stacked(Js, xdots, sc: Scenarios | None, response, intolerable, chunk) -> n
     out = np.empty((B, n))
     for s in range(0, B, max(int(chunk), 1)):
         e = min(s + max(int(chunk), 1), B)
-        Jpinv, N = projections(Js[s:e])
+        P = projection(Js[s:e])
+        Jpinv, N = P.Jpinv, P.N
         a = np.einsum("bnm,bm->bn", Jpinv, xdots[s:e])
         if sc is None:
             out[s:e] = a
@@ -282,7 +300,8 @@ def jvj(
     step = max(int(chunk), 1)
     for s in range(0, B, step):
         e = min(s + step, B)
-        Jpinv, N = projections(Js[s:e])
+        P = projection(Js[s:e])
+        Jpinv, N = P.Jpinv, P.N
         good = _tolerable(N, sc, intolerable)
         qd = qds[s:e]
         base = np.einsum("bnm,bm->bn", Jpinv, xdots[s:e]) if response == "least_norm" else qd
@@ -326,29 +345,14 @@ def rcn_stacked(
 
 
 def _rcn_stacked(Js: np.ndarray, sc: Scenarios, chunk: int) -> np.ndarray:
-    B, m, n = Js.shape
+    """(15) of every row by :func:`~fault_tolerance.resolution.indices.rcn`'s own functions."""
+    B = Js.shape[0]
     out = np.empty((B, sc.f))
     step = max(int(chunk), 1)
     for s in range(0, B, step):
         e = min(s + step, B)
-        J = Js[s:e]
-        G = J @ J.transpose(0, 2, 1)  # (b, m, m)
-        stack = np.empty((e - s, sc.f, m, m))
-        for k, S in enumerate(sc.sets):
-            C = J[:, :, list(S)]
-            stack[:, k] = G - C @ C.transpose(0, 2, 1)
-        sigma = np.sqrt(np.maximum(np.linalg.eigvalsh(stack), 0.0))
-        out[s:e] = _condition(sigma)
+        out[s:e] = condition_numbers(reduced_singular_values(Js[s:e], sc))
     return out
-
-
-def _condition(sigma: np.ndarray) -> np.ndarray:
-    """``σ_max/σ_min`` of ascending singular values, capped at RCN_MAX (as the scalar API)."""
-    smax = sigma[..., -1]
-    smin = np.maximum(sigma[..., 0], smax / RCN_MAX)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        k = np.where(smax > 0, smax / np.where(smin > 0, smin, 1.0), RCN_MAX)
-    return np.minimum(k, RCN_MAX)
 
 
 def square_sum_rcn(Js: np.ndarray, lockable=None, **options) -> np.ndarray:

@@ -1,25 +1,23 @@
-"""``inspect``: a readable description of a robot (its URDF tree, chain, task, intolerable joints)."""
+"""``inspect``: a readable description of a robot (its tree, chain, task, intolerable joints)."""
 
 from __future__ import annotations
 
-import io
 from pathlib import Path
 
 import numpy as np
 
-from fault_tolerance.errors import RobotNotFound, URDFError
+from fault_tolerance.errors import RobotNotFound
 from fault_tolerance.model.catalog import catalog, example_robot_names, preset_names, robot_path
 from fault_tolerance.model.chains import serial_chains
-from fault_tolerance.model.formats.build import build_model, read_description
-from fault_tolerance.model.formats.urdf import read_urdf
-from fault_tolerance.model.loading import arm_from_description, is_description_path, load_arm
+from fault_tolerance.model.formats.registry import is_description_path, read_description
+from fault_tolerance.model.loading import arm_from_description, load_arm
 from fault_tolerance.numerics.linalg import PIVOT_TOL, projection
 from fault_tolerance.planning.start_checks import STRUCTURAL_SAMPLES, intolerable_everywhere
 from fault_tolerance.resolution.scenarios import scenarios
 
 
 def urdf_path_of(target: str) -> Path:
-    """The URDF file behind a catalog name, an example-robot-data name or a path."""
+    """The description file behind a catalog name, an example-robot-data name or a path."""
     if target in catalog():
         return robot_path(catalog()[target]["urdf"])
     if target in example_robot_names():
@@ -45,12 +43,13 @@ def inspect_text(
 ) -> str:
     """A readable description of a robot: tree, serial chains, chain, task, intolerable joints.
 
-    ``target`` is a robot name, a URDF or a xacro file; the tree is read with yourdfpy from the
-    checked (expanded) text.
+    ``target`` is a robot name or a description file (URDF, xacro, MJCF); the tree is listed by
+    the description's format from the checked (expanded) text.
     """
-    path, desc, arm = _read_target(target, tip, task, joints, package_dirs, xacro_args)
-    urdf = _yourdfpy_tree(path, desc)
-    lines = [f"{target}: {path}"] + _tree_lines(urdf, desc) + _chain_lines(desc)
+    path, fmt, desc, arm = _read_target(target, tip, task, joints, package_dirs, xacro_args)
+    model = fmt.build_model(desc)
+    lines = [f"{target}: {path} ({fmt.label})"] + fmt.tree_lines(desc, model)
+    lines += _chain_lines(model, desc)
     if arm is None:
         lines.append(
             "no tip frame given and there are several leaf links: name one with --tip to "
@@ -61,68 +60,30 @@ def inspect_text(
 
 
 def _read_target(target, tip, task, joints, package_dirs, xacro_args):
-    """``(path, description, arm)``; the arm is None when a tip must be chosen among leaves."""
+    """``(path, format, description, arm)``; the arm is None when a tip must be chosen."""
     path = urdf_path_of(target)
     if target in catalog() or target in example_robot_names():
-        desc = read_urdf(path)
+        fmt, desc = read_description(path)
         arm = load_arm(target, tip=tip, task=task, joints=joints, package_dirs=package_dirs)
-        return path, desc, arm
-    if not path.is_file():
-        raise URDFError(f"{path}: no such URDF file")
-    desc = read_description(path, package_dirs, xacro_args)
-    choose_tip = tip is None and len(desc.leaves) > 1
-    # Pinocchio's checks first (their messages are the clearer), then the tree from yourdfpy
+        return path, fmt, desc, arm
+    fmt, desc = read_description(path, package_dirs, xacro_args)
+    choose_tip = tip is None and _tip_is_open(fmt, desc)
+    # Pinocchio's checks first (their messages are the clearer), then the tree
     arm = (
         None
         if choose_tip
-        else arm_from_description(desc, tip, task, joints, package_dirs, xacro_args)
+        else arm_from_description(fmt, desc, tip, task, joints, package_dirs, xacro_args)
     )
-    return path, desc, arm
+    return path, fmt, desc, arm
 
 
-def _yourdfpy_tree(path: Path, desc):
-    """The tree as yourdfpy reads it, from the checked bytes (never the file itself)."""
-    import yourdfpy  # after the checks: a hostile file is refused without this import's cost
-
+def _tip_is_open(fmt, desc) -> bool:
+    """True when the format chooses no default tip for the description (several candidates)."""
     try:
-        return yourdfpy.URDF.load(
-            io.BytesIO(desc.data),
-            load_meshes=False,
-            build_scene_graph=False,
-            build_collision_scene_graph=False,
-        )
-    except Exception as err:  # yourdfpy raises many types
-        raise URDFError(f"{path}: yourdfpy could not read it: {err}") from err
-
-
-def _tree_lines(urdf, desc) -> list[str]:
-    """The robot's links and joints, continuous and mimic joints, the candidate tips."""
-    lines = [
-        f"robot '{urdf.robot.name}': {len(urdf.robot.links)} links, "
-        f"{len(urdf.robot.joints)} joints",
-        "",
-        "joints (parent -> child):",
-    ]
-    for j in urdf.robot.joints:
-        lim = ""
-        if j.limit is not None and j.type in ("revolute", "prismatic"):
-            lim = (
-                f"  limits [{j.limit.lower:.4g}, {j.limit.upper:.4g}], velocity {j.limit.velocity}"
-            )
-        axis = (
-            "" if j.type == "fixed" or j.axis is None else f"  axis {np.round(j.axis, 3).tolist()}"
-        )
-        lines.append(f"  {j.name:28s} {j.type:10s} {j.parent} -> {j.child}{axis}{lim}")
-    if desc.continuous:
-        lines.append(
-            f"continuous joints, read as revolute with limits ±π: {', '.join(desc.continuous)}"
-        )
-    if desc.mimic:
-        lines.append(
-            "mimic joints (held fixed; they cannot be active joints): "
-            + ", ".join(f"{a} follows {b}" for a, b in desc.mimic.items())
-        )
-    return lines + ["", f"candidate tip frames (leaf links): {', '.join(desc.leaves)}"]
+        fmt.default_tip(desc)
+    except fmt.error:
+        return True
+    return False
 
 
 def _arm_lines(arm) -> list[str]:
@@ -165,9 +126,8 @@ def _arm_lines(arm) -> list[str]:
 MAX_CHAINS_SHOWN = 12
 
 
-def _chain_lines(desc) -> list[str]:
+def _chain_lines(model, desc) -> list[str]:
     """The serial chains of the tree, each with the ``--tip``/``--joints`` that selects it."""
-    model = build_model(desc)
     chains = serial_chains(model, desc.leaves, tuple(desc.mimic), min_joints=2)
     if not chains:
         return []

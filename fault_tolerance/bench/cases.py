@@ -9,12 +9,17 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from fault_tolerance.bench.routes import installed, jvja_qp, jvja_slsqp, post_failure_rates_explicit
 from fault_tolerance.bench.timing import Row, stats, time_rows
 from fault_tolerance.errors import InvalidInput
+
+if TYPE_CHECKING:
+    from fault_tolerance.control.controller import Controller
+    from fault_tolerance.model.arm import Arm
 
 #: The benchmark's arms: robot, task and lockable set.
 ARMS: dict[str, dict] = {
@@ -68,8 +73,8 @@ class Case:
 
     key: str
     spec: dict
-    arm: object
-    ctrl: object  # realtime.Controller
+    arm: Arm
+    ctrl: Controller
     qs: list
     xds: list
     out: np.ndarray  # an (n,) output buffer shared by the rows
@@ -165,7 +170,7 @@ def floor_rows(case: Case) -> dict[str, Row]:
 
     ctrl, m = case.ctrl, case.arm.m
     kernel, cfj, lwa = compiled_kernel("floor"), pin.computeFrameJacobian, pin.LOCAL_WORLD_ALIGNED
-    model, data, fid, sel = ctrl.model, ctrl.model.createData(), ctrl.frame_id, ctrl._rows
+    model, data, fid, sel = ctrl.model, ctrl.model.createData(), ctrl.frame_id, ctrl.workspace.rows
     G, y = np.empty((m, m)), np.empty(m)
 
     def floor(q, xd, out):
@@ -244,7 +249,7 @@ def reference_rows(case: Case) -> dict[str, Row]:
     """The plain planner (``ft.resolve``, ``ft.rcn``), the explicit route and quadprog."""
     from fault_tolerance.resolution.api import resolve
     from fault_tolerance.resolution.indices import rcn
-    from fault_tolerance.resolution.resolvers import jvja_explicit
+    from fault_tolerance.resolution.jvja import jvja_explicit
 
     arm, ctrl, sc, qx = case.arm, case.ctrl, case.sc, case.qx
     rows: dict[str, Row] = {
@@ -309,7 +314,7 @@ def deviations(case: Case, rows: dict[str, Row]) -> dict[str, float]:
     """
     ctrl, qx = case.ctrl, case.qx
     ref = [ctrl.jvja(q, xd).copy() for q, xd in qx]
-    names = ("jvja_resolve", "jvja_explicit", "jvja_qp", "jvja_slsqp")
+    names: tuple[str, ...] = ("jvja_resolve", "jvja_explicit", "jvja_qp", "jvja_slsqp")
     names += tuple(
         k for k in rows if k.startswith("jvja_") and k not in names and "bounded" not in k
     )

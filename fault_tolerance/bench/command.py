@@ -74,7 +74,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="print the per-row ratio B/A of two saved runs instead of timing",
     )
     parser.add_argument(
-        "--strict", action="store_true", help="exit with status 1 if a target fails"
+        "--check",
+        "--strict",
+        dest="check",
+        action="store_true",
+        help="exit with status 1 if a target fails (a failed target is measured once more "
+        "before it is reported FAIL); default: exit 0 whatever the verdicts",
     )
     parser.add_argument(
         "--batch-configurations",
@@ -116,8 +121,8 @@ def _arm_keys(robots: Sequence[str] | None) -> list[str]:
 def run(args: argparse.Namespace) -> int:
     """Run the benchmark (or ``--compare``) from parsed options; returns the exit status.
 
-    0 on success, 2 on bad input (a one-line message on stderr), 1 with ``--strict`` when a target
-    fails.
+    0 on success, 2 on bad input (a one-line message on stderr), 1 with ``--check`` when a target
+    fails (after its re-measurement).
     """
     try:
         return _run(args)
@@ -187,23 +192,14 @@ def _run(args: argparse.Namespace) -> int:
     def progress(msg: str) -> None:
         print(f"  timing {msg}", file=sys.stderr, flush=True)
 
+    from fault_tolerance.bench.warm import warm
+
     started = time.time()
+    # every kernel compiled (or loaded from the cache) here, so none compiles while timed
+    warm(force=True, what="compiling the fast path before timing")
     machine = machine_info()
-    results = {key: bench_arm(key, args.steps, args.warmup, args.backend, progress) for key in keys}
-    items = targets(results)
-    batch = None
-    if args.batch_configurations:
-        from fault_tolerance.bench.batch import bench_batch, target_item
-
-        progress(f"batched API ({args.batch_configurations} configurations)")
-        batch = bench_batch(args.batch_configurations)
-        items.append(target_item(batch))
-    sweep = None
-    if args.workspace is not None:
-        from fault_tolerance.bench.workspace import bench_workspace, target_items
-
-        sweep = bench_workspace(args.workspace, progress)
-        items += target_items(sweep)
+    found = _measure(args, keys, progress)
+    (results, batch, sweep), items = remeasure_failed(args, found, progress)
     machine["loadavg_after"] = list(os.getloadavg()) if hasattr(os, "getloadavg") else None
     data = {
         "schema": SCHEMA,
@@ -234,7 +230,92 @@ def _run(args: argparse.Namespace) -> int:
         write_json(args.json, data)
         print(f"\nwrote {args.json}")
     failed = [t for t in items if t["pass"] is False]
-    return 1 if (failed and args.strict) else 0
+    return 1 if (failed and args.check) else 0
+
+
+#: Target names computed from the batched-API row and from the workspace sweep.
+BATCH_TARGETS = frozenset({"batch_over_loop"})
+WORKSPACE_TARGETS = frozenset({"workspace_201_one_worker_s", "workspace_two_over_one"})
+
+
+def _measure(args: argparse.Namespace, keys: list[str], progress) -> tuple:
+    """One measurement: the arms' rows ``keys``, the batched API and the workspace sweep (if asked).
+
+    Returns ``(results, batch, sweep)``; ``batch`` and ``sweep`` are ``None`` when not asked.
+    """
+    results = {key: bench_arm(key, args.steps, args.warmup, args.backend, progress) for key in keys}
+    return results, _measure_batch(args, progress), _measure_sweep(args, progress)
+
+
+def _measure_batch(args: argparse.Namespace, progress) -> dict | None:
+    if not args.batch_configurations:
+        return None
+    from fault_tolerance.bench.batch import bench_batch
+
+    progress(f"batched API ({args.batch_configurations} configurations)")
+    return bench_batch(args.batch_configurations)
+
+
+def _measure_sweep(args: argparse.Namespace, progress) -> dict | None:
+    if args.workspace is None:
+        return None
+    from fault_tolerance.bench.workspace import bench_workspace
+
+    return bench_workspace(args.workspace, progress)
+
+
+def target_list(results: dict, batch: dict | None, sweep: dict | None) -> list[dict]:
+    """Every target of one measurement, each with the load average when it was evaluated."""
+    items = targets(results)
+    if batch:
+        from fault_tolerance.bench.batch import target_item
+
+        items.append(target_item(batch))
+    if sweep:
+        from fault_tolerance.bench.workspace import target_items
+
+        items += target_items(sweep)
+    load_ = list(os.getloadavg()) if hasattr(os, "getloadavg") else None
+    for t in items:
+        t["loadavg"] = load_
+    return items
+
+
+def remeasure_failed(args: argparse.Namespace, found: tuple, progress) -> tuple:
+    """Measure once more what a failed target is computed from; report the second measurement.
+
+    The rows of an arm with a failed target (or the batched API, or the workspace sweep) are
+    timed again, and every target computed from them is evaluated on the second measurement
+    (its ``first_value`` and ``first_pass`` keep the first). Returns ``((results, batch, sweep),
+    items)``.
+    """
+    results, batch, sweep = found
+    first = target_list(results, batch, sweep)
+    failed = [t for t in first if t["pass"] is False]
+    if not failed:
+        return found, first
+    names = {t["name"] for t in failed}
+    arms = {t["arm"] for t in failed if t["name"] not in BATCH_TARGETS | WORKSPACE_TARGETS}
+    for key in sorted(arms & set(results)):
+        progress(f"{key} again (a target failed)")
+        results[key] = bench_arm(key, args.steps, args.warmup, args.backend, progress)
+    if names & BATCH_TARGETS:
+        batch = _measure_batch(args, progress)
+    if names & WORKSPACE_TARGETS:
+        sweep = _measure_sweep(args, progress)
+    before = {(t["arm"], t["name"]): t for t in first}
+
+    def measured_again(t: dict) -> bool:
+        for group in (BATCH_TARGETS, WORKSPACE_TARGETS):
+            if t["name"] in group:
+                return bool(names & group)
+        return t["arm"] in arms
+
+    items = target_list(results, batch, sweep)
+    for t in filter(measured_again, items):
+        old = before.get((t["arm"], t["name"]), {})
+        t.update(remeasured=True, first_value=old.get("value"), first_pass=old.get("pass"))
+    return (results, batch, sweep), items
 
 
 def _run_plan(args: argparse.Namespace) -> int:
@@ -250,13 +331,18 @@ def _run_plan(args: argparse.Namespace) -> int:
     rows = []
     for key in keys:
         print(f"  planning {key}", file=sys.stderr, flush=True)
-        rows.append(bench_plan(key))
+        row = bench_plan(key)
+        if not row["pass"]:  # measured once more before it is reported FAIL
+            print(f"  planning {key} again (over its target)", file=sys.stderr, flush=True)
+            row = {**bench_plan(key), "first_seconds": row["seconds"]}
+        row["loadavg"] = list(os.getloadavg()) if hasattr(os, "getloadavg") else None
+        rows.append(row)
     print(format_plan_table(rows))
     if args.json:
         write_json(args.json, {"schema": SCHEMA, "machine": machine_info(), "plan": rows})
         print(f"\nwrote {args.json}")
     failed = [r for r in rows if not r["pass"]]
-    return 1 if (failed and args.strict) else 0
+    return 1 if (failed and args.check) else 0
 
 
 def main(argv: Sequence[str] | None = None) -> int:

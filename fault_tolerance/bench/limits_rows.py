@@ -11,6 +11,8 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 
 from fault_tolerance.bench.routes import installed
@@ -117,7 +119,7 @@ def limits_rows(case) -> dict:
     ctrl = Controller(case.arm, case.spec["lockable"], backend=case.ctrl.backend)
     free, two = _pools(case, ctrl)
     out = case.out
-    rows = {}
+    rows: dict[str, tuple[Callable[..., np.ndarray], list[tuple]]] = {}
     if free:
         rows["jvja_bounded_free"] = (ctrl.jvja, [(q, xd, out) for q, xd in free])
     if two:

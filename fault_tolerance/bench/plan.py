@@ -84,6 +84,15 @@ def format_plan_table(rows: list[dict]) -> str:
         lines.append(
             f"{r['case']:16} {r['n']:2d} {r['r']:2d} {r['steps']:6d} {r['seconds']:8.2f} "
             f"{r['target_s']:7.0f} {'PASS' if r['pass'] else 'FAIL':4} {r['method']:20} "
-            f"{r['scores']['final']:9.4g} {best:10.4g} {peak:>8}"
+            f"{r['scores']['final']:9.4g} {best:10.4g} {peak:>8}" + _fail_note(r)
         )
     return "\n".join(lines)
+
+
+def _fail_note(r: dict) -> str:
+    """A FAIL line's load average, and the first of its two measurements."""
+    if r["pass"]:
+        return ""
+    first = f"  measured twice, first {r['first_seconds']:.2f} s" if "first_seconds" in r else ""
+    load_ = r.get("loadavg")
+    return first + (f"  load average {load_[0]:.2f}" if load_ else "  load average unknown")

@@ -34,8 +34,20 @@ def format_targets(items: list[dict]) -> str:
         if t["pass"] is None and t["limit"] is not None:
             limit = f"(target {t['relation']} {t['limit']:g} applies to the default backend"
             limit += " and the Panda arms)" if t["name"] == "explicit_over_jvja" else ")"
-        lines.append(f"{verdict:<5} {t['arm']:<16}{t['label']:<38}{t['value']:9.2f}  {limit}")
+        line = f"{verdict:<5} {t['arm']:<16}{t['label']:<38}{t['value']:9.2f}  {limit}"
+        lines.append(line + _remeasure_note(t))
     return "\n".join(lines)
+
+
+def _remeasure_note(t: dict) -> str:
+    """What a FAIL line adds: the load average beside it, and the first measurement's value."""
+    note = ""
+    if t.get("remeasured") and t.get("first_value") is not None:
+        note = f"  measured twice, first {t['first_value']:.2f}"
+    if t["pass"] is False:
+        load_ = t.get("loadavg")
+        note += f"  load average {load_[0]:.2f}" if load_ else "  load average unknown"
+    return note
 
 
 def write_json(path: str | Path, data: dict) -> None:

@@ -10,6 +10,7 @@ NAME = "bench"
 HELP = "the performance benchmark"
 EXAMPLE = (
     "fault-tolerance bench\n"
+    "  fault-tolerance bench --json old.json\n"
     "  fault-tolerance bench --json new.json\n"
     "  fault-tolerance bench --compare old.json new.json"
 )

@@ -11,10 +11,14 @@ from __future__ import annotations
 
 import argparse
 import sys
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from fault_tolerance.errors import InvalidInput, RobotNotFound
+
+if TYPE_CHECKING:
+    from fault_tolerance.model.arm import Arm
 
 EXIT_OK = 0
 EXIT_FAILURE = 1
@@ -51,7 +55,7 @@ def names(text: str | None) -> list[str] | None:
 
 
 def add_robot_options(p: argparse.ArgumentParser) -> None:
-    """``--robot | --urdf PATH [--package-dir DIR]``, ``--tip``, ``--task``, ``--joints``, ``--lockable``."""
+    """``--robot | --description PATH [--package-dir DIR]``, ``--tip``, ``--task``, ``--joints``, ``--lockable``."""
     g = p.add_argument_group("robot")
     src = g.add_mutually_exclusive_group()
     src.add_argument(
@@ -59,9 +63,7 @@ def add_robot_options(p: argparse.ArgumentParser) -> None:
         default=None,
         help="shipped or example-robot-data arm (see `fault-tolerance robots`)",
     )
-    src.add_argument(
-        "--urdf", default=None, help="path of a URDF or xacro file (.urdf, .xacro, .urdf.xacro)"
-    )
+    add_description_option(src)
     add_source_options(g)
     g.add_argument(
         "--tip", default=None, help="tip frame (default: the catalog's, or the last frame)"
@@ -79,6 +81,19 @@ def add_robot_options(p: argparse.ArgumentParser) -> None:
         help="joints that may lock: all | none | joint2,joint3 | joint1+joint2,joint3 (+ joins a "
         "multi-joint scenario; none: only where a command can run without them) (default: the "
         "shipped arm's set (robots/catalog.json), else every active joint)",
+    )
+
+
+DESCRIPTION_HELP = (
+    "path of a robot description: URDF (.urdf, or .xml with <robot>), xacro (.xacro, "
+    ".urdf.xacro) or MuJoCo MJCF (.xml with <mujoco>); --urdf PATH is an alias"
+)
+
+
+def add_description_option(group, help_text: str = DESCRIPTION_HELP) -> None:
+    """``--description PATH`` with its alias ``--urdf`` (one destination, ``args.description``)."""
+    group.add_argument(
+        "--description", "--urdf", dest="description", default=None, metavar="PATH", help=help_text
     )
 
 
@@ -100,20 +115,21 @@ def add_source_options(g) -> None:
     )
 
 
-def load_robot(args) -> object:
+def load_robot(args) -> Arm:
     """The arm the robot options describe."""
     from fault_tolerance.model.formats.xacro import parse_xacro_args
     from fault_tolerance.model.loading import load_arm
 
-    if args.robot is None and args.urdf is None:
+    if args.robot is None and args.description is None:
         raise InvalidInput(
-            "name a robot with --robot NAME or --urdf PATH (see `fault-tolerance robots`)"
+            "name a robot with --robot NAME or --description PATH (URDF, xacro or MJCF; see "
+            "`fault-tolerance robots`)"
         )
     from fault_tolerance.cli.suits import robot_not_found
 
     try:
         return load_arm(
-            args.urdf or args.robot,
+            args.description or args.robot,
             tip=args.tip,
             task=args.task,
             joints=names(args.joints),
@@ -208,15 +224,57 @@ def add_path_options(p: argparse.ArgumentParser) -> None:
         choices=["least_norm", "continuation"],
         help="post-failure response of the reduced robot (docs/MATH.md, G3)",
     )
-    from fault_tolerance.resolution.resolvers import MDA_GAIN
+    from fault_tolerance.resolution.mda import MDA_GAIN
 
     g.add_argument("--gain", type=float, default=None, help=f"MDA gain α (default: {MDA_GAIN:g})")
+    g.add_argument(
+        "--option",
+        action="append",
+        default=[],
+        metavar="NAME=VALUE",
+        help="an option of the resolver (its options dataclass; docs/architecture.md, 'Adding a "
+        "resolver'), e.g. --option damping=0.05; repeat for several. Each algorithm gets the "
+        "options it takes; one that none of them takes is refused",
+    )
     g.add_argument(
         "--no-limits",
         action="store_true",
         help="ignore the joint position and velocity limits (the paper's formulation); by "
         "default every step stays inside them (docs/MATH.md, Joint limits)",
     )
+
+
+def _option_value(text: str):
+    """``--option`` values: a number, true/false, none, or the text itself."""
+    low = text.strip().lower()
+    if low in ("true", "false"):
+        return low == "true"
+    if low == "none":
+        return None
+    try:
+        return int(text) if low.lstrip("+-").isdigit() else float(text)
+    except ValueError:
+        return text.strip()
+
+
+def resolver_options(args, algorithms) -> dict:
+    """``--option NAME=VALUE`` as a dict; an option none of ``algorithms`` takes is refused."""
+    from fault_tolerance.simulation.simulate import option_names
+
+    given: dict = {}
+    for item in getattr(args, "option", None) or []:
+        name, eq, value = item.partition("=")
+        if not eq or not name.strip():
+            raise InvalidInput(f"--option {item!r}: write NAME=VALUE, e.g. --option gain=0.02")
+        given[name.strip()] = _option_value(value)
+    taken = {k for a in algorithms for k in option_names(a)}
+    unknown = sorted(set(given) - taken)
+    if unknown:
+        allowed = {a: list(option_names(a)) for a in algorithms}
+        raise InvalidInput(
+            f"--option {unknown}: not an option of {list(algorithms)}; theirs: {allowed}"
+        )
+    return given
 
 
 def limits_line(run_) -> str:

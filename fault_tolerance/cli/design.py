@@ -1,4 +1,4 @@
-"""``fault-tolerance design``: artificial limits (and links) of a planar 3R for fault tolerance."""
+"""``fault-tolerance design``: limits and links of a planar 3R, or DH parameters of a spatial arm."""
 
 from __future__ import annotations
 
@@ -14,15 +14,19 @@ from fault_tolerance.cli.common import (
     load_robot,
     lockable_of,
 )
-from fault_tolerance.cli.workspace import DASK_HELP, add_dask_options, singletons
+from fault_tolerance.cli.design_dh import DH_ONLY, run_dh
+from fault_tolerance.cli.design_dh import add_arguments as add_dh_arguments
+from fault_tolerance.cli.workspace import DASK_HELP, add_dask_options, singletons, sweep_output
 from fault_tolerance.errors import InvalidInput
 
 NAME = "design"
-HELP = "artificial limits (and links) of a planar 3R for fault tolerance"
+HELP = "design for fault tolerance: planar 3R limits/links, or a spatial arm's DH parameters"
 EXAMPLE = (
     "fault-tolerance design --robot planar_3r --vary limits --objective ftw-area --out out/d\n"
     "  fault-tolerance design --robot planar_3r --vary links,limits --objective jvj "
-    "--rcn-max 40 --task circle --workers 2 --out out/d_jvj"
+    "--rcn-max 40 --task circle --workers 2 --out out/d_jvj\n"
+    "  fault-tolerance design --vary dh --dh spatial_4r --params d3:0.2:0.6,a4:0.1:0.5 "
+    "--rcn-max 100 --out out/d_4r"
 )
 
 
@@ -32,11 +36,23 @@ def add_parser(sub) -> argparse.ArgumentParser:
         NAME, help=HELP, description=DASK_HELP, epilog=epilog(EXAMPLE), formatter_class=FORMATTER
     )
     add_robot_options(s)
-    s.add_argument("--vary", default="limits", help="limits | links,limits (default limits)")
+    _task_help(s)
     s.add_argument(
-        "--objective", default="ftw-area", help="ftw-area | jvj | rcn (default ftw-area)"
+        "--vary",
+        default="limits",
+        help="limits | links,limits (planar 3R) | dh | dh,limits (a DH arm) (default limits)",
     )
-    s.add_argument("--x0", default=None, help="circle start x,y [m] (default: the catalog's)")
+    s.add_argument(
+        "--objective",
+        default=None,
+        help="ftw-area | jvj | rcn for a planar 3R (default ftw-area); mean-jvj | max-jvj | "
+        "manipulability for --vary dh (default mean-jvj)",
+    )
+    s.add_argument(
+        "--x0",
+        default=None,
+        help="circle start x,y [m] (x,y,z for --vary dh) (default: the catalog's)",
+    )
     s.add_argument(
         "--radius", type=float, default=None, help="circle radius [m] (default: the catalog's)"
     )
@@ -44,19 +60,37 @@ def add_parser(sub) -> argparse.ArgumentParser:
         "--rcn-max",
         type=float,
         default=None,
-        help="require max K <= this on the task (default: no requirement)",
+        help="require max K <= this on the task (default: no requirement); --vary dh: max k_S "
+        "<= this (default 100, the paper's threshold)",
     )
-    s.add_argument("--candidates", type=int, default=128, help="quasi-random designs (default 128)")
+    s.add_argument(
+        "--candidates",
+        type=int,
+        default=None,
+        help="planar 3R: designs in the first population (quasi-random, the baseline first) "
+        "(default 128)",
+    )
     s.add_argument("--rounds", type=int, default=4, help="pattern-search rounds (default 4)")
     s.add_argument(
-        "--grid", type=int, default=201, help="grid of the chosen design's map (default 201)"
+        "--grid",
+        type=int,
+        default=None,
+        help="planar 3R: grid of the chosen design's map (default 201)",
     )
     s.add_argument(
         "--seed", type=int, default=0, help="seed of the quasi-random designs (default 0)"
     )
     add_dask_options(s)
+    add_dh_arguments(s)
     s.set_defaults(func=run)
     return s
+
+
+def _task_help(s: argparse.ArgumentParser) -> None:
+    """``--task`` of ``design`` names the task path, and only ``circle`` is one: say so."""
+    action = next(a for a in s._actions if "--task" in a.option_strings)
+    action.help = "the task path: circle, the only one ('planar' means the same) (default: circle)"
+    action.metavar = "circle"
 
 
 def _task(args, arm):
@@ -74,14 +108,24 @@ def _task(args, arm):
 
 def run(args) -> int:
     """Design search into ``--out``: design.json and design.png."""
-    from fault_tolerance.storage.folder_lock import FolderLock
+    from fault_tolerance.analysis.design.search import DESIGN_FILES
 
-    with FolderLock(args.out):  # a second writer of --out exits 2 naming this one
+    with sweep_output(args.out, DESIGN_FILES):
         return _run(args)
 
 
 def _run(args) -> int:
+    from fault_tolerance.analysis.design.planar import VARY
     from fault_tolerance.analysis.design.search import design
+
+    if args.vary in ("dh", "dh,limits"):
+        return run_dh(args)
+    if args.vary not in VARY:
+        raise InvalidInput(f"--vary '{args.vary}' is not one of {[*VARY, 'dh', 'dh,limits']}")
+    dh_only = [o for o, v in DH_ONLY.items() if getattr(args, v) is not None]
+    if dh_only:
+        raise InvalidInput(f"{', '.join(dh_only)}: options of --vary dh, not of --vary {args.vary}")
+    args.objective = args.objective or "ftw-area"
 
     if args.task not in (None, "circle", "planar"):  # design's --task names the task path
         raise InvalidInput(
@@ -97,9 +141,10 @@ def _run(args) -> int:
         args.objective,
         task=_task(args, arm),
         rcn_max=args.rcn_max,
-        candidates=args.candidates,
+        candidates=128 if args.candidates is None else args.candidates,
         rounds=args.rounds,
-        grid=args.grid,
+        generations=0 if args.generations is None else args.generations,
+        grid=201 if args.grid is None else args.grid,
         seed=args.seed,
         workers=args.workers or 0,
         scheduler=args.scheduler,

@@ -4,12 +4,18 @@ from __future__ import annotations
 
 import argparse
 
-from fault_tolerance.cli.common import FORMATTER, add_source_options, epilog, names
+from fault_tolerance.cli.common import (
+    FORMATTER,
+    add_description_option,
+    add_source_options,
+    epilog,
+    names,
+)
 
 NAME = "inspect"
 HELP = "kinematic tree, chosen chain and task, intolerable joints"
 EXAMPLE = (
-    "fault-tolerance inspect spatial_4r\n  fault-tolerance inspect my_arm.urdf --tip tool0\n"
+    "fault-tolerance inspect spatial_4r\n  fault-tolerance inspect my_arm.urdf --tip tool\n"
     "  fault-tolerance inspect ur_description/urdf/ur5e.xacro --package-dir . --tip tool0"
 )
 
@@ -21,14 +27,16 @@ def add_parser(sub) -> argparse.ArgumentParser:
         "target",
         nargs="?",
         default=None,
-        help="shipped / example-robot-data name, URDF or xacro path (or --robot / --urdf, as in "
-        "the other commands)",
+        help="shipped / example-robot-data name, or a URDF, xacro or MJCF path (or --robot / "
+        "--description, as in the other commands)",
     )
     src = s.add_mutually_exclusive_group()
     src.add_argument(
         "--robot", default=None, help="the same as TARGET, a robot name (default: none)"
     )
-    src.add_argument("--urdf", default=None, help="the same as TARGET, a file (default: none)")
+    add_description_option(
+        src, "the same as TARGET, a URDF, xacro or MJCF file; --urdf is an alias (default: none)"
+    )
     s.add_argument(
         "--tip",
         default=None,
@@ -59,10 +67,11 @@ def run(args) -> int:
     from fault_tolerance.errors import InvalidInput, RobotNotFound
     from fault_tolerance.model.formats.xacro import parse_xacro_args
 
-    given = [t for t in (args.target, args.robot, args.urdf) if t is not None]
+    given = [t for t in (args.target, args.robot, args.description) if t is not None]
     if len(given) != 1:
         raise InvalidInput(
-            "name one robot: fault-tolerance inspect NAME|PATH (or --robot NAME, --urdf PATH); "
+            "name one robot: fault-tolerance inspect NAME|PATH (or --robot NAME, --description "
+            "PATH); "
             f"got {len(given)}"
         )
     try:

@@ -16,7 +16,9 @@ from fault_tolerance.cli.common import (
     floats,
     limits_line,
     load_robot,
+    names,
     report_warnings,
+    resolver_options,
 )
 from fault_tolerance.cli.dynamics_options import (
     add_dynamics_options,
@@ -24,6 +26,7 @@ from fault_tolerance.cli.dynamics_options import (
     dynamics_model,
     print_torque_table,
 )
+from fault_tolerance.cli.simulate import announce_first_run, first_run_engine
 from fault_tolerance.cli.start_options import choose_start
 from fault_tolerance.errors import InvalidInput
 
@@ -34,8 +37,6 @@ EXAMPLE = (
     "  fault-tolerance lock --robot planar_3r --joint joint2 --at 0.4 --tau 0.02 --out out/lock\n"
     "  fault-tolerance lock --robot panda --joint panda_joint4 --at 0.5 --dynamics --duration 1"
 )
-#: The planners a torque-level lock compares by default.
-DYNAMICS_ALGORITHMS = ("lnva", "jvja", "jvja_inertia", "mda", "global")
 
 
 def add_parser(sub) -> argparse.ArgumentParser:
@@ -50,18 +51,20 @@ def add_parser(sub) -> argparse.ArgumentParser:
         help="lock time [s], or max / min: the moment of largest / smallest jump of the planned "
         "run (default: max)",
     )
+    from fault_tolerance.simulation.simulate import algorithms
+
     s.add_argument(
         "--algorithm",
         default="lnva",
-        choices=["lnva", "jvja", "mda", "jvja_inertia", "global"],
+        choices=list(algorithms()),  # the registered resolvers, then the path planners
         help="the planner before the lock (default: lnva, as in the paper's Sec. V); with "
         "--dynamics: the one whose planned run places --at max/min",
     )
     s.add_argument(
         "--algorithms",
-        default=",".join(DYNAMICS_ALGORITHMS),
-        help="with --dynamics: the planners compared, comma-separated (default: "
-        f"{','.join(DYNAMICS_ALGORITHMS)}), each locked at the same time from the same start",
+        default=None,
+        help="with --dynamics: the planners compared, comma-separated (default: every one, "
+        f"{','.join(algorithms())}), each locked at the same time from the same start",
     )
     add_dynamics_options(s, lock=True)
     s.add_argument("--tau", type=float, default=0.05, help="servo time constant [s] (default 0.05)")
@@ -138,6 +141,10 @@ def _run(args) -> int:
     servo = ServoModel(tau=args.tau, accel_limit=args.accel_limit)
     feedback = 10.0 if args.feedback is None else args.feedback
     gain = {} if args.gain is None else {"gain": args.gain}
+    resolver = resolver_options(args, [args.algorithm])  # --option, checked before any work
+    if resolver:
+        gain["options"] = resolver
+    gain["engine"] = first_run_engine(args, 3)  # with the gain, into every run (cli/simulate.py)
     # the start is checked with the planned (lock-free) run; the locking joint must be tolerable
     q0, path, lockable, choice = choose_start(
         args,
@@ -156,6 +163,7 @@ def _run(args) -> int:
             raise InvalidInput(f"lock time must be within [0, {duration}] s, got {t_at}")
     if choice is not None:
         print(choice.reason())
+    announce_first_run(gain["engine"])
     t_lock, planned = _lock_time(args, arm, path, q0, joint, duration, gain)
     progress = bar(int(round(duration / args.dt)) + 1, not args.no_progress, "lock")
     run_ = simulate(
@@ -213,18 +221,23 @@ def _write(run_, arm, joint: str, t_lock: float, out: Path, html: bool, found, p
 
 
 def _dynamics_algorithms(args) -> list[str]:
-    from fault_tolerance.simulation.setup import ALGORITHMS
+    """``--algorithms`` of ``lock --dynamics``: every registered resolver and planner by default."""
+    from fault_tolerance.simulation.simulate import algorithms
 
-    algs = [a.strip() for a in args.algorithms.split(",") if a.strip()]
-    bad = [a for a in algs if a not in ALGORITHMS]
+    if args.algorithms is None:
+        return list(algorithms())
+    algs = names(args.algorithms) or []
+    bad = [a for a in algs if a not in algorithms()]
     if bad or not algs:
-        raise InvalidInput(f"--algorithms {args.algorithms!r}: choose among {list(ALGORITHMS)}")
+        raise InvalidInput(f"--algorithms {args.algorithms!r}: choose among {list(algorithms())}")
     return algs
 
 
 def _run_dynamics(args) -> int:
     """``lock --dynamics``: every planner, the ideal and the finite brake, the same start and time."""
-    from fault_tolerance.simulation.simulate import simulate
+    from fault_tolerance.resolution.registry import names as registered
+    from fault_tolerance.simulation.setup import TRACKED_PAST_PLAN
+    from fault_tolerance.simulation.simulate import options_for, simulate
     from fault_tolerance.storage.atomic import output_folder
 
     arm = load_robot(args)
@@ -232,8 +245,9 @@ def _run_dynamics(args) -> int:
     algs = _dynamics_algorithms(args)
     feedback = 10.0 if args.feedback is None else args.feedback
     gain = {} if args.gain is None else {"gain": args.gain}
+    resolver = resolver_options(args, algs)  # --option, checked before any work
     common = dict(duration=args.duration, response=args.response, limits=not args.no_limits)
-    stepwise = [a for a in algs if a != "global"] or ["jvja"]
+    stepwise = [a for a in algs if a in registered()] or [TRACKED_PAST_PLAN]  # checks the start
     q0, path, lockable, choice = choose_start(
         args, arm, stepwise, extra_lockable=[joint], **common, **gain
     )
@@ -251,6 +265,7 @@ def _run_dynamics(args) -> int:
                 arm, path, alg, q0=q0, lockable=lockable, dt=args.dt, duration=duration,
                 lock_joint=joint, lock_time=t_lock, feedback_gain=feedback,
                 response=args.response, limits=not args.no_limits, dynamics=model, **gain,
+                options=options_for(alg, resolver),
             )  # fmt: skip
             rows[(alg, label)] = run_.summary()
             if out:

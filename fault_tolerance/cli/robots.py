@@ -50,7 +50,8 @@ def run(args) -> int:
     for r in [head] + rows:
         print("  ".join(str(v).ljust(w) for v, w in zip(r, widths, strict=True)).rstrip())
     print(
-        "\nAny other example-robot-data name or a URDF path works too (--robot NAME | --urdf PATH)."
+        "\nAny other example-robot-data name or a URDF, xacro or MJCF path works too "
+        "(--robot NAME | --description PATH)."
     )
     if args.all:
         from fault_tolerance.model.catalog import example_robot_names

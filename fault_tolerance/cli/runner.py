@@ -13,6 +13,7 @@ import re
 import sys
 import warnings
 from collections.abc import Callable
+from typing import NoReturn
 
 from fault_tolerance.cli.common import EXIT_BAD_INPUT, EXIT_FAILURE, EXIT_INTERRUPTED, close_bars
 from fault_tolerance.errors import FaultToleranceError
@@ -23,18 +24,65 @@ from fault_tolerance.errors import FaultToleranceError
 NEGATIVE_NUMBERS = re.compile(r"^-(\d|\.\d)[\d.eE+\-,:;]*$")
 
 
+#: Attribute of the parsed namespace that records the options given so far (by destination).
+GIVEN = "_options_given"
+
+
+def _refuse_repeat(parser: argparse.ArgumentParser, action: argparse.Action, namespace, used):
+    """``parser.error`` when ``action``'s option was already given on this command line."""
+    if not action.option_strings:
+        return
+    given = namespace.__dict__.setdefault(GIVEN, {})
+    if action.dest in given:
+        first = "" if given[action.dest] == used else f" (first as {given[action.dest]})"
+        parser.error(
+            f"{used} given twice{first}; give it once (only --package-dir and --xacro-arg "
+            "may repeat)"
+        )
+    given[action.dest] = used
+
+
+class StoreOnce(argparse._StoreAction):
+    """``store`` that refuses a second value: ``--lockable a --lockable b`` is an error, not b."""
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        """Store ``values`` unless the option was given before."""
+        _refuse_repeat(parser, self, namespace, option_string)
+        super().__call__(parser, namespace, values, option_string)
+
+
+class StoreTrueOnce(argparse._StoreTrueAction):
+    """``store_true`` that refuses the flag given twice (``--html --html``)."""
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        """Set the flag unless it was given before."""
+        _refuse_repeat(parser, self, namespace, option_string)
+        super().__call__(parser, namespace, values, option_string)
+
+
 class Parser(argparse.ArgumentParser):
     """argparse with a one-line error message (exit code 2); values may be negative numbers.
 
     Every subcommand's parser is of this class (``add_subparsers`` uses the parent's class), so
-    any option taking numbers accepts ``--opt -1,2`` as well as ``--opt=-1,2``.
+    any option taking numbers accepts ``--opt -1,2`` as well as ``--opt=-1,2``. An option given
+    twice is an error (exit 2, "given twice"), except those declared ``action="append"``
+    (``--package-dir``, ``--xacro-arg``), whose values merge.
     """
 
     def __init__(self, *args, **kwargs) -> None:
         super().__init__(*args, **kwargs)
         self._negative_number_matcher = NEGATIVE_NUMBERS
+        self.register("action", None, StoreOnce)
+        self.register("action", "store", StoreOnce)
+        self.register("action", "store_true", StoreTrueOnce)
 
-    def error(self, message: str):  # type: ignore[override]
+    def parse_known_args(self, args=None, namespace=None):
+        """Argparse's parse, without the record of the options given in the result."""
+        ns, extra = super().parse_known_args(args, namespace)
+        ns.__dict__.pop(GIVEN, None)
+        return ns, extra
+
+    def error(self, message: str) -> NoReturn:
         """Exit 2 with one line on stderr."""
         self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
 

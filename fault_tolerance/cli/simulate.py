@@ -17,6 +17,7 @@ from fault_tolerance.cli.common import (
     load_robot,
     names,
     report_warnings,
+    resolver_options,
 )
 from fault_tolerance.cli.dynamics_options import (
     add_dynamics_options,
@@ -35,20 +36,24 @@ EXAMPLE = (
     "  fault-tolerance simulate --robot panda --task position --lockable panda_joint2,panda_joint4 "
     "--radius 0.05 --rows y,z --out out/panda\n"
     "  fault-tolerance simulate --robot panda --algorithms jvja --no-limits --out out/panda_paper\n"
-    "  fault-tolerance simulate --urdf my_arm.urdf --tip tool0 --task position --csv path.csv --out out/mine"
+    "  fault-tolerance simulate --description my_arm.urdf --tip tool --task position --lockable joint1,joint2,joint3 --csv path.csv --out out/mine"
 )
 
 
 def add_parser(sub) -> argparse.ArgumentParser:
     """The ``simulate`` sub-command."""
+    from fault_tolerance.resolution.resolvers import BUILTINS
+    from fault_tolerance.simulation.simulate import algorithms
+
     s = sub.add_parser(NAME, help=HELP, epilog=epilog(EXAMPLE), formatter_class=FORMATTER)
     add_robot_options(s)
     add_path_options(s)
     s.add_argument(
         "--algorithms",
-        default="lnva,jvja,mda",
-        help="comma-separated among lnva,jvja,mda,jvja_inertia,global (global: the whole-path plan, "
-        "docs/MATH.md W1-W5; with --x0 and no --q0 it chooses its start on the self-motion of x0)",
+        default=",".join(e.name for e in BUILTINS),
+        help=f"comma-separated among {','.join(algorithms())} (registered resolvers, then path "
+        "planners; global: the whole-path plan, docs/MATH.md W1-W5; with --x0 and no --q0 it "
+        "chooses its start on the self-motion of x0)",
     )
     add_plan_options(s)
     add_dynamics_options(s)
@@ -83,13 +88,31 @@ def add_plan_options(s) -> None:
 
 
 def _algorithms(args) -> list[str]:
-    from fault_tolerance.simulation.setup import ALGORITHMS
+    from fault_tolerance.simulation.simulate import algorithms
 
     algs = names(args.algorithms) or []
-    bad = [a for a in algs if a not in ALGORITHMS]
+    bad = [a for a in algs if a not in algorithms()]
     if bad or not algs:
-        raise InvalidInput(f"--algorithms {args.algorithms!r}: choose among {list(ALGORITHMS)}")
+        raise InvalidInput(f"--algorithms {args.algorithms!r}: choose among {list(algorithms())}")
     return algs
+
+
+def _sim_options(args, algs: list[str]) -> tuple[dict, dict]:
+    """The runs' shared options of :func:`simulate`, and ``--option`` (each algorithm its own)."""
+    from fault_tolerance.resolution.mda import MDA_GAIN
+
+    resolver = resolver_options(args, algs)  # an option none of algs takes is refused
+    options = {
+        "duration": args.duration,
+        "feedback_gain": args.feedback or 0.0,
+        "response": args.response,
+        "gain": MDA_GAIN if args.gain is None else args.gain,
+        "limits": not args.no_limits,  # the default start's checks run the same formulation
+        "engine": first_run_engine(args, len(algs)),
+    }
+    if resolver:
+        options["options"] = resolver
+    return options, resolver
 
 
 def _global_start(alg: str, args) -> dict:
@@ -118,25 +141,62 @@ def run(args) -> int:
         return _run(args, out)
 
 
+#: Samples (all runs together) up to which a first run takes the reference engine rather than
+#: compiling the fast path first (the reference does ~2000-5000 samples/s on the Panda).
+SHORT_RUN = 60_000
+#: What a first run with the reference engine says (one line on stderr).
+REFERENCE_NOTICE = (
+    "fault-tolerance: the compiled fast path is not in numba's cache yet; this run takes the "
+    "reference engine (the same numbers to 1e-6) and the fast path compiles in the background "
+    "for the next runs"
+)
+
+
+#: The kernel groups a run of ``simulate`` or ``lock`` uses (:mod:`fault_tolerance.bench.warm`).
+SIMULATE_KERNELS = ("controller", "bounded", "simulate")
+
+
+def first_run_engine(args, runs: int) -> str:
+    """``"auto"``, or ``"reference"`` for a short run while the fast path is not compiled yet.
+
+    A long run (more than :data:`SHORT_RUN` samples) compiles the fast path first, saying so on
+    one line of stderr; a short one takes the reference engine (then call
+    :func:`announce_first_run` once the inputs are checked; docs/performance.md "First run").
+    """
+    from fault_tolerance.bench import warm
+
+    if not warm.compile_ahead() or not warm.cold_groups(SIMULATE_KERNELS):
+        return "auto"
+    duration = args.duration if args.duration else 10.0  # the shipped paths are shorter
+    if runs * duration / args.dt > SHORT_RUN:
+        warm.warm(SIMULATE_KERNELS)
+        return "auto"
+    return "reference"
+
+
+def announce_first_run(engine: str) -> None:
+    """For a first run on the reference engine: one line on stderr, the compilation started."""
+    from fault_tolerance.bench import warm
+
+    if engine == "reference":
+        print(REFERENCE_NOTICE, file=sys.stderr)
+        warm.start_in_background(SIMULATE_KERNELS)
+
+
 def _run(args, out: Path | None) -> int:
-    from fault_tolerance.resolution.resolvers import MDA_GAIN
+    from fault_tolerance.resolution.registry import names as registered
     from fault_tolerance.resolution.scenarios import scenarios
     from fault_tolerance.simulation.diagnostics import check_run as check
-    from fault_tolerance.simulation.simulate import simulate
+    from fault_tolerance.simulation.setup import TRACKED_PAST_PLAN
+    from fault_tolerance.simulation.simulate import options_for, simulate
     from fault_tolerance.storage.atomic import output_folder
     from fault_tolerance.storage.budget import check_run
 
     arm = load_robot(args)
     algs = _algorithms(args)
-    options = {
-        "duration": args.duration,
-        "feedback_gain": args.feedback or 0.0,
-        "response": args.response,
-        "gain": MDA_GAIN if args.gain is None else args.gain,
-        "limits": not args.no_limits,  # the default start's checks run the same formulation
-    }
+    options, resolver = _sim_options(args, algs)
     out = output_folder(out) if out else None
-    stepwise = [a for a in algs if a != "global"] or ["jvja"]  # the start is checked with these
+    stepwise = [a for a in algs if a in registered()] or [TRACKED_PAST_PLAN]  # checks the start
     q0, path, lockable, choice = choose_start(args, arm, stepwise, **options)
     checked = {} if choice is None or args.dynamics else choice.runs  # kinematic checks
     if args.dynamics:
@@ -146,6 +206,7 @@ def _run(args, out: Path | None) -> int:
     steps = check_run(args.dt, duration, arm.n, arm.m, f, runs=len(algs))  # all kept in memory
     if choice is not None:
         print(choice.reason())
+    announce_first_run(options["engine"])
     progress = bar(steps * len(algs), not args.no_progress, "simulate")
     runs, saved, found = {}, [], {}
     try:
@@ -163,7 +224,7 @@ def _run(args, out: Path | None) -> int:
                     lockable=lockable,
                     dt=args.dt,
                     progress=progress,
-                    **options,
+                    **{**options, "options": options_for(alg, resolver)},
                 )
             found[alg] = check(runs[alg], arm)
             if out:  # the run, its plot and page appear together, whole
@@ -193,8 +254,9 @@ def _run(args, out: Path | None) -> int:
         print(f"{alg}: {limits_line(run_)}")
     if out:
         from fault_tolerance.figures import runs as plots
+        from fault_tolerance.figures.text import plain
 
-        title = f"{arm.name}: {', '.join(algs)}"
+        title = plain(f"{arm.name}: {', '.join(algs)}")  # names are data, not mathtext
         plots.save_figure(plots.plot_comparison(runs, title), out / "comparison")
         print(f"wrote {out}/ (run.npz, run.csv, summary.json per algorithm; comparison.png/.svg)")
     return 0
@@ -231,14 +293,15 @@ def print_table(runs) -> None:
     """λ and K statistics, position error [m] (and orientation error [rad]) of each run."""
     summaries = {alg: run_.summary() for alg, run_ in runs.items()}
     angular = any("orientation_error_max" in s for s in summaries.values())
+    w = max([10, *map(len, summaries)])  # a registered resolver's name may be longer
     print(
-        f"{'algorithm':10} {'λ mean':>10} {'λ max':>10} {'K mean':>10} {'K max':>10} "
+        f"{'algorithm':{w}} {'λ mean':>10} {'λ max':>10} {'K mean':>10} {'K max':>10} "
         f"{'pos err max [m]':>16}" + (f" {'ori err max [rad]':>18}" if angular else "")
         + "   (λ in (rad/s)²)"
     )  # fmt: skip
     for alg, s in summaries.items():
         ori = f" {s.get('orientation_error_max', float('nan')):18.3g}" if angular else ""
         print(
-            f"{alg:10} {s['jvj_mean']:10.4g} {s['jvj_max']:10.4g} {s['rcn_mean']:10.4g} "
+            f"{alg:{w}} {s['jvj_mean']:10.4g} {s['jvj_max']:10.4g} {s['rcn_mean']:10.4g} "
             f"{s['rcn_max']:10.4g} {s['tracking_error_max']:16.3g}" + ori
         )

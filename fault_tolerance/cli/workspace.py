@@ -3,7 +3,11 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
+import os
 import time
+from collections.abc import Iterator
+from pathlib import Path
 
 from fault_tolerance.cli.common import FORMATTER, add_robot_options, epilog, load_robot, lockable_of
 from fault_tolerance.errors import InvalidInput
@@ -44,6 +48,32 @@ def add_dask_options(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--no-progress", action="store_true", help="no progress bar (default: the bar is shown)"
     )
+
+
+@contextlib.contextmanager
+def sweep_output(out: str, replaceable: tuple[str, ...]) -> Iterator[Path]:
+    """Check ``--out`` before any work, lock it, and leave no folder behind if the command fails.
+
+    ``--out`` must be a folder or absent (not a file, a link, nor a path under a file); an
+    existing one may hold only a result of this command and its ``chunks-*/``. On failure the
+    folders this command created and left empty are removed (finished chunks are kept).
+    """
+    from fault_tolerance.storage.folder_io import check_path_names, refuse_link
+    from fault_tolerance.storage.folder_lock import FolderLock
+    from fault_tolerance.storage.result_folder import check_target, created_folders
+
+    path = check_path_names(Path(out))
+    above = Path(os.path.abspath(path)).parent
+    while not os.path.lexists(above) and above != above.parent:
+        above = above.parent
+    if not above.is_dir():
+        raise InvalidInput(f"{out}: --out lies under {above}, which is not a folder")
+    if os.path.lexists(path) and not os.path.islink(path) and not path.is_dir():
+        raise InvalidInput(f"{out}: --out exists and is not a folder; choose a folder")
+    refuse_link(path, folder=True)
+    with created_folders(path), FolderLock(path):  # a second writer of --out exits 2
+        check_target(path, (*replaceable, "chunks-*/*"))
+        yield path
 
 
 def singletons(lockable) -> list[str]:
@@ -100,9 +130,9 @@ def add_parser(sub) -> argparse.ArgumentParser:
 
 def run(args) -> int:
     """Failure-tolerant workspace of one arm into ``--out``."""
-    from fault_tolerance.storage.folder_lock import FolderLock
+    from fault_tolerance.analysis.workspace.result import WORKSPACE_FILES
 
-    with FolderLock(args.out):  # a second writer of --out exits 2 naming this one
+    with sweep_output(args.out, WORKSPACE_FILES):
         return _run(args)
 
 

@@ -12,83 +12,93 @@ the compiled solve refuses. See docs/MATH.md "Joint limits" and "Joint limits, c
 from __future__ import annotations
 
 from collections.abc import Callable
+from typing import Any, cast
 
 import numpy as np
 
 from fault_tolerance.control.fast.box_check import box_status_numpy, compiled_box_status
+from fault_tolerance.control.indices import jacobian, jacobian_derivatives
+from fault_tolerance.control.workspace import (
+    BOUNDED_REFERENCE_STEPS,
+    BOUNDED_STEPS,
+    FALLBACKS,
+    ControllerWorkspace,
+)
 from fault_tolerance.errors import InvalidInput
 from fault_tolerance.model.joint_limits import NO_LIMIT, velocity_limits
 from fault_tolerance.resolution.bounded import resolve_bounded
+from fault_tolerance.resolution.registry import KERNEL_JVJA, KERNEL_MDA, get
 
 
-def bounded_step(ctrl, name: str, inner: Callable, horizon: float) -> Callable:
+def bounded_step(
+    cw: ControllerWorkspace, name: str, inner: Callable, horizon: float, backend: str
+) -> Callable:
     """``step(q, xdot, out=None)``: ``inner`` (the unbounded fast step), inside the rate box.
 
-    ``ctrl`` is the :class:`~fault_tolerance.control.controller.Controller` being built. With the numba
-    backend the whole step after the Jacobian is one compiled call
+    ``cw`` is the workspace of the :class:`~fault_tolerance.control.controller.Controller` being
+    built, ``backend`` its backend. With the numba backend the whole step after the Jacobian is one compiled call
     (:func:`fault_tolerance.control.fast.bounded_solve.bounded_kernel`); otherwise, and for every step the compiled
     solve refuses, the reference route: ``inner``, the box check, and
     :func:`~fault_tolerance.resolution.bounded.resolve_bounded` only when a bound is met.
 
-    Sets ``ctrl.last_scale`` (task scaling of the last step, 1 when ``ẋ`` was reached) and
-    ``ctrl.last_active`` (joints held at a bound); counts ``ctrl.bounded_steps`` (steps that needed
-    the bounded solver) and ``ctrl.bounded_reference_steps`` (those solved by the reference).
+    Writes ``cw.box_state`` (task scaling of the last step, 1 when ``ẋ`` was reached; the joints
+    held at a bound: the Controller's ``last_scale``, ``last_active``); counts the steps that
+    needed the bounded solver and those solved by the reference in ``cw.counts``.
     """
     if not (np.isfinite(horizon) and horizon > 0):
         raise InvalidInput(f"horizon must be finite and > 0 [s], got {horizon}")
-    arm, n = ctrl.arm, ctrl.n
+    arm, n = cw.arm, cw.n
     lim = np.empty((3, n))
     lim[0] = np.where(np.abs(arm.lower) < NO_LIMIT, arm.lower, -np.inf)
     lim[1] = np.where(np.abs(arm.upper) < NO_LIMIT, arm.upper, np.inf)
     lim[2] = velocity_limits(arm)
-    prm = np.array([1.0 / horizon, ctrl._alpha])
-    reference = _reference_step(ctrl, name, inner, lim, prm)
-    if ctrl.backend != "numba" or name == "jvja_inertia":  # no compiled solve for it yet
+    prm = np.array([1.0 / horizon, cw.alpha])
+    reference = _reference_step(cw, name, inner, lim, prm, backend)
+    if backend != "numba":
         return reference
     from fault_tolerance.control.fast.bounded_step import compiled_bounded_step
 
-    return compiled_bounded_step(ctrl, name, inner, reference, lim, prm)
+    return compiled_bounded_step(cw, name, inner, reference, lim, prm)
 
 
-def _reference_step(ctrl, name: str, inner: Callable, lim, prm) -> Callable:
+def _reference_step(
+    cw: ControllerWorkspace, name: str, inner: Callable, lim, prm, backend: str
+) -> Callable:
     """The reference route: ``inner``, the box check, :func:`resolve_bounded` when a bound is met."""
-    n = ctrl.n
+    n, counts, state = cw.n, cw.counts, cw.box_state
     buf = np.empty((4, n))  # lo, hi, scratch (n), scratch (m <= n)
     lo, hi = buf[0], buf[1]
-    ws = ctrl._jvja_ws  # [P, Q, c] of the last JVJA fast step, N = I - PᵀQ (set by the kernels)
-    jv = name == "jvja" and ctrl._singletons
-    cols = ctrl.scenarios.columns if ctrl._singletons else np.zeros(0, dtype=np.int64)
-    check = compiled_box_status() if ctrl.backend == "numba" else box_status_numpy
-    dummy = np.zeros((ctrl.m, n)), np.zeros((ctrl.m, n)), np.zeros(n)
-    sc = ctrl.scenarios
-    general = (name == "jvja" and not ctrl._singletons) or name == "jvja_inertia"
+    ws = cw.jvja_factors  # [P, Q, c] of the last JVJA fast step, N = I - PᵀQ (set by the kernels)
+    mode = get(name).compiled  # the built-in kernel this step checks
+    jv = mode == KERNEL_JVJA and cw.singletons
+    cols = cw.scenarios.columns if cw.singletons else np.zeros(0, dtype=np.int64)
+    check = compiled_box_status() if backend == "numba" else box_status_numpy
+    dummy = np.zeros((cw.m, n)), np.zeros((cw.m, n)), np.zeros(n)
+    sc = cw.scenarios
+    general = mode == KERNEL_JVJA and not cw.singletons
 
     def slow(q, xdot, out):
-        J = ctrl.jacobian(q)
-        opts = {"tolerate": ctrl.tolerate}
-        if name == "mda":
-            opts.update(dJ=ctrl.jacobian_derivatives(q), gain=ctrl.gain, max_step=ctrl.max_step)
-        if name == "jvja_inertia":
-            opts["M"] = ctrl._dynamics.mass_matrix(q)
+        J = jacobian(cw, q)
+        opts = {"tolerate": cw.tolerate}
+        if mode == KERNEL_MDA:
+            opts.update(dJ=jacobian_derivatives(cw, q), gain=cw.gain, max_step=cw.max_step)
         box_status_numpy(q, lim, prm, buf, out, *dummy, cols, False)  # the box (L1) at q
         box = (lo.copy(), hi.copy())
         res = resolve_bounded(name, J, np.asarray(xdot, dtype=float), sc, bounds=box, **opts)
         out[...] = res.qd
-        state = ctrl._box_state  # the compiled steps' state when there are any
-        state[0], state[1], state[2:] = res.scale, 1.0, res.active
-        ctrl.bounded_steps += 1
-        ctrl.bounded_reference_steps += 1
+        state[0], state[1], state[2:] = res.scale, 1.0, res.active  # the compiled steps' state too
+        counts[BOUNDED_STEPS] += 1
+        counts[BOUNDED_REFERENCE_STEPS] += 1
         return out
 
     def step(q: np.ndarray, xdot: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
-        before = ctrl.fallbacks
+        before = counts[FALLBACKS]
         out = inner(q, xdot, out)
-        fresh = jv and ctrl.fallbacks == before
+        fresh = jv and counts[FALLBACKS] == before
         P, Q, c = (ws[0], ws[1], ws[2]) if fresh else dummy
         status = check(q, lim, prm, buf, out, P, Q, c, cols, fresh)
         if status or general or (jv and not fresh):
             return slow(q, xdot, out)
-        state = ctrl._box_state
         state[0], state[1] = 1.0, 0.0
         state[2:] = 0.0
         return out
@@ -97,12 +107,12 @@ def _reference_step(ctrl, name: str, inner: Callable, lim, prm) -> Callable:
         """The box check and, when a bound is met, :func:`resolve_bounded`, for given rates."""
         if box_status_numpy(q, lim, prm, buf, out, *dummy, cols, False):
             return slow(q, xdot, out)
-        state = ctrl._box_state
         state[0], state[1] = 1.0, 0.0
         state[2:] = 0.0
         return out
 
-    step.slow, step.finish = slow, finish
+    carrier = cast(Any, step)  # a function that carries its two helpers as attributes
+    carrier.slow, carrier.finish = slow, finish
     step.__name__ = name
     step.__doc__ = f"{name} inside the rate box of the joint limits (reference route)."
     return step

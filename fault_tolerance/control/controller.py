@@ -11,7 +11,9 @@ of its cost:
   pseudo-inverse; multi-joint scenarios (G1) with one batched solve per scenario size;
 * the reduced condition numbers of all scenarios from one batched ``eigvalsh`` of the stack
   ``J_S J_Sᵀ`` (docs/MATH.md, eq. 15), and the MDA gradient from one batched ``eigh``;
-* buffers allocated once; pass ``out=`` to get the rates in your own array.
+* buffers allocated once, in one :class:`~fault_tolerance.control.workspace.ControllerWorkspace`
+  (:attr:`Controller.workspace`, frozen: its tables cannot be rebound); pass ``out=`` to get the
+  rates in your own array.
 
 Near singularities nothing is approximated. A step first checks a certificate that no damping is
 needed: with the Cholesky factor ``G = UᵀU``, ``λ_min(G) ≥ 1 / trace(G⁻¹)`` and
@@ -36,7 +38,8 @@ Backends for the LNVA and single-joint JVJA steps (``backend=``):
 MDA and the RCN always use the lapack (or numpy) code; multi-joint JVJA with numba runs
 :func:`fault_tolerance.control.fast.multi_step.multi_kernel`. The step kernels (the
 LAPACK/NumPy calls, the numba kernel and its compilation) are in :mod:`fault_tolerance.control.lapack_steps`;
-this module builds the workspace they run in and hands singular steps to the planner.
+this module builds the workspace they run in (:mod:`fault_tolerance.control.workspace`);
+:mod:`fault_tolerance.control.fallback` hands singular steps to the planner.
 
 Example:
     >>> import numpy as np, fault_tolerance as ft
@@ -52,34 +55,34 @@ Example:
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
+from dataclasses import replace
 
 import numpy as np
-import pinocchio as pin
 
+from fault_tolerance.control import indices
 from fault_tolerance.control import lapack_steps as kernels
-from fault_tolerance.control.indices import ControllerIndices
-from fault_tolerance.control.inertia_step import inertia_step
+from fault_tolerance.control.workspace import (
+    BOUNDED_REFERENCE_STEPS,
+    BOUNDED_STEPS,
+    FALLBACKS,
+    ControllerWorkspace,
+    build_workspace,
+)
 from fault_tolerance.errors import InvalidInput
 from fault_tolerance.model.arm import Arm
 from fault_tolerance.numerics.linalg import PIVOT_EPS, PIVOT_TOL
-from fault_tolerance.resolution import resolvers as planner
+from fault_tolerance.resolution import mda as mda_module
+from fault_tolerance.resolution.registry import KERNEL_JVJA, KERNEL_LNVA, KERNEL_MDA, get, names
 from fault_tolerance.resolution.scenarios import Scenarios, scenarios
 
 __all__ = [
     "BACKENDS",
     "Controller",
-    "METHODS",
     "available_backends",
 ]
 
-#: Methods a :class:`Controller` steps with.
-METHODS = ("lnva", "jvja", "mda", "jvja_inertia")
 #: Backends of the LNVA / JVJA steps, fastest first.
 BACKENDS = ("numba", "lapack", "numpy")
-
-_LWA = pin.LOCAL_WORLD_ALIGNED
-_WORLD = pin.WORLD
-_INF = float("inf")
 
 
 def available_backends() -> list[str]:
@@ -92,6 +95,18 @@ def available_backends() -> list[str]:
         except ImportError:
             pass
     return out + ["numpy"]
+
+
+def _counter(index: int, doc: str) -> property:
+    """A count of the workspace's ``counts[index]``, read and reset through the Controller."""
+
+    def get(self) -> int:
+        return int(self.workspace.counts[index])
+
+    def set_(self, value: int) -> None:
+        self.workspace.counts[index] = value
+
+    return property(get, set_, doc=doc)
 
 
 def _backend(backend: str) -> str:
@@ -110,7 +125,7 @@ def _backend(backend: str) -> str:
     return backend
 
 
-class Controller(ControllerIndices):
+class Controller:
     """A preallocated workspace for LNVA / JVJA / MDA steps of one arm and one lockable set.
 
     Build it once, outside the control loop, then call :attr:`step` (or :attr:`lnva`,
@@ -126,11 +141,17 @@ class Controller(ControllerIndices):
             ``"all"`` (every joint), column indices or joint names, tuples for multi-joint
             scenarios (``|S| <= r``), or a :class:`~fault_tolerance.resolution.scenarios.Scenarios`. The
             catalog's choice for an arm is ``arm.default_lockable``.
-        method: What :attr:`step` computes: ``"jvja"`` (default), ``"lnva"``, ``"mda"`` or
-            ``"jvja_inertia"`` (docs/MATH.md (D3); the NumPy route, built only when chosen).
+        method: What :attr:`step` computes: a registered resolver
+            (:func:`fault_tolerance.resolution.registry.names`), ``"jvja"`` by default. The
+            built-ins step with their compiled kernels; a resolver registered without
+            ``compiled`` steps with its reference rates (its ``bounded`` variant under limits),
+            through :func:`fault_tolerance.control.generic_step.generic_step`.
+        options: The resolver's own options by name (its options dataclass); ``gain`` and
+            ``max_step`` below fill options of those names unless given here. An option the
+            resolver does not take raises :class:`~fault_tolerance.errors.InvalidInput`.
         weights: One positive weight per scenario (default 1).
-        gain: MDA gain α of ``q̇ = J⁺ẋ - α N ∇K`` (default ``planner.MDA_GAIN``).
-        max_step: Cap of the norm of MDA's null-space step [rad/s] (``planner.MDA_MAX_STEP``).
+        gain: MDA gain α of ``q̇ = J⁺ẋ - α N ∇K`` (default ``mda.MDA_GAIN``).
+        max_step: Cap of the norm of MDA's null-space step [rad/s] (``mda.MDA_MAX_STEP``).
         tolerate: As ``planner.jvja(tolerate=True)``: pivots of ``N[S, S]`` below
             ``linalg.PIVOT_EPS`` are damped (by the planner) instead of raising
             :class:`~fault_tolerance.errors.IntolerableFailure`; for loops that may cross a
@@ -144,12 +165,16 @@ class Controller(ControllerIndices):
             least your control period).
 
     Attributes:
-        step: The step chosen by ``method``: ``step(q, xdot, out=None) -> qd``.
+        step: The step chosen by ``method`` (and ``options``): ``step(q, xdot, out=None) -> qd``.
+        options: The resolver's options dataclass, as built from ``options``, ``gain`` and
+            ``max_step``.
         lnva: ``lnva(q, xdot, out=None) -> qd``, least-norm rates.
         jvja: ``jvja(q, xdot, out=None) -> qd``, minimum-jump rates, eq. (5).
         mda: ``mda(q, xdot, out=None) -> qd``, maximum-dexterity rates.
         scenarios: The validated failure scenarios.
         backend: The backend in use.
+        workspace: The :class:`~fault_tolerance.control.workspace.ControllerWorkspace` the steps
+            run in (tables, scratch, the last step's state, the counters).
         fallbacks: Number of steps handed to :mod:`~fault_tolerance.resolution.resolvers` (near a singularity
             of ``J``, where the rates are damped).
         last_scale: Task scaling of the last step (1 unless the task was out of reach in the box).
@@ -172,15 +197,24 @@ class Controller(ControllerIndices):
         *,
         method: str = "jvja",
         weights: Sequence[float] | None = None,
-        gain: float = planner.MDA_GAIN,
-        max_step: float = planner.MDA_MAX_STEP,
+        gain: float = mda_module.MDA_GAIN,
+        max_step: float = mda_module.MDA_MAX_STEP,
         tolerate: bool = False,
         backend: str = "auto",
         limits: bool = True,
         horizon: float | None = None,
+        options: dict | None = None,
     ) -> None:
-        if method not in METHODS:
-            raise InvalidInput(f"method '{method}' is not one of {list(METHODS)}")
+        if method not in names():
+            raise InvalidInput(f"method '{method}' is not one of {list(names())}")
+        entry = get(method)
+        if limits and entry.bounded is None:
+            raise InvalidInput(
+                f"resolver '{method}' has no bounded variant: it cannot honour the joint limits; "
+                "build the Controller with limits=False"
+            )
+        run = {"gain": gain, "max_step": max_step}  # the scenarios' weights are weights=
+        self.options = entry.options_with(options, run, {"weights": "Controller(weights=...)"})
         gain = float(gain)
         if not np.isfinite(gain) or gain < 0:
             raise InvalidInput(f"mda gain must be finite and >= 0, got {gain}")
@@ -192,7 +226,6 @@ class Controller(ControllerIndices):
         backend = _backend(backend)
         self.arm = arm
         self.model = arm.model
-        self.data = arm.model.createData()
         self.frame_id = arm.frame_id
         self.n, self.m = arm.n, arm.m
         self.scenarios: Scenarios = scenarios(
@@ -202,60 +235,87 @@ class Controller(ControllerIndices):
         self.gain = gain
         self.max_step = float(max_step)
         self.tolerate = bool(tolerate)
-        # Pivots N_ii below this leave the fast path: intolerable (raise), or damped by the planner.
-        self._pivot_threshold = PIVOT_EPS if self.tolerate else PIVOT_TOL
         self.backend = backend
-        self.fallbacks = 0
-        self._rows, self._rank_coef = kernels.row_selector(arm), kernels.rank_coefficient(arm)
-        # The steps are closures over this workspace, built by the backend's kernels.
-        self._la = (
-            kernels.numpy_linalg() if backend == "numpy" else kernels.lapack_linalg_or_numpy()
-        )
-        self._init_scenario_tables()
-        self._jvja_ws: list = [None] * 3  # P, Q, c of the last JVJA step: N = I - PᵀQ (kernels)
         self.limits = bool(limits)
-        # [last scale, 1 after a bounded step, active joints (1.0)]: the bounded steps write it
-        self._box_state = np.zeros(self.n + 2)
-        self._box_state[0] = 1.0
-        self._box_ws = None  # the compiled bounded steps' workspace (boxfast)
-        self.bounded_steps = 0
-        self.bounded_reference_steps = 0
-        if backend == "numba":
+        self.workspace = self._build_workspace()
+        self.data = self.workspace.data
+        self._build_steps(horizon)
+        compiled = {KERNEL_LNVA: self.lnva, KERNEL_JVJA: self.jvja, KERNEL_MDA: self.mda}
+        if entry.compiled in compiled and not options:
+            self.step = compiled[entry.compiled]
+        else:  # its reference rates (a new resolver, or a built-in with options of its own)
+            from fault_tolerance.control.generic_step import generic_step
+
+            box_horizon = self.horizon if self.limits else None
+            self.step = generic_step(self.workspace, entry, self.options, box_horizon)
+
+    def _build_workspace(self) -> ControllerWorkspace:
+        """The tables of this arm and lockable set (and the compiled bounded steps' ones)."""
+        ws = build_workspace(
+            self.arm,
+            self.scenarios,
+            rows=kernels.row_selector(self.arm),
+            rank_coef=kernels.rank_coefficient(self.arm),
+            # Pivots N_ii below this leave the fast path: intolerable (raise), or damped.
+            pivot_threshold=PIVOT_EPS if self.tolerate else PIVOT_TOL,
+            tolerate=self.tolerate,
+            gain=self.gain,
+            max_step=self.max_step,
+            la=(
+                kernels.numpy_linalg()
+                if self.backend == "numpy"
+                else kernels.lapack_linalg_or_numpy()
+            ),
+        )
+        if self.limits and self.backend == "numba":
+            from fault_tolerance.control.fast.bounded_step import bounded_tables
+
+            tables, state = bounded_tables(ws)
+            ws = replace(ws, box_tables=tables, box_state=state)
+        return ws
+
+    def _build_steps(self, horizon: float | None) -> None:
+        """The built-ins' steps :attr:`lnva`, :attr:`jvja`, :attr:`mda`, closures over the workspace."""
+        ws = self.workspace
+        if self.backend == "numba":
             from fault_tolerance.control.fast.step import compiled_step
 
-            self.lnva = compiled_step(self, 0)
-            if self._singletons:
-                self.jvja = compiled_step(self, 1)
+            self.lnva = compiled_step(ws, KERNEL_LNVA)
+            if ws.singletons:
+                self.jvja = compiled_step(ws, KERNEL_JVJA)
             else:  # multi-joint scenarios (G1), compiled too
                 from fault_tolerance.control.fast.multi_step import compiled_multi_step
 
-                self.jvja = compiled_multi_step(self)
+                self.jvja = compiled_multi_step(ws)
         else:
-            self.lnva = kernels.lapack_lnva(self)
-            self.jvja = kernels.lapack_jvja(self)
-        self.mda = kernels.lapack_mda(self)
+            self.lnva = kernels.lapack_lnva(ws)
+            self.jvja = kernels.lapack_jvja(ws)
+        self.mda = kernels.lapack_mda(ws)
         if self.limits:  # the fast steps checked against the rate box (L1), bounded when needed
             from fault_tolerance.control.bounded_step import bounded_step
             from fault_tolerance.model.joint_limits import RATE_HORIZON
 
             self.horizon = float(RATE_HORIZON if horizon is None else horizon)
-            self.lnva = bounded_step(self, "lnva", self.lnva, self.horizon)
-            self.jvja = bounded_step(self, "jvja", self.jvja, self.horizon)
-            self.mda = bounded_step(self, "mda", self.mda, self.horizon)
-        if method == "jvja_inertia":  # built on request: it needs the arm's inertias
-            self.jvja_inertia = inertia_step(self)  # inside the rate box with limits
-        self.step = getattr(self, method)
+            self.lnva = bounded_step(ws, "lnva", self.lnva, self.horizon, self.backend)
+            self.jvja = bounded_step(ws, "jvja", self.jvja, self.horizon, self.backend)
+            self.mda = bounded_step(ws, "mda", self.mda, self.horizon, self.backend)
 
-    # -- helpers ----------------------------------------------------------------------------
+    # -- state and indices ---------------------------------------------------------------------
+    fallbacks = _counter(FALLBACKS, "Steps handed to the planner (near a singularity of ``J``).")
+    bounded_steps = _counter(BOUNDED_STEPS, "Steps that met a bound and were solved bounded.")
+    bounded_reference_steps = _counter(
+        BOUNDED_REFERENCE_STEPS, "Bounded steps solved by the Python reference, not compiled."
+    )
+
     @property
     def last_scale(self) -> float:
         """Task scaling of the last step (1 unless the task was out of reach in the box)."""
-        return float(self._box_state[0])
+        return float(self.workspace.box_state[0])
 
     @property
     def last_active(self) -> np.ndarray:
         """Joints held at a bound in the last step, bool (n,) (a new array)."""
-        return self._box_state[2:] != 0.0
+        return self.workspace.box_state[2:] != 0.0
 
     @property
     def f(self) -> int:
@@ -270,110 +330,24 @@ class Controller(ControllerIndices):
 
     def jacobian(self, q: np.ndarray) -> np.ndarray:
         """Task Jacobian at ``q``, shape (m, n), computed as in the steps (no input validation)."""
-        return pin.computeFrameJacobian(self.model, self.data, q, self.frame_id, _LWA)[self._rows]
+        return indices.jacobian(self.workspace, q)
 
-    def _init_scenario_tables(self) -> None:
-        sc, n = self.scenarios, self.n
-        w = sc.weights / sc.weights.max()  # eq. (5) is scale-free; a sum of these cannot overflow
-        W = float(w.sum())
-        self._singletons = sc.singletons
-        self._uniform = bool(np.all(sc.weights == sc.weights[0]))
-        self._all_uniform = False
-        # fw[0]: 0 on lockable columns, +inf elsewhere (a_i / (N_ii + inf) = 0 there);
-        # fw[1]: w_i / W on lockable columns (1 everywhere with uniform weights: alpha = -1/f).
-        self._fw = np.zeros((2, n))
-        self._fw[1] = 1.0
-        if sc.singletons:
-            cols = sc.columns
-            self._all_uniform = self._uniform and sorted(cols.tolist()) == list(range(n))
-            self._fw[0] = _INF
-            self._fw[0, cols] = 0.0
-            if not self._uniform:
-                self._fw[1] = 0.0
-                self._fw[1, cols] = w / W
-        self._alpha = -1.0 / sc.f if (self._uniform and sc.singletons) else -1.0
-        # Scenarios grouped by size for the batched (G1) solve: (columns (k, s), w / W (k,)).
-        self._groups: list[tuple[np.ndarray, np.ndarray]] = []
-        for size in sorted({len(S) for S in sc.sets}):
-            members = [k for k, S in enumerate(sc.sets) if len(S) == size]
-            idx = np.array([sc.sets[k] for k in members], dtype=int)
-            self._groups.append((idx, w[members] / W))
-        # keep[k, 0, j] = 0 when joint j is locked in scenario k: J_S = J * keep[k] (column mask).
-        keep = np.ones((sc.f, n))
-        for k, S in enumerate(sc.sets):
-            keep[k, list(S)] = 0.0
-        self._keep = keep[:, None, :]
-        self._Jm = np.empty((sc.f, self.m, n))
-        self._stack = np.empty((sc.f, self.m, self.m))
-        j = np.arange(n)
-        self._upper = (j[:, None] < j[None, :]).astype(float)[:, None, :]  # (n, 1, n)
+    def rcn(self, q: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+        """Reduced condition numbers ``k_S`` of all scenarios at ``q``, eq. (15), shape (f,).
 
-    def _fallback(self, name: str, J: np.ndarray, xdot, out: np.ndarray, q=None) -> np.ndarray:
-        """The step done by :mod:`.planner` itself (damped near singularities), into ``out``."""
-        J = np.array(J, dtype=float)
-        xdot = np.asarray(xdot, dtype=float)
-        if xdot.shape != (self.m,):
-            raise InvalidInput(f"xdot has shape {xdot.shape}; {self.arm.name} needs ({self.m},)")
-        if not (np.all(np.isfinite(J)) and np.all(np.isfinite(xdot))):
-            raise InvalidInput("q and xdot must be finite")
-        self.fallbacks += 1
-        if name == "lnva":
-            qd = planner.lnva(J, xdot)
-        elif name == "jvja":
-            qd = planner.jvja(J, xdot, self.scenarios, tolerate=self.tolerate)
-        else:
-            qd = planner.mda(
-                J,
-                xdot,
-                self.scenarios,
-                dJ=self.jacobian_derivatives(q),
-                gain=self.gain,
-                max_step=self.max_step,
-            )
-        out[...] = qd
-        return out
-
-    def _bad_call(self, err: Exception, q, xdot, out) -> InvalidInput:
-        """An :class:`InvalidInput` that says which argument of a step is wrong."""
-        if not (isinstance(q, np.ndarray) and q.dtype == np.float64):
-            return InvalidInput(f"q must be a float64 NumPy array of shape ({self.n},), got {q!r}")
-        for name, value, shape in (("q", q, (self.n,)), ("xdot", xdot, (self.m,))):
-            if np.shape(value) != shape:
-                return InvalidInput(
-                    f"{name} has shape {np.shape(value)}; {self.arm.name} needs shape {shape}"
-                )
-        if out is not None and not (
-            isinstance(out, np.ndarray)
-            and out.shape == (self.n,)
-            and out.dtype == np.float64
-            and out.flags.c_contiguous
-        ):
-            return InvalidInput(f"out must be a C-contiguous float64 array of shape ({self.n},)")
-        return InvalidInput(f"step failed: {err}")
-
-    # -- multi-joint JVJA (G1), called by kernels.lapack_jvja ---------------------------------
-    def _shift_general(self, J: np.ndarray, B: np.ndarray, a: np.ndarray, c: np.ndarray) -> bool:
-        """``c = Σ_S (w_S/W) E_S N[S,S]⁻¹ a[S]`` (G1), one batched solve per scenario size.
-
-        ``N[S, S] = I - J_Sᵀ B_S`` (``B = G⁻¹J``): N itself is never formed. False when a pivot
-        needs the planner's damping (``tolerate``); raises when intolerable.
+        One batched ``eigvalsh`` of the stack ``J_S J_Sᵀ``; capped at ``RCN_MAX`` as
+        :func:`fault_tolerance.rcn`.
         """
-        c[:] = 0.0
-        for idx, wrel in self._groups:
-            NSS = -np.einsum("rks,rkt->kst", J[:, idx], B[:, idx])  # (k, s, s)
-            NSS[:, range(idx.shape[1]), range(idx.shape[1])] += 1.0
-            if idx.shape[1] == 1:
-                piv = NSS[:, 0, 0]
-                if piv.min() < self._pivot_threshold:
-                    if self.tolerate:
-                        return False
-                    self.scenarios.check_tolerable(np.eye(self.n) - J.T @ B)
-                np.add.at(c, idx[:, 0], wrel * a[idx[:, 0]] / piv)
-                continue
-            if np.linalg.eigvalsh(NSS)[:, 0].min() < self._pivot_threshold:
-                if self.tolerate:
-                    return False
-                self.scenarios.check_tolerable(np.eye(self.n) - J.T @ B)
-            sol = np.linalg.solve(NSS, a[idx][:, :, None])[:, :, 0]  # (k, s)
-            np.add.at(c, idx.ravel(), (wrel[:, None] * sol).ravel())
-        return True
+        return indices.rcn(self.workspace, q, out)
+
+    def rcn_of(self, J: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+        """As :meth:`rcn`, for a given task Jacobian ``J`` of shape (m, n)."""
+        return indices.rcn_of(self.workspace, J, out)
+
+    def jacobian_derivatives(self, q: np.ndarray) -> np.ndarray:
+        """``dJ[j] = ∂J/∂q_j``, shape (n, m, n), as :meth:`Arm.jacobian_derivatives`, vectorised."""
+        return indices.jacobian_derivatives(self.workspace, q)
+
+    def rcn_gradient(self, J: np.ndarray, dJ: np.ndarray) -> np.ndarray:
+        """Gradient of ``K = Σ_S k_S²``, shape (n,), as :func:`fault_tolerance.rcn_gradient`."""
+        return indices.rcn_gradient(self.workspace, J, dJ)

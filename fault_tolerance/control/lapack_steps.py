@@ -5,11 +5,12 @@
 * :func:`step_kernel`: the whole LNVA / single-joint JVJA step after the Jacobian, as scalar
   loops; :func:`compiled_kernel`: that kernel compiled by numba (imported then; cached on disk).
 * The step builders :func:`lapack_lnva`, :func:`lapack_jvja`, :func:`lapack_mda` and
-  :func:`compiled_step`: each reads a built controller's workspace (scenario tables, thresholds,
-  linear-algebra calls ``_la``) and returns its ``step(q, xdot, out=None) -> qd`` closure.
+  :func:`compiled_step`: each reads a Controller's
+  :class:`~fault_tolerance.control.workspace.ControllerWorkspace` (scenario tables, thresholds,
+  linear-algebra calls ``la``) and returns its ``step(q, xdot, out=None) -> qd`` closure.
 
 Every step certifies ``σ_min(J) ≥ SIGMA_EPS`` by ``trace((J Jᵀ)⁻¹) ≤ TRACE_MAX``, or hands the
-step to the controller's ``_fallback`` (the planner, damped): see :mod:`fault_tolerance.control.controller`.
+step to :func:`fault_tolerance.control.fallback.fallback` (the planner, damped): see :mod:`fault_tolerance.control.controller`.
 Importing this module imports neither numba nor scipy.
 """
 
@@ -17,23 +18,27 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
+from functools import partial
 from types import SimpleNamespace
-from typing import Protocol
 
 import numpy as np
 import pinocchio as pin
 
+from fault_tolerance.control.fallback import bad_call as _bad_call
+from fault_tolerance.control.fallback import fallback as _fallback
+from fault_tolerance.control.indices import djac, rcn_gradient
+from fault_tolerance.control.workspace import ControllerWorkspace
 from fault_tolerance.errors import FaultToleranceError
 from fault_tolerance.numerics.linalg import RANK_RTOL, SIGMA_EPS, projection
 
 __all__ = [
     "TRACE_MAX",
-    "Workspace",
     "lapack_jvja",
     "lapack_linalg",
     "lapack_linalg_or_numpy",
     "lapack_lnva",
     "lapack_mda",
+    "shift_general",
     "numpy_linalg",
 ]
 
@@ -45,43 +50,6 @@ _WORLD = pin.WORLD
 _INF = float("inf")
 _STEP_ERRORS = (ValueError, TypeError, RuntimeError, AttributeError, IndexError)
 F64 = np.dtype(np.float64)
-
-
-class Workspace(Protocol):
-    """What the step builders read: a built :class:`~fault_tolerance.control.controller.Controller`.
-
-    Declared here so that this module does not import :mod:`fault_tolerance.control.controller` (which
-    imports it).
-    """
-
-    model: pin.Model
-    data: pin.Data
-    frame_id: int
-    n: int
-    m: int
-    tolerate: bool
-    gain: float
-    max_step: float
-    scenarios: object  # failures.Scenarios
-    _rows: slice | np.ndarray
-    _la: SimpleNamespace
-    _fw: np.ndarray
-    _rank_coef: float
-    _alpha: float
-    _pivot_threshold: float
-    _singletons: bool
-    _uniform: bool
-    _all_uniform: bool
-
-    def _fallback(self, name: str, J, xdot, out, q=None) -> np.ndarray: ...
-    def _bad_call(self, err: Exception, q, xdot, out) -> Exception: ...
-    def _shift_general(
-        self, J: np.ndarray, B: np.ndarray, a: np.ndarray, c: np.ndarray
-    ) -> bool: ...
-    def _djac(self, Jw: np.ndarray, Jl: np.ndarray, p: np.ndarray) -> np.ndarray: ...
-    def rcn_gradient(self, J: np.ndarray, dJ: np.ndarray) -> np.ndarray:
-        """Gradient of the square-sum RCN ``K``, shape (n,)."""
-        ...
 
 
 # -- the step's certificate: what the arm lets it skip ------------------------------------------
@@ -193,15 +161,15 @@ def lapack_linalg_or_numpy() -> SimpleNamespace:
 # -- LNVA / JVJA / MDA with LAPACK (or NumPy) calls --------------------------------------------
 
 
-def lapack_lnva(ctrl: Workspace) -> Callable[..., np.ndarray]:
-    """The LNVA step of ``ctrl`` with its LAPACK (or NumPy) calls: ``lnva(q, xdot, out=None)``."""
-    model, data, fid, rows = ctrl.model, ctrl.data, ctrl.frame_id, ctrl._rows
-    n, m = ctrl.n, ctrl.m
-    la = ctrl._la
+def lapack_lnva(ws: ControllerWorkspace) -> Callable[..., np.ndarray]:
+    """The LNVA step of a Controller's workspace ``ws`` with its LAPACK (or NumPy) calls: ``lnva(q, xdot, out=None)``."""
+    model, data, fid, rows = ws.model, ws.data, ws.frame_id, ws.rows
+    n, m = ws.n, ws.m
+    la = ws.la
     dsyrk, dposv, dtrtri, ddot = la.dsyrk, la.dposv, la.dtrtri, la.ddot
     cfj, dot, empty = pin.computeFrameJacobian, np.dot, np.empty
     GT = np.zeros((m, m), order="F")  # LAPACK works in its upper triangle; the rest stays 0
-    fallback, bad_call = ctrl._fallback, ctrl._bad_call
+    fallback, bad_call = partial(_fallback, ws), partial(_bad_call, ws)
 
     def lnva(q: np.ndarray, xdot: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
         """LNVA, least-norm rates ``q̇ = J⁺ẋ`` (damped near singularities as in linalg)."""
@@ -228,26 +196,27 @@ def lapack_lnva(ctrl: Workspace) -> Callable[..., np.ndarray]:
     return lnva
 
 
-def lapack_jvja(ctrl: Workspace) -> Callable[..., np.ndarray]:
-    """The JVJA step of ``ctrl`` with its LAPACK (or NumPy) calls, any scenarios (G1, G2)."""
-    model, data, fid, rows = ctrl.model, ctrl.data, ctrl.frame_id, ctrl._rows
-    n, m = ctrl.n, ctrl.m
-    la = ctrl._la
+def lapack_jvja(ws: ControllerWorkspace) -> Callable[..., np.ndarray]:
+    """The JVJA step of ``ws`` with its LAPACK (or NumPy) calls, any scenarios (G1, G2)."""
+    model, data, fid, rows = ws.model, ws.data, ws.frame_id, ws.rows
+    n, m = ws.n, ws.m
+    la = ws.la
     dsyrk, dposv, dtrtri, ddot = la.dsyrk, la.dposv, la.dtrtri, la.ddot
     dgemv = la.dgemv
     cfj, dot, empty = pin.computeFrameJacobian, np.dot, np.empty
     divide, multiply, add, subtract, einsum = np.divide, np.multiply, np.add, np.subtract, np.einsum
     GT = np.zeros((m, m), order="F")
     c, d, dF = np.empty(n), np.empty(n), np.empty(n)
-    off, wrel = ctrl._fw[0], ctrl._fw[1]
-    rank_coef, alpha = ctrl._rank_coef, ctrl._alpha
-    fallback, bad_call, general = ctrl._fallback, ctrl._bad_call, ctrl._shift_general
-    tol, tolerate = ctrl._pivot_threshold, ctrl.tolerate
-    check_tolerable = ctrl.scenarios.check_tolerable
-    mode = ("all" if ctrl._all_uniform else "singletons") if ctrl._singletons else "general"
-    weighted = not ctrl._uniform
-    ws = ctrl._jvja_ws
-    ws[2] = c
+    off, wrel = ws.fw[0], ws.fw[1]
+    rank_coef, alpha = ws.rank_coef, ws.alpha
+    fallback, bad_call = partial(_fallback, ws), partial(_bad_call, ws)
+    general = partial(shift_general, ws)
+    tol, tolerate = ws.pivot_threshold, ws.tolerate
+    check_tolerable = ws.scenarios.check_tolerable
+    mode = ("all" if ws.all_uniform else "singletons") if ws.singletons else "general"
+    weighted = not ws.uniform
+    last = ws.jvja_factors
+    last[2] = c
 
     def jvja(q: np.ndarray, xdot: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
         """JVJA, minimum square-sum jump rates, eq. (5) in closed form (G1, G2)."""
@@ -267,7 +236,7 @@ def lapack_jvja(ctrl: Workspace) -> Callable[..., np.ndarray]:
             dot(xdot, B, out=out)  # a
             einsum("ij,ij->j", J, B, out=d)  # N is never formed: N_ii = 1 - J_iᵀ B_i
             subtract(1.0, d, out=d)
-            ws[0], ws[1] = J, B  # N = I - JᵀB, for the bounded step's box check (boxstep)
+            last[0], last[1] = J, B  # N = I - JᵀB, for the bounded step's box check (boxstep)
             if mode == "all":  # c_i = a_i / N_ii, alpha = -1/f
                 if min(d.tolist()) < tol:
                     if not tolerate:
@@ -302,19 +271,19 @@ def lapack_jvja(ctrl: Workspace) -> Callable[..., np.ndarray]:
     return jvja
 
 
-def lapack_mda(ctrl: Workspace) -> Callable[..., np.ndarray]:
-    """The MDA step of ``ctrl`` with its LAPACK (or NumPy) calls: ``mda(q, xdot, out=None)``."""
-    model, data, fid, rows = ctrl.model, ctrl.data, ctrl.frame_id, ctrl._rows
-    n, m = ctrl.n, ctrl.m
-    la = ctrl._la
+def lapack_mda(ws: ControllerWorkspace) -> Callable[..., np.ndarray]:
+    """The MDA step of ``ws`` with its LAPACK (or NumPy) calls: ``mda(q, xdot, out=None)``."""
+    model, data, fid, rows = ws.model, ws.data, ws.frame_id, ws.rows
+    n, m = ws.n, ws.m
+    la = ws.la
     dsyrk, dposv, dtrtri, ddot = la.dsyrk, la.dposv, la.dtrtri, la.ddot
     dgemm, dgemv = la.dgemm, la.dgemv
     GT = np.zeros((m, m), order="F")
     eye = np.asfortranarray(np.eye(n))
-    fallback, bad_call = ctrl._fallback, ctrl._bad_call
-    djac, grad_of = ctrl._djac, ctrl.rcn_gradient
-    rank_coef = ctrl._rank_coef
-    gain, max_step = ctrl.gain, ctrl.max_step
+    fallback, bad_call = partial(_fallback, ws), partial(_bad_call, ws)
+    hessian, grad_of = partial(djac, ws), partial(rcn_gradient, ws)
+    rank_coef = ws.rank_coef
+    gain, max_step = ws.gain, ws.max_step
     oMf = data.oMf
 
     def mda(q: np.ndarray, xdot: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
@@ -337,7 +306,7 @@ def lapack_mda(ctrl: Workspace) -> Callable[..., np.ndarray]:
                 return fallback("mda", J, xdot, out, q)
             np.dot(xdot, B, out=out)
             N = dgemm(-1.0, J.T, B, 1.0, eye)
-            grad = grad_of(J, djac(Jw, Jl, oMf[fid].translation))
+            grad = grad_of(J, hessian(Jw, Jl, oMf[fid].translation))
             step = dgemv(gain, N, grad)  # α N ∇K [rad/s], capped as planner.mda does
             size = math.sqrt(ddot(step, step))
             if not size < _INF:  # ∇K overflowed at a reduced singularity: no direction
@@ -359,4 +328,31 @@ def lapack_mda(ctrl: Workspace) -> Callable[..., np.ndarray]:
     return mda
 
 
-# -- LNVA / JVJA in one compiled kernel -------------------------------------------------------
+# -- multi-joint JVJA (G1) --------------------------------------------------------------------
+def shift_general(
+    ws: ControllerWorkspace, J: np.ndarray, B: np.ndarray, a: np.ndarray, c: np.ndarray
+) -> bool:
+    """``c = Σ_S (w_S/W) E_S N[S,S]⁻¹ a[S]`` (G1), one batched solve per scenario size.
+
+    ``N[S, S] = I - J_Sᵀ B_S`` (``B = G⁻¹J``): N itself is never formed. False when a pivot
+    needs the planner's damping (``tolerate``); raises when intolerable.
+    """
+    c[:] = 0.0
+    for idx, wrel in ws.groups:
+        NSS = -np.einsum("rks,rkt->kst", J[:, idx], B[:, idx])  # (k, s, s)
+        NSS[:, range(idx.shape[1]), range(idx.shape[1])] += 1.0
+        if idx.shape[1] == 1:
+            piv = NSS[:, 0, 0]
+            if piv.min() < ws.pivot_threshold:
+                if ws.tolerate:
+                    return False
+                ws.scenarios.check_tolerable(np.eye(ws.n) - J.T @ B)
+            np.add.at(c, idx[:, 0], wrel * a[idx[:, 0]] / piv)
+            continue
+        if np.linalg.eigvalsh(NSS)[:, 0].min() < ws.pivot_threshold:
+            if ws.tolerate:
+                return False
+            ws.scenarios.check_tolerable(np.eye(ws.n) - J.T @ B)
+        sol = np.linalg.solve(NSS, a[idx][:, :, None])[:, :, 0]  # (k, s)
+        np.add.at(c, idx.ravel(), (wrel[:, None] * sol).ravel())
+    return True

@@ -6,6 +6,8 @@ from pathlib import Path
 
 import numpy as np
 
+from fault_tolerance.figures.text import plain
+
 
 def plot_design(d, path: str | Path) -> Path:
     """Two panels: W(A)/FTW of the chosen design; candidates (mean λ vs mean K, or area)."""
@@ -60,8 +62,45 @@ def plot_design(d, path: str | Path) -> Path:
         b.set_ylabel("mean K")
         b.legend(fontsize=8)
         b.set_title(f"{rec['evaluations']} designs, objective {rec['objective']}")
-    fig.suptitle(f"{rec['robot']}: design ({rec['vary']})")
+    fig.suptitle(f"{plain(rec['robot'])}: design ({plain(rec['vary'])})")
     fig.tight_layout()
     fig.savefig(path, dpi=90)
+    plt.close(fig)
+    return Path(path)
+
+
+def plot_dh_design(d, path: str | Path) -> Path:
+    """The search of a DH design: every candidate's mean λ against its largest k_S.
+
+    With the Pareto front, the chosen design and the baseline (the table the search started from).
+    """
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    rec, seen = d.record, d.evaluated
+    ok = seen["feasible"].astype(bool)
+    fig, ax = plt.subplots(figsize=(7.5, 5.0), layout="constrained")
+    ax.scatter(seen["rcn_max"][ok], seen["mean_jvj"][ok], s=12, c="#9ecae1", label="candidates")
+    bad = ~ok & np.isfinite(seen["rcn_max"])
+    if bad.any():
+        ax.scatter(seen["rcn_max"][bad], seen["mean_jvj"][bad], s=12, c="#d9d9d9",
+                   label=f"over rcn_max {rec['settings']['rcn_max']:g}")  # fmt: skip
+    front = sorted((p["rcn_max"], p["mean_jvj"]) for p in rec["pareto"])
+    if front:
+        ax.plot(*zip(*front, strict=True), "-", c="#08519c", lw=1.2, label="Pareto front")
+    base = rec["baseline"]
+    if base.get("mean_jvj") is not None:
+        ax.plot(base["rcn_max"], base["mean_jvj"], "s", c="k", ms=8, label="baseline")
+    ax.plot(rec["rcn_max"], rec["mean_jvj"], "*", c="#e6550d", ms=14, label="chosen")
+    ax.set_xscale("log")
+    ax.set_yscale("log")
+    ax.set_xlabel("largest reduced condition number k_S along the task [1]")
+    ax.set_ylabel("mean square-sum jump λ [(rad/s)²]")
+    names = ", ".join(f"{k} = {v:.3g}" for k, v in rec["parameters"].items())
+    ax.set_title(f"DH design ({rec['objective']}): {names}", fontsize=10)
+    ax.legend(fontsize=8)
+    fig.savefig(path, dpi=120)
     plt.close(fig)
     return Path(path)

@@ -20,16 +20,21 @@ from pathlib import Path
 
 import numpy as np
 
+from fault_tolerance.figures.text import plain
 from fault_tolerance.simulation.run import Run
 from fault_tolerance.storage.atomic import write_atomic
 
-COLORS = {"lnva": "#1f77b4", "jvja": "#d62728", "mda": "#2ca02c", "global": "#9467bd"}
-LABELS = {
-    "lnva": "LNVA (least norm)",
-    "jvja": "JVJA (minimum jump)",
-    "mda": "MDA (maximum dexterity)",
-    "global": "global (whole-path plan)",
-}
+
+def style(name: str) -> dict:
+    """Colour and label of the curve of algorithm ``name``: its registry entry's (else matplotlib's).
+
+    The label is drawn as written (:func:`~fault_tolerance.figures.text.plain`: no mathtext).
+    """
+    from fault_tolerance.simulation.simulate import algorithm_style
+
+    known = algorithm_style(name)
+    color, label = (None, name) if known is None else known
+    return {"color": color, "label": plain(label)}
 
 
 def _subplots(nrows: int, ncols: int, figsize, **kw):
@@ -63,7 +68,7 @@ def _log_when_decades(ax, values) -> None:
 
 def _robot(runs) -> str:
     first = next(iter(runs.values()), None)
-    return str((first.meta.get("robot") if first is not None else None) or "arm")
+    return plain((first.meta.get("robot") if first is not None else None) or "arm")
 
 
 def plot_comparison(runs: Mapping[str, Run], title: str = ""):
@@ -74,9 +79,9 @@ def plot_comparison(runs: Mapping[str, Run], title: str = ""):
     """
     fig, (ax1, ax2) = _subplots(2, 1, (7.0, 6.2), sharex=True)
     for name, run in runs.items():
-        style = {"color": COLORS.get(name), "label": LABELS.get(name, name), "lw": 1.6}
-        ax1.plot(run.t, run.jvj, **style)
-        ax2.plot(run.t, run.K, **style)
+        curve = {**style(name), "lw": 1.6}
+        ax1.plot(run.t, run.jvj, **curve)
+        ax2.plot(run.t, run.K, **curve)
     ax1.set_ylabel(r"square-sum jump $\lambda$ [(rad/s)$^2$]")
     ax1.set_title("(a) joint velocity jump", loc="left", fontsize=10)
     ax2.set_ylabel(r"square-sum RCN $K=\sum_S k_S^2$")
@@ -86,7 +91,7 @@ def plot_comparison(runs: Mapping[str, Run], title: str = ""):
         ax.grid(alpha=0.3)
     ax1.legend(fontsize=8, loc="best")
     _log_when_decades(ax2, [r.K for r in runs.values()])
-    fig.suptitle(title or f"{_robot(runs)}: λ(t) and K(t), {', '.join(runs)}", fontsize=11)
+    fig.suptitle(title or f"{_robot(runs)}: λ(t) and K(t), {plain(', '.join(runs))}", fontsize=11)
     fig.tight_layout()
     return fig
 
@@ -119,10 +124,10 @@ def plot_lock(runs: Mapping[str, Run], title: str = "", planned: Run | None = No
     colors = ["#d62728", "#1f77b4", "#2ca02c", "#9467bd"]
     for (label, run), c in zip(runs.items(), colors, strict=False):
         lock = run.meta.get("lock") or {}
-        ax1.plot(run.x[:, 0], run.x[:, 1], color=c, lw=1.4, label=f"actual, {label}")
-        ax2.plot(run.t, 1e3 * run.error, color=c, lw=1.4, label=label)
+        ax1.plot(run.x[:, 0], run.x[:, 1], color=c, lw=1.4, label=f"actual, {plain(label)}")
+        ax2.plot(run.t, 1e3 * run.error, color=c, lw=1.4, label=plain(label))
         if angular and _orientation(run) is not None:
-            axes[2].plot(run.t, 1e3 * _orientation(run), color=c, lw=1.4, label=label)
+            axes[2].plot(run.t, 1e3 * _orientation(run), color=c, lw=1.4, label=plain(label))
         if lock:
             k = int(np.searchsorted(run.t, lock["time"] - 1e-12))
             ax1.plot(*run.x[k, :2], "o", color=c, ms=7, mfc="none", mew=2)
@@ -148,7 +153,8 @@ def plot_lock(runs: Mapping[str, Run], title: str = "", planned: Run | None = No
         ax.legend(fontsize=8)
     locks = [r.meta["lock"] for r in runs.values() if r.meta.get("lock")]
     default = f"{_robot(runs)}: " + (
-        ", ".join(f"{lk['joint']} locks at {lk['time']:.3g} s" for lk in locks) or "lock runs"
+        ", ".join(f"{plain(lk['joint'])} locks at {lk['time']:.3g} s" for lk in locks)
+        or "lock runs"
     )
     fig.suptitle(title or default, fontsize=11)
     fig.tight_layout()
@@ -186,7 +192,7 @@ def _planned_panel(ax, planned: Run, runs: Mapping[str, Run], colors, letter: st
         if not lock:
             continue
         lam = planned_jump(planned, lock["time"])
-        ax.plot([lock["time"]], [lam], "o", color=c, ms=7, label=f"{label}: λ = {lam:.4g}")
+        ax.plot([lock["time"]], [lam], "o", color=c, ms=7, label=f"{plain(label)}: λ = {lam:.4g}")
     ax.set_ylabel(r"square-sum jump $\lambda$ [(rad/s)$^2$]")
     ax.set_title(f"({letter}) λ(t) of the planned run at the lock moments", loc="left", fontsize=10)
 
@@ -196,7 +202,7 @@ def plot_run(run: Run, title: str = ""):
     fig, axes = _subplots(2, 2, (10.0, 6.4), sharex=True)
     names = run.meta.get("joint_names") or [f"q{i}" for i in range(run.q.shape[1])]
     for j, name in enumerate(names):
-        axes[0, 0].plot(run.t, run.qd[:, j], lw=1.2, label=name)
+        axes[0, 0].plot(run.t, run.qd[:, j], lw=1.2, label=plain(name))
     axes[0, 0].set_ylabel("joint rates [rad/s]")
     axes[0, 0].legend(fontsize=7, ncol=2)
     axes[0, 1].plot(run.t, run.jvj, color="#d62728")
@@ -221,7 +227,8 @@ def plot_run(run: Run, title: str = ""):
     for ax in axes[1]:
         ax.set_xlabel("time t [s]")
     fig.suptitle(
-        title or f"{run.meta.get('robot', '')} — {run.meta.get('algorithm', '')}", fontsize=11
+        title or f"{plain(run.meta.get('robot', ''))} — {plain(run.meta.get('algorithm', ''))}",
+        fontsize=11,
     )
     fig.tight_layout()
     return fig

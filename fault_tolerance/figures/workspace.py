@@ -6,6 +6,8 @@ from pathlib import Path
 
 import numpy as np
 
+from fault_tolerance.figures.text import plain
+
 
 def _mask_image(ws, sl):
     """0 outside W(A), 1 in W(A) only, 2 in the failure-tolerant workspace."""
@@ -23,7 +25,7 @@ def plot_workspace(ws, path: str | Path) -> Path:
     if ws.spatial:
         N = len(ws.axes[2])
         zs = sorted({N // 4, N // 2, (3 * N) // 4})
-        slices = [(slice(None), slice(None), k) for k in zs]
+        slices: list[tuple] = [(slice(None), slice(None), k) for k in zs]
         titles = [f"z = {ws.axes[2][k]:.3f} m" for k in zs]
     else:
         slices, titles = [(slice(None), slice(None))], [""]
@@ -53,7 +55,8 @@ def plot_workspace(ws, path: str | Path) -> Path:
             a.set_ylabel("y [m]")
             a.set_aspect("equal")
     fig.suptitle(
-        f"{ws.spec['robot']['source']}: failure-tolerant workspace, lockable {ws.spec['lockable']}"
+        f"{plain(ws.spec['robot']['source'])}: failure-tolerant workspace, lockable "
+        f"{plain(ws.spec['lockable'])}"
     )
     fig.tight_layout()
     fig.savefig(path, dpi=90)

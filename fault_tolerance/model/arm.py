@@ -10,12 +10,16 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from functools import cached_property
+from typing import TYPE_CHECKING
 
 import numpy as np
 import pinocchio as pin
 
 from fault_tolerance.errors import InvalidInput, InvalidTask, JointNotFound, URDFError
 from fault_tolerance.model.chains import frame_id, joint_kind
+
+if TYPE_CHECKING:
+    from fault_tolerance.model.formats.urdf import URDFDescription
 
 TASK_ROWS = ("x", "y", "z", "rx", "ry", "rz")
 TASKS = {
@@ -107,7 +111,10 @@ class Arm:
         self.source = source
         self.package_dirs = [str(d) for d in package_dirs]
         self.xacro_args: dict[str, str] = {}  # set by load_arm for xacro sources
-        self.description = None  # the checked URDFDescription, when loaded from a file
+        self.description: URDFDescription | None = (
+            None  # the checked URDFDescription, when loaded from a file
+        )
+        self.description_format: str | None = None  # its format's name (formats/registry.py)
         self.joint_names: list[str] = [
             model.names[j] for j in range(1, model.njoints) if model.joints[j].nv > 0
         ]
@@ -190,16 +197,19 @@ class Arm:
             return self.joint_names.index(joint)
         raise JointNotFound(str(joint), self.joint_names)
 
-    def check_q(self, q: np.ndarray | Sequence[float]) -> np.ndarray:
-        """``q`` as a float array of shape (n,), or :class:`InvalidInput` saying what is wrong."""
-        q = np.asarray(q, dtype=float)
+    def check_q(self, q: np.ndarray | Sequence[float], name: str = "q") -> np.ndarray:
+        """``q`` as a float array of shape (n,), or :class:`InvalidInput` naming ``name``."""
+        try:
+            q = np.asarray(q, dtype=float)
+        except (TypeError, ValueError):
+            raise InvalidInput(f"{name} must be {self.n} numbers, got {q!r}") from None
         if q.shape != (self.n,):
             raise InvalidInput(
-                f"q has shape {q.shape}; {self.name} needs shape ({self.n},) for joints "
+                f"{name} has shape {q.shape}; {self.name} needs shape ({self.n},) for joints "
                 f"{self.joint_names}"
             )
         if not np.all(np.isfinite(q)):
-            raise InvalidInput(f"q must be finite, got {q.tolist()}")
+            raise InvalidInput(f"{name} must be finite, got {q.tolist()}")
         return q
 
     # -- kinematics (all from Pinocchio) ----------------------------------------------------

@@ -1,17 +1,21 @@
-"""The arm a run carries: its checked URDF text, tip, task and joints, rebuilt without the file.
+"""The arm a run carries: its checked description text, tip, task and joints, rebuilt without the file.
 
 A saved run must replay on another machine without trusting anything in it. So a run stores the
-URDF text its arm was built from (after :func:`~.urdf.read_urdf`'s checks), the tip, the task,
+description format (``description_format``: ``urdf`` or ``mjcf``; a xacro file is stored as the
+URDF it expands to; a record without it is a URDF) and the text its arm was built from, after that
+format's checks, under the format's name (``record["urdf"]``, ``record["mjcf"]``), the tip, the task,
 the active joints and the configuration the other joints are fixed at (:func:`arm_record`), and
 :func:`arm_from_record` rebuilds the arm from that text alone, checking it again as if it were a
 file someone handed us. No path written in the run is ever opened:
 
-* the URDF is the stored text, never a file named in the run;
+* the description is the stored text, never a file named in the run (an MJCF text may include
+  no file);
 * a mesh is opened only if it is a ``package://`` name that resolves, after following links, to a
   file *inside* one of the package folders the caller names (``--package-dir``), or inside the
   installed robot data of a named robot (our ``robots/`` for shipped arms, example-robot-data's
   models for its arms). ``..`` components, absolute paths, ``file://`` names and relative names are
-  refused; such a visual is dropped with one warning and the arm is drawn without it.
+  refused; such a visual is dropped with one warning and the arm is drawn without it. An MJCF
+  mesh is opened only as a relative name (no ``..``) inside one of those folders.
 
 Example:
     >>> import fault_tolerance as ft
@@ -23,7 +27,6 @@ Example:
 
 from __future__ import annotations
 
-import os
 import warnings
 from collections.abc import Sequence
 from pathlib import Path
@@ -42,15 +45,18 @@ class Source(NamedTuple):
     """What an arm was built from, kept by the loaders for :func:`arm_record`."""
 
     kind: str  # "shipped", "example" or "file"
-    data: bytes  # the checked URDF bytes
+    data: bytes  # the checked description bytes
     q_full: list[float] | None  # full-model configuration the inactive joints are fixed at
     root_joint: str | None  # "free_flyer" when the model has a floating root (example robots)
+    description_format: str = "urdf"  # the registry format the text is rebuilt with
 
 
-def remember(arm, kind: str, data: bytes, q_full=None, root_joint: str | None = None):
+def remember(
+    arm, kind: str, data: bytes, q_full=None, root_joint: str | None = None, fmt: str = "urdf"
+):
     """Attach the :class:`Source` of ``arm`` (called by the loaders); returns ``arm``."""
     q = None if q_full is None else [float(v) for v in np.asarray(q_full, dtype=float)]
-    arm.built_from = Source(kind, bytes(data), q, root_joint)
+    arm.built_from = Source(kind, bytes(data), q, root_joint, fmt)
     return arm
 
 
@@ -91,7 +97,7 @@ def remember_example(arm, name: str, full, q_ref):
 
 
 def arm_record(arm) -> dict | None:
-    """The record of ``arm`` a run stores: URDF text, tip, task, joints, fixed configuration.
+    """The record of ``arm`` a run stores: format and text, tip, task, joints, fixed configuration.
 
     None for an arm not built by :func:`~.loading.load_arm` (a hand-made Pinocchio model); such a
     run replays only with the arm given (``replay(run, arm)``).
@@ -103,7 +109,8 @@ def arm_record(arm) -> dict | None:
         "format": ARM_RECORD_FORMAT,
         "name": arm.name,
         "kind": src.kind,
-        "urdf": src.data.decode("utf-8"),
+        "description_format": src.description_format,
+        src.description_format: src.data.decode("utf-8"),
         "tip": arm.tip,
         "task": list(arm.task),
         "joints": list(arm.joint_names),
@@ -116,10 +123,11 @@ def check_record(record, where: str) -> dict:
     """``record`` if it has the fields and types of :func:`arm_record`, else :class:`InvalidInput`."""
     if not isinstance(record, dict):
         raise InvalidInput(f"{where}: the arm record is not an object")
+    fmt = _record_format(record, where)
     types = {
         "name": str,
         "kind": str,
-        "urdf": str,
+        fmt: str,
         "tip": str,
         "task": list,
         "joints": list,
@@ -146,7 +154,24 @@ def check_record(record, where: str) -> dict:
         raise InvalidInput(f"{where}: the arm record's q_full must be a list of finite numbers")
     if record.get("root_joint") not in (None, "free_flyer"):
         raise InvalidInput(f"{where}: the arm record's root_joint must be null or 'free_flyer'")
+    if record.get("root_joint") and record["kind"] != "example":
+        raise InvalidInput(
+            f"{where}: the arm record's root_joint is for example-robot-data arms only"
+        )
     return record
+
+
+def _record_format(record: dict, where: str) -> str:
+    """The record's ``description_format`` (``urdf`` when absent: records before MJCF)."""
+    from fault_tolerance.model.formats.registry import FORMATS
+
+    fmt = record.get("description_format", "urdf")
+    stored = sorted({f.records_as for f in FORMATS})
+    if fmt not in stored:
+        raise InvalidInput(
+            f"{where}: the arm record's description_format {fmt!r} is not one of {stored}"
+        )
+    return fmt
 
 
 def arm_from_record(record: dict, package_dirs: Sequence[str | Path] = (), where: str = "run"):
@@ -159,30 +184,28 @@ def arm_from_record(record: dict, package_dirs: Sequence[str | Path] = (), where
         where: Names the run in messages.
 
     Raises:
-        InvalidInput, URDFError: the record or its URDF text is malformed (one line).
+        InvalidInput, DescriptionError: the record or its text is malformed (one line).
     """
     from fault_tolerance.model.arm import Arm
     from fault_tolerance.model.chains import reduce_model
-    from fault_tolerance.model.formats.build import build_model, build_visuals
-    from fault_tolerance.model.formats.urdf import read_urdf
+    from fault_tolerance.model.formats.registry import format_named
 
     record = check_record(record, where)
-    label = Path(f"{where} (URDF of {record['name']})")
-    desc = read_urdf(label, record["urdf"].encode("utf-8"))
-    model = build_model(desc)
+    fmt = format_named(_record_format(record, where))
+    label = Path(f"{where} ({fmt.label} of {record['name']})")
+    desc = fmt.from_text(label, record[fmt.name].encode("utf-8"))
+    model = fmt.build_model(desc)
     if record.get("root_joint") == "free_flyer":
         model = _with_free_flyer(desc, model)
     roots = [Path(d) for d in package_dirs] + _installed_roots(record)
-    xml, dropped = confine_meshes(desc.xml, roots)
+    visual, dropped = fmt.confined_visuals(model, desc, roots)
     if dropped:
         warnings.warn(
             f"{where}: {len(dropped)} mesh(es) not opened ({dropped[0]}); only package:// meshes "
-            "inside the folders named with --package-dir are read",
+            "(URDF) or relative mesh names (MJCF) inside the folders named with --package-dir "
+            "are read",
             stacklevel=2,
         )
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")  # a mesh that fails to load: drawn without visuals
-        visual = build_visuals(model, desc._replace(xml=xml), [])
     q_full = record.get("q_full")
     if q_full is not None and len(q_full) != model.nq:
         raise InvalidInput(
@@ -204,7 +227,7 @@ def arm_from_record(record: dict, package_dirs: Sequence[str | Path] = (), where
         raise InvalidInput(
             f"{where}: the rebuilt arm has joints {arm.joint_names}, the run {record['joints']}"
         )
-    return remember(arm, record["kind"], desc.data, q_full, record.get("root_joint"))
+    return remember(arm, record["kind"], desc.data, q_full, record.get("root_joint"), fmt=fmt.name)
 
 
 def _with_free_flyer(desc, model):
@@ -242,53 +265,6 @@ def _example_urdf(name: str) -> Path:
     loader = ROBOTS[name]
     sub = Path(loader.path) / loader.urdf_subpath / loader.urdf_filename
     return Path(getModelPath(str(sub))) / sub
-
-
-def confine_meshes(xml: str, roots: Sequence[Path]) -> tuple[str, list[str]]:
-    """``xml`` with each mesh name resolved inside ``roots``, or its ``<visual>`` dropped.
-
-    A ``<mesh filename="package://PKG/REST">`` is replaced by the real path of ``ROOT/PKG/REST``
-    (or of ``ROOT/REST`` when ``ROOT`` is the package folder ``PKG`` itself) for the first root where
-    that is a file inside ``ROOT`` after links are followed. Returns the new XML and a list saying
-    which names were refused and why. ``<collision>`` elements are removed (never drawn).
-    """
-    from fault_tolerance.model.formats.xml_safety import _parse_safely
-
-    root = _parse_safely(Path("carried URDF"), xml.encode("utf-8"))
-    real_roots = [Path(os.path.realpath(r)) for r in roots if Path(r).is_dir()]
-    dropped: list[str] = []
-    for link in root.findall("link"):
-        for col in link.findall("collision"):
-            link.remove(col)
-        for vis in link.findall("visual"):
-            for mesh in vis.iter("mesh"):
-                name = mesh.get("filename") or ""
-                found, why = _resolve_mesh(name, real_roots)
-                if found is None:
-                    dropped.append(f"{name[:80]!r}: {why}")
-                    link.remove(vis)
-                    break
-                mesh.set("filename", str(found))
-    from lxml import etree
-
-    return etree.tostring(root, encoding="unicode"), dropped
-
-
-def _resolve_mesh(name: str, roots: Sequence[Path]) -> tuple[Path | None, str]:
-    prefix = "package://"
-    if not name.startswith(prefix):
-        return None, "not a package:// name"
-    rel = name[len(prefix) :]
-    parts = rel.split("/")
-    if not rel or "\\" in rel or "\x00" in rel or any(p in ("", ".", "..") for p in parts):
-        return None, "'..', '.', empty or backslash components are not allowed"
-    for real in roots:
-        tails = [parts] + ([parts[1:]] if real.name == parts[0] and len(parts) > 1 else [])
-        for tail in tails:
-            candidate = Path(os.path.realpath(real.joinpath(*tail)))
-            if candidate.is_file() and candidate.is_relative_to(real):
-                return candidate, ""
-    return None, "not found inside the package folders given"
 
 
 def arm_of_run(run, package_dirs: Sequence[str | Path] = (), where: str = "the run"):

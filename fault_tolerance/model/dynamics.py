@@ -78,7 +78,7 @@ class ArmDynamics:
                 "(default_mass=KG, --default-mass KG: solid spheres of radius "
                 f"{DEFAULT_RADIUS} m at the joint origins)"
             )
-        if bad:
+        if bad and default_mass is not None:
             model = _with_default_masses(model, float(default_mass))
         if not gravity:
             model.gravity = pin.Motion.Zero()

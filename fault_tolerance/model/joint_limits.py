@@ -10,6 +10,7 @@ from __future__ import annotations
 import numpy as np
 
 from fault_tolerance.errors import InvalidInput
+from fault_tolerance.numerics.checks import finite, no_nan
 
 #: Horizon h of the rate box (L1) [s]: a joint covers at most its distance to a limit in h.
 RATE_HORIZON = 0.05
@@ -35,10 +36,10 @@ def rate_box(q, lower, upper, velocity, horizon: float = RATE_HORIZON):
     """
     if not (np.isfinite(horizon) and horizon > 0):
         raise InvalidInput(f"horizon must be finite and > 0 [s], got {horizon}")
-    q = np.asarray(q, dtype=float)
-    v = np.abs(np.asarray(velocity, dtype=float))
-    lower = np.asarray(lower, dtype=float)
-    upper = np.asarray(upper, dtype=float)
+    q = finite(q, "q", ndim=1)
+    v = np.abs(no_nan(velocity, "velocity", q.shape))
+    lower = no_nan(lower, "lower", q.shape)
+    upper = no_nan(upper, "upper", q.shape)
     lo_q = np.where(np.abs(lower) < NO_LIMIT, (lower - q) / horizon, -np.inf)
     hi_q = np.where(np.abs(upper) < NO_LIMIT, (upper - q) / horizon, np.inf)
     return np.clip(lo_q, -v, v), np.clip(hi_q, -v, v)

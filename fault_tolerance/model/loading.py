@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-from fault_tolerance.errors import InvalidInput, RobotNotFound, URDFError
+from fault_tolerance.errors import InvalidInput, RobotNotFound
 from fault_tolerance.model.arm import Arm
 from fault_tolerance.model.arm_record import remember, remember_example
 from fault_tolerance.model.catalog import (
@@ -19,14 +19,11 @@ from fault_tolerance.model.catalog import (
     robot_path,
 )
 from fault_tolerance.model.chains import active_q, reduce_model
-from fault_tolerance.model.formats.build import (
-    build_model,
-    build_visuals,
-    load_urdf_models,
+from fault_tolerance.model.formats.registry import (
+    DescriptionFormat,
+    is_description_path,
     read_description,
 )
-from fault_tolerance.model.formats.urdf import URDFDescription, default_tip
-from fault_tolerance.model.formats.xacro import is_xacro
 
 
 def load_arm(
@@ -38,14 +35,18 @@ def load_arm(
     package_dirs: Sequence[str] | None = None,
     xacro_args: Mapping[str, str] | None = None,
 ) -> Arm:
-    """Load an arm by catalog name, example-robot-data name, URDF or xacro path.
+    """Load an arm by catalog name, example-robot-data name, or a URDF, xacro or MJCF path.
 
     Args:
         robot: ``"planar_3r"``, ``"spatial_4r"``, ``"powercube_3r"``, ``"iiwa"``, an
             example-robot-data name (``"panda"``, ``"ur5"``, ``"xarm7"``, ...) or the path of a
-            URDF file or a xacro file (``.xacro``, ``.urdf.xacro``; expanded without ROS).
+            URDF file, a xacro file (``.xacro``, ``.urdf.xacro``; expanded without ROS) or a MuJoCo
+            MJCF file (``.xml`` whose root is ``<mujoco>``); the format is recognised by
+            :func:`~.formats.registry.format_of`.
         tip: Tip frame (default: the catalog's; for a URDF file its only leaf link, else an
-            error listing the leaf links; for example-robot-data the preset or last frame).
+            error listing the leaf links; for an MJCF file the end of the serial chain from the
+            root body or a site on it (bodies and sites are frames); for example-robot-data the
+            preset or last frame).
         task: ``"planar"``, ``"position"``, ``"pose"`` or a list of rows among ``x y z rx ry rz``.
         joints: Active joint names; the others are fixed (default: the chain to the tip).
         package_dirs: Folders of the ROS packages that ``package://pkg/...`` and
@@ -61,10 +62,8 @@ def load_arm(
     shipped = catalog()
     path = Path(name).expanduser()
     if name not in shipped and (is_description_path(path) or path.exists()):
-        if not path.is_file():
-            raise URDFError(f"{path}: no such URDF file")
-        desc = read_description(path, package_dirs, xacro_args)
-        return arm_from_description(desc, tip, task, joints, package_dirs, xacro_args)
+        fmt, desc = read_description(path, package_dirs, xacro_args)
+        return arm_from_description(fmt, desc, tip, task, joints, package_dirs, xacro_args)
     if xacro_args:
         raise InvalidInput(
             f"xacro_args {sorted(xacro_args)} given for '{name}', which is not a xacro file"
@@ -74,14 +73,12 @@ def load_arm(
     return _load_example_robot(name, tip, task, joints, shipped)
 
 
-def is_description_path(path: Path) -> bool:
-    """True for the file names of descriptions: ``.urdf``, ``.xml``, ``.xacro``, ``.urdf.xacro``."""
-    return path.suffix.lower() in (".urdf", ".xml") or is_xacro(path)
-
-
 def _load_shipped(name: str, entry: dict, tip, task, joints, package_dirs) -> Arm:
     """A robot of ``robots/catalog.json``."""
-    model, visual, desc = load_urdf_models(robot_path(entry["urdf"]), package_dirs)
+    path = robot_path(entry["urdf"])
+    fmt, desc = read_description(path, package_dirs)
+    model = fmt.build_model(desc)
+    visual = fmt.build_visuals(model, desc, package_dirs)
     tip = entry["tip"] if tip is None else tip
     # optional reference posture of the full model (catalog "q_reference"): joints left out
     # of ``joints`` are fixed there, the active ones give Arm.q_reference
@@ -99,28 +96,29 @@ def _load_shipped(name: str, entry: dict, tip, task, joints, package_dirs) -> Ar
         source=name,
         q_reference=None if q_full is None else active_q(full, model, q_full),
     )
-    return remember(arm, "shipped", desc.data, q_full)
+    return remember(arm, "shipped", desc.data, q_full, fmt=fmt.records_as)
 
 
 def arm_from_description(
-    desc: URDFDescription,
+    fmt: DescriptionFormat,
+    desc,
     tip: str | None = None,
     task=None,
     joints: Sequence[str] | None = None,
     package_dirs: Sequence[str] | None = None,
     xacro_args: Mapping[str, str] | None = None,
 ) -> Arm:
-    """An arm from a checked description (:func:`~.models.read_description`)."""
+    """An arm from a checked description of format ``fmt`` (:func:`~.registry.read_description`)."""
     path = desc.path
-    model = build_model(desc)
-    visual = build_visuals(model, desc, package_dirs)
-    tip = default_tip(desc) if tip is None else tip
+    model = fmt.build_model(desc)
+    visual = fmt.build_visuals(model, desc, package_dirs)
+    tip = fmt.default_tip(desc) if tip is None else tip
     model, visual = reduce_model(model, tip, joints, visual_model=visual, label=str(path))
     mimics = [j for j in model.names[1:] if j in desc.mimic]
     if mimics:
-        raise URDFError(
-            f"{path}: active joint(s) {mimics} follow other joints (<mimic>); Pinocchio would "
-            "move them independently. Leave them out of the active joints (joints=[...], "
+        raise fmt.error(
+            f"{path}: active joint(s) {mimics} follow other joints ({fmt.coupling}); Pinocchio "
+            "would move them independently. Leave them out of the active joints (joints=[...], "
             "--joints) to hold them fixed, or choose a tip frame that does not depend on them"
         )
     arm = Arm(
@@ -134,7 +132,8 @@ def arm_from_description(
     )
     arm.xacro_args = dict(xacro_args or {})
     arm.description = desc
-    return remember(arm, "file", desc.data)
+    arm.description_format = fmt.name
+    return remember(arm, "file", desc.data, fmt=fmt.records_as)
 
 
 def _stem(name: str) -> str:

@@ -17,6 +17,8 @@ from typing import NamedTuple
 import numpy as np
 import pinocchio as pin
 
+from fault_tolerance.errors import InvalidInput
+
 #: A joint whose range spans 2π up to this [rad] counts as a full turn (URDF ±3.14159 does).
 FULL_TURN_TOL = 1e-4
 TWO_PI = 2.0 * np.pi
@@ -76,6 +78,17 @@ def planar_chain(arm, checks: int = 8, tol: float = 1e-9) -> PlanarChain | None:
         v = signs * q + offsets
         if not np.allclose(chain.tip(v), arm.fk(q), atol=1e-9):
             return None
+    return chain
+
+
+def require_planar_chain(arm) -> PlanarChain:
+    """The :class:`PlanarChain` of ``arm``, or :class:`InvalidInput` when it is not one."""
+    chain = planar_chain(arm)
+    if chain is None:
+        raise InvalidInput(
+            f"{arm.name} is not a planar chain (revolute joints about parallel z axes, task x/y); "
+            f"its task is {'/'.join(arm.task)}"
+        )
     return chain
 
 

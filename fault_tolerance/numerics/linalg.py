@@ -15,7 +15,7 @@ from ``U``, so ``N`` stays an exact projector onto the numerical null space.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -35,37 +35,55 @@ PIVOT_DAMPING = 1e-2
 
 
 class Projection(NamedTuple):
-    """``J⁺`` and ``N`` of one Jacobian, and how close ``J`` is to a singularity."""
+    """``J⁺`` and ``N`` of one Jacobian (or of a stack), and how close ``J`` is to a singularity.
 
-    Jpinv: np.ndarray  # shape (n, m), damped near singularities
-    N: np.ndarray  # shape (n, n), symmetric, idempotent, J N = 0
-    sigma_min: float  # smallest singular value of J
-    damped: bool  # True when sigma_min < SIGMA_EPS
+    For a stack of Jacobians (..., m, n) every field has the stack's leading axes.
+    """
+
+    Jpinv: np.ndarray  # shape (..., n, m), damped near singularities
+    N: np.ndarray  # shape (..., n, n), symmetric, idempotent, J N = 0
+    sigma_min: Any  # smallest singular value of J: float, or (...,) for a stack
+    damped: Any  # sigma_min < SIGMA_EPS: bool, or (...,) for a stack
 
 
-def damping_factor(sigma_min: float) -> float:
-    """Variable damping ``μ² = DAMPING² (1 - (σ_min/SIGMA_EPS)²)`` below SIGMA_EPS, else 0."""
-    if sigma_min >= SIGMA_EPS:
-        return 0.0
-    return DAMPING**2 * (1.0 - (sigma_min / SIGMA_EPS) ** 2)
+def damping_factor(sigma_min):
+    """Variable damping ``μ² = DAMPING² (1 - (σ_min/SIGMA_EPS)²)`` below SIGMA_EPS, else 0.
+
+    Elementwise for an array of ``σ_min``; a float for a float.
+    """
+    if np.ndim(sigma_min) == 0:
+        if sigma_min >= SIGMA_EPS:
+            return 0.0
+        return DAMPING**2 * (1.0 - (sigma_min / SIGMA_EPS) ** 2)
+    s = np.asarray(sigma_min, dtype=float)
+    return np.where(s < SIGMA_EPS, DAMPING**2 * (1.0 - (s / SIGMA_EPS) ** 2), 0.0)
 
 
 def projection(J: np.ndarray) -> Projection:
     """Pseudo-inverse and null-space projector from one eigendecomposition of ``J Jᵀ``.
 
     ``J⁺ = Jᵀ (J Jᵀ)⁻¹`` (damped near singularities, see the module doc) and ``N = I - J⁺J``.
+    ``J`` is one Jacobian (m, n) or a stack (..., m, n): each matrix of a stack gets exactly what
+    it would get alone (the batched API and the whole-path planner call it on stacks).
     """
     J = np.asarray(J, dtype=float)
-    m, n = J.shape
-    lam, V = np.linalg.eigh(J @ J.T)  # ascending, lam = σ²
+    n = J.shape[-1]
+    Jt = np.swapaxes(J, -1, -2)
+    lam, V = np.linalg.eigh(J @ Jt)  # ascending, lam = σ²
     lam = np.maximum(lam, 0.0)
-    sigma_min = float(np.sqrt(lam[0]))
+    sigma_min = np.sqrt(lam[..., 0])
     mu2 = damping_factor(sigma_min)
-    Jpinv = J.T @ (V / (lam + mu2 + (lam + mu2 == 0.0))) @ V.T
-    keep = lam > (RANK_RTOL**2) * max(lam[-1], 1e-300)
-    U = (J.T @ V[:, keep]) / np.sqrt(lam[keep])
-    N = np.eye(n) - U @ U.T
-    return Projection(Jpinv, N, sigma_min, mu2 > 0.0)
+    d = lam + np.asarray(mu2)[..., None]
+    Jpinv = Jt @ (V / (d + (d == 0.0))[..., None, :]) @ np.swapaxes(V, -1, -2)
+    keep = lam > (RANK_RTOL**2) * np.maximum(lam[..., -1:], 1e-300)
+    if J.ndim == 2:  # the dropped directions left out of the product (not added as zeros)
+        U = (Jt @ V[:, keep]) / np.sqrt(lam[keep])
+        return Projection(Jpinv, np.eye(n) - U @ U.T, float(sigma_min), bool(mu2 > 0.0))
+    U = np.where(
+        keep[..., None, :], (Jt @ V) / np.sqrt(np.where(keep, lam, 1.0))[..., None, :], 0.0
+    )
+    N = np.eye(n) - U @ np.swapaxes(U, -1, -2)
+    return Projection(Jpinv, N, sigma_min, np.asarray(mu2) > 0.0)
 
 
 def pinv(J: np.ndarray) -> np.ndarray:
@@ -86,21 +104,27 @@ def damped_pivots(p):
 
 
 def pivot_block(N: np.ndarray, S: Sequence[int], damp: bool = False) -> np.ndarray:
-    """``N[S, S]``; with ``damp`` its smallest eigenvalue raised to :func:`damped_pivots` of itself."""
+    """``N[S, S]`` of one projector or of a stack (..., n, n).
+
+    With ``damp`` its smallest eigenvalue is raised to :func:`damped_pivots` of itself.
+    """
     S = list(S)
-    M = N[np.ix_(S, S)]
+    M = N[..., S, :][..., :, S]
     if damp:
-        lam = float(np.linalg.eigvalsh(M)[0])
-        M = M + (float(damped_pivots(lam)) - lam) * np.eye(len(S))
+        lam = np.linalg.eigvalsh(M)[..., 0]
+        shift = np.asarray(damped_pivots(lam) - lam)[..., None, None]
+        M = M + shift * np.eye(len(S))
     return M
 
 
-def min_pivot(N: np.ndarray, S: Sequence[int]) -> float:
-    """Smallest eigenvalue of ``N[S, S]``; zero means locking ``S`` loses the task."""
+def min_pivot(N: np.ndarray, S: Sequence[int]):
+    """Smallest eigenvalue of ``N[S, S]``; zero means locking ``S`` loses the task.
+
+    A float for one projector (n, n), an array (...,) for a stack (..., n, n).
+    """
     S = list(S)
-    if len(S) == 1:
-        return float(N[S[0], S[0]])
-    return float(np.linalg.eigvalsh(N[np.ix_(S, S)])[0])
+    p = N[..., S[0], S[0]] if len(S) == 1 else np.linalg.eigvalsh(pivot_block(N, S))[..., 0]
+    return float(p) if N.ndim == 2 else p
 
 
 # Eqn. (2) in closed form (G1).
@@ -108,18 +132,23 @@ def reduced_rates(a: np.ndarray, N: np.ndarray, S: Sequence[int], damp: bool = F
     r"""Rates of the reduced robot with joints ``S`` locked, eq. (2) in closed form (G1).
 
     :math:`{}^S\dot q' = a - N_{:,S} N_{S,S}^{-1} a_S`, with :math:`a = J^+\dot x`.
-    Shape (n,); entries in ``S`` are zero. The caller checks ``N[S, S]`` is not singular, or asks
-    for ``damp``: pivots below :data:`PIVOT_EPS` damped (:func:`damped_pivots`), always finite.
+    Shape (n,), or (..., n) for stacks ``a`` (..., n) and ``N`` (..., n, n); entries in ``S`` are
+    zero. The caller checks ``N[S, S]`` is not singular, or asks for ``damp``: pivots below
+    :data:`PIVOT_EPS` damped (:func:`damped_pivots`), always finite.
     """
     S = list(S)
     if len(S) == 1:
         i = S[0]
-        piv = float(damped_pivots(N[i, i])) if damp else N[i, i]
-        qd = a - (a[i] / piv) * N[:, i]
-        qd[i] = 0.0
+        piv = damped_pivots(N[..., i, i]) if damp else N[..., i, i]
+        qd = a - (a[..., i] / piv)[..., None] * N[..., :, i]
+        qd[..., i] = 0.0
         return qd
-    qd = a - N[:, S] @ np.linalg.solve(pivot_block(N, S, damp), a[S])
-    qd[S] = 0.0
+    M = pivot_block(N, S, damp)
+    if a.ndim == 1:
+        qd = a - N[:, S] @ np.linalg.solve(M, a[S])
+    else:
+        qd = a - (N[..., :, S] @ np.linalg.solve(M, a[..., S][..., None]))[..., 0]
+    qd[..., S] = 0.0
     return qd
 
 

@@ -30,7 +30,9 @@ from fault_tolerance.paper.start_sensitivity import (
     SENSITIVITY_STARTS,
     start_sensitivity,
 )
-from fault_tolerance.resolution.resolvers import MDA_GAIN
+from fault_tolerance.paper.synthesis import report_section as synthesis_section
+from fault_tolerance.paper.synthesis import synthesis
+from fault_tolerance.resolution.mda import MDA_GAIN
 from fault_tolerance.simulation.run import Run
 from fault_tolerance.storage.atomic import output_folder, write_atomic
 from fault_tolerance.storage.folder_io import check_path_names
@@ -162,6 +164,9 @@ def _reproduce(
                 _beyond_case(summary, out, CASES[key], res, bar)
             if "experiment" in keys:
                 _beyond_experiment(summary, out, exp_T, bar)
+            if "fig6" in keys and not quick:  # the DH synthesis the paper proposed, on its 4R
+                bar.describe("synthesis")
+                summary["beyond_the_paper"]["synthesis"] = synthesis(out)
             done.append("beyond_the_paper")
             _torque_level(summary, bar, quick)
             done.append("torque_level")
@@ -267,6 +272,8 @@ def _write_results(out: Path, summary: dict, beyond: bool) -> None:
         from fault_tolerance.paper.beyond_the_paper import report_section
 
         report = report.rstrip("\n") + "\n\n" + report_section(summary["beyond_the_paper"])
+        if "synthesis" in summary["beyond_the_paper"]:
+            report += "\n\n" + synthesis_section(summary["beyond_the_paper"]["synthesis"])
     if "torque_level" in summary:
         from fault_tolerance.paper import torque_level
 

@@ -180,18 +180,23 @@ def _seeds(arm: Arm, sc: Scenarios, rng, max_seeds: int):
         )
 
 
-#: Order in which a candidate's runs are checked: cheap resolvers first, so a bad start fails fast.
-_CHEAP_FIRST = ("lnva", "jvja", "mda")
-
-
 def _check(arm, q0, path, algorithms, sc, sim_options):
-    """Simulate ``path`` from ``q0``: ``(problem, caveat, largest k_S, runs)``."""
-    from fault_tolerance.simulation.simulate import simulate
+    """Simulate ``path`` from ``q0``: ``(problem, caveat, largest k_S, runs)``.
 
-    order = sorted(algorithms, key=lambda a: _CHEAP_FIRST.index(a) if a in _CHEAP_FIRST else 9)
+    The runs go in the registry's order (the built-ins first, cheapest first: LNVA, JVJA, MDA),
+    so a bad start fails fast; ``sim_options["options"]`` gives each resolver those it takes.
+    """
+    from fault_tolerance.resolution.registry import names
+    from fault_tolerance.simulation.simulate import options_for, simulate
+
+    known = names()
+    order = sorted(algorithms, key=lambda a: known.index(a) if a in known else len(known))
     worst, caveat, runs = 0.0, None, {}
     for alg in order:
-        run = simulate(arm, path, alg, q0=q0, lockable=sc, **sim_options)
+        own = dict(sim_options)
+        if "options" in own:
+            own["options"] = options_for(alg, own["options"])
+        run = simulate(arm, path, alg, q0=q0, lockable=sc, **own)
         problem = run_problem(arm, run)
         if problem:
             return f"{alg}: {problem}", None, worst, {}
@@ -279,7 +284,7 @@ def default_start(
 def _task_maker(arm: Arm, path, x0):
     """``(make, x0)``: ``make(point)`` is the task checked from ``point``; a TaskPath fixes x0."""
     if hasattr(path, "x") and hasattr(path, "xdot"):  # a ready TaskPath fixes the start point
-        fixed, x0 = path, np.asarray(path.x0, dtype=float)  # type: ignore[union-attr]
+        fixed, x0 = path, np.asarray(path.x0, dtype=float)
         return (lambda _x0: fixed), x0
     return (path if path is not None else (lambda p: default_path(arm, p))), x0
 
@@ -365,7 +370,9 @@ def explain_intolerable(
     finally:
         _EXPLAINING = False
     why = "" if choice is None else f"{where}, tool at x0 = {np.round(choice.x0, 4).tolist()}"
-    return IntolerableAtStart(joints, err.pivot, None if choice is None else choice.q0, why)
+    return IntolerableAtStart(
+        joints, err.pivot, None if choice is None else choice.q0.tolist(), why
+    )
 
 
 def _try_start(arm, lockable, **options) -> StartChoice | None:

@@ -144,7 +144,8 @@ class FastSteps:
         self.all_angles = len(ang) == 3
         self.R_des = pin.exp3(full[3:]) if self.all_angles else None
         self.eye = np.eye(self.n)
-        self._q = self._J = None
+        self._q: np.ndarray | None = None  # the q of the last error(), and J there
+        self._J = np.empty((0, self.n))
 
     def jacobian(self, q: np.ndarray) -> np.ndarray:
         """``J(q)`` (that of the last :meth:`error` when ``q`` is the same array)."""

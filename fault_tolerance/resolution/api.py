@@ -9,6 +9,7 @@ box of the joint limits (``Arm.rate_bounds(q)``; docs/MATH.md "Joint limits"). W
 from __future__ import annotations
 
 from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 
@@ -21,13 +22,18 @@ from fault_tolerance.resolution.resolvers import resolve as unbounded_resolve
 def resolve(
     name: str, J: np.ndarray, xdot: np.ndarray, lockable=None, *, bounds=None, **options
 ) -> np.ndarray:
-    """Joint rates from the resolver ``name`` (``"lnva"``, ``"jvja"`` or ``"mda"``).
+    """Joint rates from the registered resolver ``name`` (``registry.names()``: lnva, jvja, mda, ...).
 
-    Options as :func:`fault_tolerance.resolution.resolvers.resolve` (``weights``, ``response``, ``arm``,
-    ``q``, ``gain``, ``dJ``, ``max_step``, ``proj``, ``tolerate``, ``joint_names``); an option
-    no resolver takes raises :class:`~fault_tolerance.errors.InvalidInput`. ``bounds=(qd_lo,
-    qd_hi)``: the rates minimise the resolver's own objective inside that box, the task scaled
-    when it cannot be reached (:func:`fault_tolerance.resolve_bounded` also returns the scaling).
+    The one ``resolve``: without ``bounds`` the resolver's reference rates
+    (:func:`fault_tolerance.resolution.resolvers.resolve`); with ``bounds=(qd_lo, qd_hi)`` its
+    bounded variant: the rates minimise the resolver's own objective inside that box, the task
+    scaled when it cannot be reached (:func:`fault_tolerance.resolve_bounded` also returns the
+    scaling). A resolver registered without a bounded variant raises
+    :class:`~fault_tolerance.errors.InvalidInput` when given ``bounds``. Options: the resolver's
+    own (its options dataclass; ``weights``, ``response`` for jvja, ``gain``, ``max_step`` for
+    mda), and the context ``proj``, ``tolerate``, ``joint_names``, ``arm``, ``q``, ``dJ``; an
+    option the resolver does not take raises :class:`~fault_tolerance.errors.InvalidInput`
+    naming the ones it takes.
 
     Example:
         >>> import numpy as np, fault_tolerance as ft
@@ -68,7 +74,9 @@ def jvj(
         >>> ft.jvj(J, xd, ft.resolve("jvja", J, xd)) <= ft.jvj(J, xd, ft.resolve("lnva", J, xd))
         True
     """
-    opts = dict(weights=weights, response=response, per_joint=per_joint, joint_names=joint_names)
+    opts: dict[str, Any] = dict(
+        weights=weights, response=response, per_joint=per_joint, joint_names=joint_names
+    )
     if bounds is None:
         return unbounded_jvj(J, xdot, qd, lockable, **opts)
     return jvj_under_limits(J, xdot, qd, lockable, bounds=bounds, **opts)

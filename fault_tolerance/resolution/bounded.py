@@ -34,6 +34,7 @@ from fault_tolerance.errors import InvalidInput
 from fault_tolerance.numerics.linalg import damped_pivots, projection, reduced_rates
 from fault_tolerance.resolution.box_qp import BOX_TOL, BoxSolution, solve_box
 from fault_tolerance.resolution.indices import RESPONSES
+from fault_tolerance.resolution.registry import check_task, get, split
 from fault_tolerance.resolution.scenarios import Scenarios, scenarios
 
 #: Regularisation of the continuation metric, relative to its mean diagonal.
@@ -171,44 +172,56 @@ def _jvja_least_norm(J, xdot, sc, lo, hi, proj, tolerate):
     return solve_box(proj.N @ c, a, _null_basis(proj.N), lo, hi), scales
 
 
-def resolve_bounded(name: str, J, xdot, lockable=None, *, bounds, **options) -> BoundedRates:
-    """Rates of resolver ``name`` under the rate box ``bounds = (qd_lo, qd_hi)``, with task scaling.
-
-    The rates minimise the resolver's own objective subject to ``J q̇ = s ẋ`` and the box, ``s ≤ 1``
-    as large as possible (see the module doc; ``s = 1`` whenever ``ẋ`` is reachable). Options as
-    :func:`fault_tolerance.resolve`. Inside the box, the unbounded rates come back unchanged.
-
-    Example:
-        >>> import numpy as np, fault_tolerance as ft
-        >>> J = np.array([[1.0, 1.0, 1.0]]); xd = np.array([0.3])
-        >>> out = ft.resolve_bounded("lnva", J, xd, bounds=([-1, -1, -1], [1, 1, 0.05]))
-        >>> [round(float(v), 3) for v in out.qd], out.scale, out.active.tolist()
-        ([0.125, 0.125, 0.05], 1.0, [False, False, True])
-    """
-    from fault_tolerance.resolution.resolvers import OPTIONS, RESOLVERS, check_task, resolve
-
-    if name not in RESOLVERS or set(options) - OPTIONS:
-        return BoundedRates(resolve(name, J, xdot, lockable, **options), 1.0, None, None)  # raises
-    J, xdot = check_task(J, xdot)
+def _nearest_on_task(J, xdot, qd, lo, hi, proj) -> BoundedRates:
+    """(L2) with target ``qd``: its rates when inside the box, else the nearest inside on the task."""
     n = J.shape[1]
-    lo, hi = check_bounds(bounds, n)
-    options = dict(options)
-    proj = options.pop("proj", None) or projection(J)
-    tolerate = bool(options.get("tolerate", False))
-    empty = np.zeros(0)
-    if name in ("lnva", "mda"):
-        qd = resolve(name, J, xdot, lockable, proj=proj, **options)  # the unbounded optimum
-        if _inside(qd, lo, hi):
-            return BoundedRates(np.clip(qd, lo, hi), 1.0, np.zeros(n, dtype=bool), empty)
-        a = proj.Jpinv @ xdot
-        sol = solve_box(proj.N @ (qd - a), a, _null_basis(proj.N), lo, hi)  # near a singularity
-        # the damped qd - a is not in the null space exactly; its task part stays in a
-        return BoundedRates(sol.qd, sol.scale, sol.active, empty)
-    names = options.get("joint_names") or (options["arm"].joint_names if options.get("arm") else ())
-    sc = _scenarios(J, lockable, options.pop("weights", None), names)
-    if name == "jvja_inertia":
-        return _inertia_bounded(J, xdot, sc, lo, hi, proj, tolerate, options)
-    response = options.get("response", "least_norm")
+    if _inside(qd, lo, hi):
+        return BoundedRates(np.clip(qd, lo, hi), 1.0, np.zeros(n, dtype=bool), np.zeros(0))
+    a = proj.Jpinv @ xdot
+    sol = solve_box(proj.N @ (qd - a), a, _null_basis(proj.N), lo, hi)  # near a singularity
+    # the damped qd - a is not in the null space exactly; its task part stays in a
+    return BoundedRates(sol.qd, sol.scale, sol.active, np.zeros(0))
+
+
+def bounded_nearest(rates):
+    """The bounded variant of a resolver whose objective is the distance to its own rates, (L2n).
+
+    LNVA minimises ``‖q̇‖²``, MDA ``‖q̇ + α∇K‖²``: on the task's affine set both are
+    ``‖q̇ − q̇*‖²`` up to a constant, ``q̇*`` their unbounded rates, so inside the box their rates
+    are (L2) with target ``q̇*``. ``rates(J, xdot, lockable, **keywords)`` is the reference
+    resolver; the variant is ``bounded(J, xdot, lockable, lo, hi, **keywords)``, the keywords
+    ``rates`` takes (``proj`` is computed once and shared).
+    """
+    import inspect
+
+    takes = frozenset(inspect.signature(rates).parameters)
+
+    def bounded(J, xdot, lockable, lo, hi, *, proj=None, **keywords) -> BoundedRates:
+        proj = proj or projection(J)
+        if "proj" in takes:
+            keywords["proj"] = proj
+        qd = rates(J, xdot, lockable, **{k: v for k, v in keywords.items() if k in takes})
+        return _nearest_on_task(J, xdot, qd, lo, hi, proj)
+
+    bounded.__doc__ = (
+        f"{getattr(rates, '__name__', 'rates')} inside the box, (L2) (bounded_nearest)."
+    )
+    # the keywords the registry may pass: those of rates (it filters the context by them)
+    bounded.__signature__ = inspect.Signature(
+        [inspect.Parameter(p, inspect.Parameter.KEYWORD_ONLY) for p in sorted(takes | {"proj"})]
+    )
+    return bounded
+
+
+# Eqn. (L2) with JVJA's objectives (L4)-(L5), and the continuation metric of (G3).
+def bounded_jvja(
+    J, xdot, lockable, lo, hi, *, proj=None, tolerate=False, joint_names=(), weights=None,
+    response="least_norm",
+) -> BoundedRates:  # fmt: skip
+    """JVJA inside the box ``[lo, hi]``: its least-norm or continuation objective (module doc)."""
+    proj = proj or projection(J)
+    n = J.shape[1]
+    sc = _scenarios(J, lockable, weights, joint_names)
     if response not in RESPONSES:
         raise InvalidInput(f"response {response!r} is not one of {RESPONSES}")
     if response == "least_norm" and sc.singletons:  # fast path: nothing meets a bound
@@ -229,18 +242,27 @@ def resolve_bounded(name: str, J, xdot, lockable=None, *, bounds, **options) -> 
     return BoundedRates(sol.qd, sol.scale, sol.active, scales)
 
 
-def _inertia_bounded(J, xdot, sc, lo, hi, proj, tolerate, options) -> BoundedRates:
-    """jvja_inertia under the box: (L2) with its kinetic-energy metric H of (D3)."""
-    from fault_tolerance.resolution.inertia_jvja import _inertia, jvja_inertia, kinetic_jump_metric
+def resolve_bounded(name: str, J, xdot, lockable=None, *, bounds, **options) -> BoundedRates:
+    """Rates of resolver ``name`` under the rate box ``bounds = (qd_lo, qd_hi)``, with task scaling.
 
-    opts = {k: options.get(k) for k in ("M", "arm", "q")}
-    qd = jvja_inertia(J, xdot, sc, tolerate=tolerate, proj=proj, **opts)  # the unbounded optimum
-    _, scales = reduced_under_limits(J, xdot, sc, lo, hi, proj=proj, tolerate=tolerate)
-    if _inside(qd, lo, hi):
-        return BoundedRates(np.clip(qd, lo, hi), 1.0, np.zeros(len(qd), dtype=bool), scales)
-    H = kinetic_jump_metric(J, _inertia(opts["M"], opts["arm"], opts["q"], J.shape[1]), sc, tolerate)
-    sol = _continuation(J, xdot, sc, lo, hi, proj, tolerate, H=H)
-    return BoundedRates(sol.qd, sol.scale, sol.active, scales)
+    The rates minimise the resolver's own objective subject to ``J q̇ = s ẋ`` and the box, ``s ≤ 1``
+    as large as possible (see the module doc; ``s = 1`` whenever ``ẋ`` is reachable): the
+    registered entry's ``bounded`` variant (:mod:`fault_tolerance.resolution.registry`; a resolver
+    without one raises :class:`InvalidInput`). Options as :func:`fault_tolerance.resolve`. Inside
+    the box, the unbounded rates come back unchanged.
+
+    Example:
+        >>> import numpy as np, fault_tolerance as ft
+        >>> J = np.array([[1.0, 1.0, 1.0]]); xd = np.array([0.3])
+        >>> out = ft.resolve_bounded("lnva", J, xd, bounds=([-1, -1, -1], [1, 1, 0.05]))
+        >>> [round(float(v), 3) for v in out.qd], out.scale, out.active.tolist()
+        ([0.125, 0.125, 0.05], 1.0, [False, False, True])
+    """
+    entry = get(name)
+    entry.make_options(split(options)[1])  # unknown options raise before any work
+    J, xdot = check_task(J, xdot)
+    lo, hi = check_bounds(bounds, J.shape[1])
+    return entry.call_bounded(J, xdot, lockable, lo, hi, **options)
 
 
 def _inside(x, lo, hi) -> bool:

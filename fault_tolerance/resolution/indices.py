@@ -11,6 +11,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from fault_tolerance.errors import InvalidInput
+from fault_tolerance.numerics.checks import finite
 from fault_tolerance.numerics.linalg import projection, reduced_rates
 from fault_tolerance.resolution.scenarios import Scenarios, scenarios
 
@@ -88,11 +89,12 @@ def jvj(
         >>> ft.jvj(J, xd, ft.resolve("jvja", J, xd)) <= ft.jvj(J, xd, ft.resolve("lnva", J, xd))
         True
     """
-    J = np.asarray(J, dtype=float)
+    J = finite(J, "J", ndim=2)
+    m, n = J.shape
+    xdot, qd = finite(xdot, "xdot", (m,)), finite(qd, "qd", (n,))
     sc = _scenarios(J, lockable, weights, joint_names)
     proj = projection(J)
     sc.check_tolerable(proj.N)
-    xdot, qd = np.asarray(xdot, dtype=float), np.asarray(qd, dtype=float)
     if response == "continuation":
         _check_rates(J, xdot, qd)
     post = post_failure_rates(proj.Jpinv @ xdot, proj.N, sc, qd, response)
@@ -126,14 +128,16 @@ def reduced_singular_values(J: np.ndarray, sc: Scenarios) -> np.ndarray:
     """Singular values of every reduced Jacobian ``J_S``, ascending, shape (f, m).
 
     ``J_S J_Sᵀ = J Jᵀ - J[:, S] J[:, S]ᵀ``: the f small ``m x m`` matrices go to one batched
-    ``eigvalsh`` call.
+    ``eigvalsh`` call. A stack of Jacobians (..., m, n) gives (..., f, m), each row what it
+    would give alone (the batched API and the whole-path planner call it on stacks).
     """
-    G = J @ J.T
+    G = J @ np.swapaxes(J, -1, -2)
     if sc.singletons:
-        cols = J[:, sc.columns].T  # (f, m)
-        stack = G[None, :, :] - cols[:, :, None] * cols[:, None, :]
+        cols = np.swapaxes(J[..., :, sc.columns], -1, -2)  # (..., f, m)
+        stack = G[..., None, :, :] - cols[..., :, None] * cols[..., None, :]
     else:
-        stack = np.array([G - J[:, list(S)] @ J[:, list(S)].T for S in sc.sets])
+        parts = [J[..., :, list(S)] for S in sc.sets]
+        stack = np.stack([G - C @ np.swapaxes(C, -1, -2) for C in parts], axis=-3)
     lam = np.linalg.eigvalsh(stack)
     return np.sqrt(np.maximum(lam, 0.0))
 
@@ -149,7 +153,7 @@ def condition_numbers(sigma: np.ndarray) -> np.ndarray:
 
 def rcn(J: np.ndarray, lockable=None, *, joint_names: Sequence[str] = ()) -> np.ndarray:
     """Reduced condition numbers ``k_S = σ_max(J_S)/σ_min(J_S) >= 1``, eq. (15), shape (f,)."""
-    J = np.asarray(J, dtype=float)
+    J = finite(J, "J", ndim=2)
     return condition_numbers(reduced_singular_values(J, _scenarios(J, lockable, None, joint_names)))
 
 
@@ -169,8 +173,9 @@ def rcn_gradient(
     :math:`\partial k/\partial q_j = (\sigma_{max}' \sigma_{min} - \sigma_{max}\sigma_{min}')/\sigma_{min}^2`.
     ``dJ`` is ``Arm.jacobian_derivatives(q)``, shape (n, m, n).
     """
-    J = np.asarray(J, dtype=float)
+    J = finite(J, "J", ndim=2)
     m, n = J.shape
+    dJ = finite(dJ, "dJ", (n, m, n))
     sc = _scenarios(J, lockable, None, joint_names)
     grad = np.zeros(n)
     for S in sc.sets:
@@ -187,11 +192,11 @@ def rcn_gradient(
 
 def fault_tolerance_measure(J: np.ndarray, lockable=None) -> float:
     """``k_f = min_S σ_min(J_S)`` (Roberts & Maciejewski): worst-case reduced dexterity."""
-    J = np.asarray(J, dtype=float)
+    J = finite(J, "J", ndim=2)
     return float(reduced_singular_values(J, _scenarios(J, lockable))[:, 0].min())
 
 
 def reduced_manipulability(J: np.ndarray, lockable=None) -> np.ndarray:
     """``w_S = √det(J_S J_Sᵀ)`` per scenario, shape (f,)."""
-    J = np.asarray(J, dtype=float)
+    J = finite(J, "J", ndim=2)
     return np.prod(reduced_singular_values(J, _scenarios(J, lockable)), axis=1)

@@ -9,18 +9,40 @@ the continuation form (G3) with ``N[S, S]`` replaced by ``Ñ[S, S]``. With ``M =
 
 For one degree of redundancy the jump of every scenario is forced (``Δ_S ∥ n``) and its kinetic
 energy is ``½ nᵀMn`` times the square jump: the same minimiser as JVJA (D4).
+
+Registered as ``"jvja_inertia"`` (:mod:`fault_tolerance.resolution.resolvers`); it needs the
+configuration (``arm`` and ``q``, or the inertia ``M`` directly). Its options
+(:class:`JvjaInertiaOptions`): the scenario ``weights``. Its bounded variant
+:func:`bounded_jvja_inertia` is (L2) with the metric of (D3).
 """
 
 from __future__ import annotations
 
 import weakref
 from collections.abc import Sequence
+from dataclasses import dataclass
 
 import numpy as np
 
 from fault_tolerance.errors import InvalidInput
 from fault_tolerance.numerics.linalg import Projection, pivot_block, projection
+from fault_tolerance.resolution.bounded import (
+    BoundedRates,
+    _continuation,
+    _inside,
+    reduced_under_limits,
+)
 from fault_tolerance.resolution.scenarios import Scenarios, scenarios
+
+
+@dataclass(frozen=True)
+class JvjaInertiaOptions:
+    """jvja_inertia's options: the scenario ``weights`` (default 1 each).
+
+    The inertia is not an option: it is the configuration's, ``M`` or ``arm`` and ``q`` (context).
+    """
+
+    weights: Sequence[float] | None = None
 
 
 def _scenarios(J: np.ndarray, lockable, weights, joint_names) -> Scenarios:
@@ -138,3 +160,26 @@ def jvja_inertia(
     N, a = proj.N, proj.Jpinv @ xdot
     z = -np.linalg.pinv(N @ H @ N, rcond=1e-10, hermitian=True) @ (N @ H @ a)
     return a + N @ z
+
+
+# Eqn. (L2) with the kinetic-energy metric H of (D3).
+def bounded_jvja_inertia(
+    J, xdot, lockable, lo, hi, *, M=None, arm=None, q=None, weights=None, joint_names=(),
+    tolerate=False, proj=None,
+) -> BoundedRates:  # fmt: skip
+    """jvja_inertia inside the box ``[lo, hi]``: ``min ½q̇ᵀHq̇`` s.t. ``J q̇ = s ẋ``, (L2) with (D3)'s H.
+
+    Inside the box the unbounded rates come back unchanged; ``reduced_scale`` is each scenario's
+    task scale under the same box (as JVJA's).
+    """
+    J = np.asarray(J, dtype=float)
+    proj = proj or projection(J)
+    sc = _scenarios(J, lockable, weights, joint_names)
+    Mq = _inertia(M, arm, q, J.shape[1])
+    qd = jvja_inertia(J, xdot, sc, M=Mq, tolerate=tolerate, proj=proj)  # the unbounded optimum
+    _, scales = reduced_under_limits(J, xdot, sc, lo, hi, proj=proj, tolerate=tolerate)
+    if _inside(qd, lo, hi):
+        return BoundedRates(np.clip(qd, lo, hi), 1.0, np.zeros(len(qd), dtype=bool), scales)
+    H = kinetic_jump_metric(J, Mq, sc, tolerate)
+    sol = _continuation(J, xdot, sc, lo, hi, proj, tolerate, H=H)
+    return BoundedRates(sol.qd, sol.scale, sol.active, scales)

@@ -60,10 +60,13 @@ class Scenarios:
         return [f"joint index {i}" for i in S]
 
     def pivots(self, N: np.ndarray) -> np.ndarray:
-        """Smallest eigenvalue of ``N[S, S]`` per scenario, shape (f,); ~0 means intolerable."""
+        """Smallest eigenvalue of ``N[S, S]`` per scenario, shape (f,); ~0 means intolerable.
+
+        A stack of projectors (..., n, n) gives (..., f).
+        """
         if self.singletons:
-            return N[self.columns, self.columns]
-        return np.array([min_pivot(N, S) for S in self.sets])
+            return N[..., self.columns, self.columns]
+        return np.stack([np.asarray(min_pivot(N, S)) for S in self.sets], axis=-1)
 
     def check_tolerable(self, N: np.ndarray) -> np.ndarray:
         """Smallest pivot of ``N[S, S]`` per scenario; raise :class:`IntolerableFailure` if one is ~0."""

@@ -10,6 +10,7 @@ import csv
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING, cast
 
 import numpy as np
 
@@ -17,10 +18,22 @@ from fault_tolerance.errors import InvalidInput
 
 
 class TaskPath:
-    """A task path of ``m`` coordinates over ``[0, duration]`` seconds."""
+    """A task path of ``m`` coordinates over ``[0, duration]`` seconds.
 
-    duration: float
-    x0: np.ndarray
+    Subclasses give ``duration`` and ``x0`` as dataclass fields or as properties.
+    """
+
+    if TYPE_CHECKING:  # read-only here: a field or a property may provide them
+
+        @property
+        def duration(self) -> float:
+            """Length of the path in time [s]."""
+            ...
+
+        @property
+        def x0(self) -> np.ndarray:
+            """Start position."""
+            ...
 
     @property
     def m(self) -> int:
@@ -154,12 +167,12 @@ class SampledPath(TaskPath):
         object.__setattr__(self, "v", v)
 
     @property
-    def x0(self) -> np.ndarray:  # type: ignore[override]
+    def x0(self) -> np.ndarray:
         """Start position."""
         return self.xs[0].copy()
 
     @property
-    def duration(self) -> float:  # type: ignore[override]
+    def duration(self) -> float:
         """Length of the path in time [s]."""
         return float(self.t[-1])
 
@@ -172,7 +185,7 @@ class SampledPath(TaskPath):
 
     def xdot(self, t: float) -> np.ndarray:
         """Interpolated velocity at ``t``."""
-        return self._interp(self.v, t)
+        return self._interp(cast(np.ndarray, self.v), t)  # set by __post_init__
 
     def spec(self) -> dict:
         """JSON-able description."""
@@ -199,7 +212,7 @@ class FunctionPath(TaskPath):
             raise InvalidInput(f"duration must be > 0, got {self.duration}")
 
     @property
-    def x0(self) -> np.ndarray:  # type: ignore[override]
+    def x0(self) -> np.ndarray:
         """Start position."""
         return self.x(0.0)
 

@@ -9,6 +9,8 @@ the record, then ``q ← q + q̇ dt``.
 
 from __future__ import annotations
 
+from typing import cast
+
 import numpy as np
 
 from fault_tolerance.model.joint_limits import NO_LIMIT, arm_rate_box
@@ -32,7 +34,7 @@ from fault_tolerance.simulation.run import (
     FLAG_STEP_LIMITED,
     FLAG_TASK_SCALED,
 )
-from fault_tolerance.simulation.setup import _Setup, _State
+from fault_tolerance.simulation.setup import TRACKED_PAST_PLAN, _Setup, _State
 
 #: Reduced robots whose smallest N[S, S] pivot falls below this are flagged near-intolerable; the
 #: pivots are damped there (``linalg.PIVOT_EPS``), so JVJA's rates and λ stay finite.
@@ -50,15 +52,14 @@ def _step(s: _Setup, state: _State, k: int, rec: dict, x_des, xd_des) -> None:
     planned = None
     box = arm_rate_box(arm, q, s.horizon) if s.limits else None
     if s.reference is not None and (not state.locked or state.lock_jump is None):
-        planned = _tracking_rates(s, k, q, J, xd_cmd, proj)
+        planned = _tracking_rates(s, s.reference, k, q, J, xd_cmd, proj)
         if box is not None:  # the plan's rates, nearest inside the box (L4 with that target)
             sol = bounded_least_norm(J, xd_cmd, box[0], box[1], target=planned, proj=proj)
             planned = sol.qd
             if not state.locked:
                 flag |= _box_flags(sol.active, sol.scale)
     elif not state.locked or state.lock_jump is None:
-        opts = dict(response=s.response, arm=arm, q=q, gain=s.gain, tolerate=True,
-                    max_step=s.max_step, proj=proj)  # fmt: skip
+        opts = dict(s.options or {}, arm=arm, q=q, tolerate=True, proj=proj)
         if box is None:
             planned = resolve(s.algorithm, J, xd_cmd, s.sc, **opts)
         else:
@@ -70,11 +71,9 @@ def _step(s: _Setup, state: _State, k: int, rec: dict, x_des, xd_des) -> None:
         qd_cmd, lflag = _locked_rates(s, state, J, xd_cmd, planned, box)
         flag = lflag
     else:
-        qd_cmd = planned
-        if (
-            s.algorithm == "mda"
-            and np.linalg.norm(qd_cmd - proj.Jpinv @ xd_cmd) >= 0.999 * s.max_step
-        ):
+        qd_cmd = cast(np.ndarray, planned)  # not locked: a branch above planned the rates
+        cap = (s.options or {}).get("max_step")  # a resolver whose null-space step is capped
+        if cap is not None and np.linalg.norm(qd_cmd - proj.Jpinv @ xd_cmd) >= 0.999 * cap:
             flag |= FLAG_STEP_LIMITED
     if np.any(np.abs(qd_cmd) > s.vmax):
         flag |= FLAG_OVER_SPEED
@@ -147,7 +146,7 @@ def _clip_to_limits(s: _Setup, q: np.ndarray, qd: np.ndarray) -> int:
     arm = s.arm
     lo = np.where(np.abs(arm.lower) < NO_LIMIT, (arm.lower - q) / s.dt, -np.inf)
     hi = np.where(np.abs(arm.upper) < NO_LIMIT, (arm.upper - q) / s.dt, np.inf)
-    v = s.vlimit
+    v = s.vlimit if s.vlimit is not None else np.inf  # as the compiled sampler reads it
     lo, hi = np.maximum(lo, -v), np.minimum(hi, v)
     clipped = np.clip(qd, lo, hi)
     changed = bool(np.any(np.abs(clipped - qd) > 1e-12))
@@ -172,8 +171,8 @@ def _record(rec, k, q, qd, qd_cmd, x, x_des, err, parts, k_s, sigma_min, flag) -
 
 
 # MATH.md (W3): the plan's reference tracked in the null space; J q̇ = ẋ_cmd whatever the reference.
-def _tracking_rates(s: _Setup, k: int, q, J, xd_cmd, proj) -> np.ndarray:
+def _tracking_rates(s: _Setup, reference: np.ndarray, k: int, q, J, xd_cmd, proj) -> np.ndarray:
     """``J⁺ẋ_cmd + N (q_ref[k+1] − q)/dt``; past the reference's end, JVJA's rates."""
-    if k + 1 < len(s.reference):
-        return proj.Jpinv @ xd_cmd + proj.N @ ((s.reference[k + 1] - q) / s.dt)
-    return resolve("jvja", J, xd_cmd, s.sc, tolerate=True, proj=proj)
+    if k + 1 < len(reference):
+        return proj.Jpinv @ xd_cmd + proj.N @ ((reference[k + 1] - q) / s.dt)
+    return resolve(TRACKED_PAST_PLAN, J, xd_cmd, s.sc, tolerate=True, proj=proj)

@@ -156,7 +156,7 @@ class Run:
     def _dynamics_summary(self) -> dict:
         """A dynamics run's torque figures (docs/dynamics.md); nothing for a kinematic run."""
         dyn = self.meta.get("dynamics")
-        if not dyn or self.tau is None:
+        if not dyn or self.tau is None or self.tau_cmd is None:
             return {}
         effort = np.array([np.inf if e is None else e for e in dyn["effort"]], dtype=float)
         ratio = np.abs(self.tau) / effort  # 0 where no limit is given
@@ -242,7 +242,7 @@ class Run:
         np.savez_compressed(buf, meta=np.array(to_json(self.meta)), **arrays)
         (folder / "run.npz").write_bytes(buf.getvalue())
         (folder / "run.csv").write_text(self.to_csv(), encoding="utf-8")
-        record = {"meta": self.meta, "summary": self.summary()}
+        record: dict[str, object] = {"meta": self.meta, "summary": self.summary()}
         if warnings is not None:
             record["warnings"] = list(warnings)
         (folder / "summary.json").write_text(to_json(record), encoding="utf-8")

@@ -18,15 +18,15 @@ from fault_tolerance.errors import InvalidInput
 from fault_tolerance.model.arm import Arm
 from fault_tolerance.model.joint_limits import velocity_limits
 from fault_tolerance.resolution.indices import RESPONSES
-from fault_tolerance.resolution.resolvers import RESOLVERS
+from fault_tolerance.resolution.registry import get
 from fault_tolerance.resolution.scenarios import Scenarios, scenarios
 from fault_tolerance.simulation.paths import TaskPath
 from fault_tolerance.storage.budget import check_run, run_samples
 
 #: The whole-path planner's name (fault_tolerance.planning.wholepath); not a per-step resolver.
 GLOBAL = "global"
-#: Every algorithm simulate runs: the resolvers and the global plan.
-ALGORITHMS = (*RESOLVERS, GLOBAL)
+#: The resolver a tracked path plan hands over to past its end (and whose setup it validates).
+TRACKED_PAST_PLAN = "jvja"
 
 #: Largest joint motion MDA's null-space step may make in one time step [rad]. Far from the
 #: minimum-K start the gradient of K is steep (‖α N ∇K‖ of 10⁴ rad/s near singular reduced
@@ -99,6 +99,8 @@ class _Setup:
     horizon: float = 0.05  # [s] of the rate box, at least dt
     vlimit: np.ndarray | None = None  # velocity limits of the box, with the documented defaults
     reference: np.ndarray | None = None  # the global plan's configurations, tracked (W3)
+    options: dict | None = None  # the resolver's validated options, by name (every step)
+    user_options: dict | None = None  # those given by simulate(options=...), for the record
 
 
 @dataclass
@@ -114,11 +116,15 @@ class _State:
 
 def _setup(
     arm, path, algorithm, q0, lockable, weights, response, dt, duration, feedback_gain, gain,
-    lock_joint, lock_time, servo, limits=True, horizon=None,
+    lock_joint, lock_time, servo, limits=True, horizon=None, options=None,
 ) -> _Setup:  # fmt: skip
     """Validate the options of :func:`simulate` (before any work)."""
-    if algorithm not in RESOLVERS:
-        raise InvalidInput(f"algorithm '{algorithm}' is not one of {list(ALGORITHMS)}")
+    entry = get(algorithm)
+    if limits and entry.bounded is None:
+        raise InvalidInput(
+            f"resolver '{algorithm}' has no bounded variant: it cannot honour the joint limits; "
+            "run it with limits=False (--no-limits)"
+        )
     if path.m != arm.m:
         raise InvalidInput(
             f"the path has {path.m} coordinates, the task {'/'.join(arm.task)} has {arm.m}"
@@ -148,9 +154,15 @@ def _setup(
     vmax = arm.velocity_limit
     vmax = np.where(np.isfinite(vmax) & (vmax > 0), vmax, np.inf)  # 0 or inf: no limit given
     h = _check_limits(arm, q0, limits, horizon, dt)
+    run = {"response": response, "gain": gain, "max_step": MDA_MAX_ANGLE / dt}
+    owned = {"weights": "simulate(weights=...)", "response": "simulate(response=...)"}
+    opts = entry.options_with(options, run, owned)  # one it does not take raises
+    cap = opts.get("max_step", run["max_step"])  # the compiled sample's cap of MDA's step
     return _Setup(
-        arm, path, algorithm, sc, response, dt, duration, steps, feedback_gain, gain, lock_col,
-        lock_time, servo, MDA_MAX_ANGLE / dt, vmax, bool(limits), h, velocity_limits(arm),
+        arm, path, algorithm, sc, response, dt, duration, steps, feedback_gain,
+        float(opts.get("gain", gain)), lock_col, lock_time, servo,
+        np.inf if cap is None else float(cap), vmax, bool(limits), h, velocity_limits(arm),
+        options=opts, user_options=dict(options or {}),
     )  # fmt: skip
 
 
@@ -224,7 +236,9 @@ def sample_path(path: TaskPath, ts: np.ndarray, m: int) -> tuple[np.ndarray, np.
 
 def _maybe_lock(s: _Setup, state: _State, t: float) -> None:
     """Lock the joint when its time has come (it stops at once: a brake)."""
-    if s.lock_col is not None and not state.locked and t >= s.lock_time - 1e-12:
+    if s.lock_col is None or s.lock_time is None:  # no lock in this run
+        return
+    if not state.locked and t >= s.lock_time - 1e-12:
         state.locked = True
         state.keep = np.array([j for j in range(s.arm.n) if j != s.lock_col])
         state.qd[s.lock_col] = 0.0

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from dataclasses import replace
+from typing import cast
 
 import numpy as np
 
@@ -23,7 +24,8 @@ from fault_tolerance.model.arm_record import arm_record
 from fault_tolerance.model.joint_limits import NO_LIMIT, wrap_into_limits
 from fault_tolerance.model.task_errors import angular_mask, error_norms
 from fault_tolerance.numerics.linalg import projection
-from fault_tolerance.resolution.resolvers import MDA_GAIN
+from fault_tolerance.resolution.mda import MDA_GAIN
+from fault_tolerance.resolution.registry import get, names
 from fault_tolerance.simulation.paths import TaskPath
 from fault_tolerance.simulation.reference_step import _step
 from fault_tolerance.simulation.run import (
@@ -32,6 +34,7 @@ from fault_tolerance.simulation.run import (
 from fault_tolerance.simulation.setup import (
     GLOBAL,
     HISTORIES,
+    TRACKED_PAST_PLAN,
     ServoModel,
     _allocate,
     _maybe_lock,
@@ -48,6 +51,41 @@ ENGINES = ("auto", "fast", "reference")
 #: returning a :class:`Run`. The planning layer registers ``"global"``
 #: (:mod:`fault_tolerance.planning.wholepath.run`), which sits above this one.
 PATH_PLANNERS: dict[str, Callable[..., Run]] = {}
+#: How plots and the replay page show a path planner: ``(colour, label)``, registered with it.
+PATH_PLANNER_STYLES: dict[str, tuple[str, str]] = {}
+
+
+def algorithms() -> tuple[str, ...]:
+    """Every algorithm :func:`simulate` runs: the registered resolvers, then the path planners."""
+    return (*names(), *PATH_PLANNERS)
+
+
+def algorithm_style(algorithm: str | None) -> tuple[str, str] | None:
+    """``(colour, label)`` of an algorithm for plots and the replay page; None if unknown."""
+    name = str(algorithm or "").lower()
+    if name in PATH_PLANNER_STYLES:
+        return PATH_PLANNER_STYLES[name]
+    if name in names():
+        entry = get(name)
+        return entry.colour, entry.label
+    return None
+
+
+def option_names(algorithm: str) -> tuple[str, ...]:
+    """The ``options=`` :func:`simulate` takes for ``algorithm`` (a path planner: none)."""
+    if algorithm in PATH_PLANNERS:
+        return ()
+    if algorithm not in names():
+        raise InvalidInput(f"algorithm {algorithm!r} is not one of {list(algorithms())}")
+    return get(algorithm).option_names
+
+
+def options_for(algorithm: str, options: dict | None) -> dict | None:
+    """The part of ``options`` that ``algorithm`` takes (several algorithms share one set)."""
+    if not options:
+        return None
+    own = option_names(algorithm)
+    return {k: v for k, v in options.items() if k in own} or None
 
 
 def simulate(
@@ -71,6 +109,7 @@ def simulate(
     plan_options: dict | None = None,
     limits: bool = True,
     horizon: float | None = None,
+    options: dict | None = None,
     dynamics=None,
 ) -> Run:
     """Integrate ``algorithm`` along ``path`` from ``q0``; optionally lock a joint on the way.
@@ -78,8 +117,8 @@ def simulate(
     Args:
         arm: The arm.
         path: Task path with the arm's ``m`` coordinates.
-        algorithm: ``"lnva"``, ``"jvja"``, ``"mda"`` or ``"global"`` (the whole-path plan of
-            :mod:`fault_tolerance.planning.wholepath`, tracked in the null space, MATH.md (W3)).
+        algorithm: One of :func:`algorithms`: a registered resolver (``"lnva"``, ``"jvja"``,
+            ``"mda"``, ...) or ``"global"`` (the whole-path plan, tracked in the null space, (W3)).
         q0: Initial configuration, shape (n,). Required, except for ``"global"``: without it the
             global plan chooses its start on the self-motion of the path's first point.
         lockable: Joints that may lock (default: the arm's default lockable joints).
@@ -104,9 +143,10 @@ def simulate(
             inside it and scale the task out of reach (docs/MATH.md "Joint limits"); ``q0`` must
             be inside the limits. ``False``: the paper's unconstrained formulation.
         horizon: Horizon of the rate box [s] (default ``bounded.RATE_HORIZON``; at least ``dt``).
-        dynamics: ``True`` or a :class:`~fault_tolerance.simulation.torque.DynamicsModel`: the
-            plan tracked by computed torques, the lock as a brake (docs/dynamics.md); not with
-            ``servo``. The run adds ``tau`` and ``tau_cmd``.
+        options: The resolver's own options by name (its options dataclass; ``response`` and
+            ``gain`` fill those of the same name unless given here); an unknown one raises.
+        dynamics: ``True`` or a :class:`~.torque.DynamicsModel`: the plan tracked by computed
+            torques, the lock a brake (docs/dynamics.md); not with ``servo``; adds ``tau``, ``tau_cmd``.
 
     Example:
         >>> import numpy as np, fault_tolerance as ft
@@ -118,32 +158,30 @@ def simulate(
         >>> bool(np.allclose(run.q, ref.q, rtol=0, atol=1e-12))
         True
     """
-    _check_call(engine, algorithm, plan_options, q0)
+    q0 = _check_call(arm, engine, algorithm, plan_options, q0, options)
     sim = dict(
         lockable=lockable, weights=weights, response=response, dt=dt, duration=duration,
         feedback_gain=feedback_gain, gain=gain, lock_joint=lock_joint, lock_time=lock_time,
         servo=servo, limits=limits, horizon=horizon,
     )  # fmt: skip
-    model = as_model(dynamics)
-    if model is not None:
-        return _dynamics_run(arm, path, algorithm, model, sim, q0, progress, engine, plan_options)
-    return _route(arm, path, algorithm, sim, q0, progress, engine, plan_options)
+    route = dict(progress=progress, engine=engine, plan_options=plan_options, options=options)
+    if (model := as_model(dynamics)) is not None:  # a torque-level run
+        return _dynamics_run(arm, path, algorithm, model, sim, q0, route)
+    return _route(arm, path, algorithm, sim, q0, **route)
 
 
-def _route(arm, path, algorithm, sim, q0, progress, engine, plan_options) -> Run:
-    """A kinematic run: the global plan's planner, or the loop of the resolvers."""
-    if algorithm == GLOBAL:
-        if GLOBAL not in PATH_PLANNERS:
-            raise InvalidInput(
-                f"algorithm '{GLOBAL}' needs the whole-path planner: import fault_tolerance"
-            )
-        return PATH_PLANNERS[GLOBAL](
+def _route(arm, path, algorithm, sim, q0, *, progress, engine, plan_options, options) -> Run:
+    """A kinematic run: a whole-path planner, or the loop of the step resolvers."""
+    if algorithm in PATH_PLANNERS:
+        return PATH_PLANNERS[algorithm](
             arm, path, q0=q0, plan_options=plan_options, progress=progress, loop=_simulate, **sim
         )
-    return _simulate(arm, path, algorithm, q0=q0, progress=progress, engine=engine, **sim)
+    q0 = cast(np.ndarray, q0)  # not None: _check_call refused that
+    sim = dict(sim, progress=progress, engine=engine, options=options)
+    return _simulate(arm, path, algorithm, q0=q0, **sim)
 
 
-def _dynamics_run(arm, path, algorithm, model, sim, q0, progress, engine, plan_options) -> Run:
+def _dynamics_run(arm, path, algorithm, model, sim, q0, route: dict) -> Run:
     """A torque-level run: the kinematic plan with perfect rate tracking, tracked by torques."""
     if sim["servo"] is not None:
         raise InvalidInput(
@@ -151,22 +189,35 @@ def _dynamics_run(arm, path, algorithm, model, sim, q0, progress, engine, plan_o
             "torques (drop servo=..., or dynamics=...)"
         )
     sim = dict(sim, servo=ServoModel(tau=0.0))
-    plan = _route(arm, path, algorithm, sim, q0, progress, engine, plan_options)
+    plan = _route(arm, path, algorithm, sim, q0, **route)
     return track(arm, plan, model)
 
 
-def _check_call(engine: str, algorithm: str, plan_options, q0) -> None:
-    """The options of :func:`simulate` that decide the route, checked before any work."""
+def _check_call(arm, engine: str, algorithm: str, plan_options, q0, options=None):
+    """The options of :func:`simulate` that decide the route, checked before any work; ``q0``."""
     if engine not in ENGINES:
         raise InvalidInput(f"engine {engine!r} is not one of {list(ENGINES)}")
-    if algorithm == GLOBAL:
-        return
+    if q0 is not None:
+        q0 = arm.check_q(q0, "q0")
+    if algorithm == GLOBAL and GLOBAL not in PATH_PLANNERS:
+        raise InvalidInput(
+            f"algorithm '{GLOBAL}' needs the whole-path planner: import fault_tolerance"
+        )
+    if algorithm in PATH_PLANNERS:
+        if options:
+            raise InvalidInput(
+                f"options are a step resolver's; '{algorithm}' takes plan_options instead"
+            )
+        return q0
+    if algorithm not in names():
+        raise InvalidInput(f"algorithm {algorithm!r} is not one of {list(algorithms())}")
     if plan_options is not None:
         raise InvalidInput(f"plan_options are options of algorithm 'global', not of '{algorithm}'")
     if q0 is None:
         raise InvalidInput(
             f"simulate needs q0 for algorithm '{algorithm}' (only 'global' chooses its own start)"
         )
+    return q0
 
 
 def _simulate(
@@ -190,12 +241,13 @@ def _simulate(
     engine: str = "auto",
     limits: bool = True,
     horizon: float | None = None,
+    options: dict | None = None,
 ) -> Run:
     """The loop of :func:`simulate`; with ``reference`` (the global plan) the rates track it."""
     setup = _setup(
-        arm, path, "jvja" if reference is not None else algorithm, q0, lockable, weights,
-        response, dt, duration, feedback_gain, gain, lock_joint, lock_time, servo, limits,
-        horizon,
+        arm, path, TRACKED_PAST_PLAN if reference is not None else algorithm, q0, lockable,
+        weights, response, dt, duration, feedback_gain, gain, lock_joint, lock_time, servo,
+        limits, horizon, options,
     )  # fmt: skip
     if reference is not None:
         setup = replace(setup, algorithm=algorithm, reference=np.asarray(reference, dtype=float))
@@ -254,13 +306,15 @@ def _finish(s: _Setup, state: _State, rec: dict, q0) -> Run:
         "dt": s.dt,
         "duration": s.duration,
         "feedback_gain": s.feedback_gain,
-        "mda_gain": s.gain if s.algorithm == "mda" else None,
+        "mda_gain": s.gain if "gain" in (s.options or {}) else None,
         "q0": np.asarray(q0, dtype=float).tolist(),
         "path": s.path.spec(),
         "servo": s.servo.describe() if servo_used else "perfect rate tracking",
         "limits": _limits_meta(s),
     }
-    if s.lock_col is not None:
+    if s.user_options:  # a resolver's own options, as given (absent: its defaults)
+        meta["options"] = dict(s.user_options)
+    if s.lock_col is not None and s.lock_time is not None:
         meta["lock"] = {
             "joint": arm.joint_names[s.lock_col],
             "index": s.lock_col,

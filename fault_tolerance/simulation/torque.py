@@ -115,12 +115,12 @@ def track(arm, plan: Run, model: DynamicsModel) -> Run:
     st = _Arm(q=plan.q[0].copy(), qd=plan.qd[0].copy(), keep=np.arange(n))
     Q, QD, TAU, CMD = (np.zeros((K1, n)) for _ in range(4))
     for k in range(K1):
-        if k == k_lock:
+        if k == k_lock and col is not None:
             _lock(dyn, st, col, model)
         if st.held and st.stop_k is None:
             st.stop_k = k
         v_prev = plan.qd[max(k - 1, 0)]
-        off = col if col is not None and k >= k_lock else None
+        off = col if col is not None and k_lock is not None and k >= k_lock else None
         # the plan's rates jump at the lock: no acceleration there, the PD closes the gap
         ff = np.zeros(n) if k == k_lock else (plan.qd[k] - v_prev) / dt
         Q[k], QD[k] = st.q, st.qd
@@ -167,20 +167,21 @@ def _substep(dyn: ArmDynamics, st: _Arm, tau: np.ndarray, col, model: DynamicsMo
     if st.held:
         qdd = held_accelerations(dyn.mass_matrix(st.q), dyn.bias(st.q, st.qd), tau, st.keep)
     elif st.braking:
+        brake = float(model.brake_torque or 0.0)  # [N·m]; braking only with a finite brake
         full = tau.copy()
-        full[col] = -model.brake_torque * np.sign(st.qd[col])
+        full[col] = -brake * np.sign(st.qd[col])
         qdd = dyn.forward(st.q, st.qd, full)
         new = st.qd[col] + h * qdd[col]
         if new * st.qd[col] <= 0.0:  # it stops within this sub-step: held from here on
             frac = abs(st.qd[col]) / max(abs(h * qdd[col]), 1e-300)
             st.brake_time += frac * h
-            st.impulse += model.brake_torque * frac * h
+            st.impulse += brake * frac * h
             st.qd[col] = 0.0
             st.braking, st.held = False, True
             qdd = held_accelerations(dyn.mass_matrix(st.q), dyn.bias(st.q, st.qd), tau, st.keep)
         else:
             st.brake_time += h
-            st.impulse += model.brake_torque * h
+            st.impulse += brake * h
     else:
         qdd = dyn.forward(st.q, st.qd, tau)
     st.qd = st.qd + h * qdd

@@ -13,14 +13,16 @@ from pathlib import Path
 import numpy as np
 
 from fault_tolerance.errors import InvalidInput
+from fault_tolerance.storage.folder_io import refuse_link
 
 
 def write_atomic(path: str | Path, data: bytes | str) -> Path:
     """Write ``data`` to ``path`` via a temporary file in the same folder and ``os.replace``.
 
     A reader never sees a half-written file, and an interrupted write leaves the old file intact.
+    A symbolic link or special file at ``path`` is refused (``OutputError``), never followed.
     """
-    path = Path(path)
+    path = refuse_link(Path(path))
     path.parent.mkdir(parents=True, exist_ok=True)
     raw = data.encode() if isinstance(data, str) else data
     fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
@@ -42,7 +44,7 @@ def write_atomic(path: str | Path, data: bytes | str) -> Path:
 
 def output_folder(path: str | Path) -> Path:
     """``path`` as a folder that exists and can be written to, or :class:`InvalidInput` saying why."""
-    path = Path(path)
+    path = refuse_link(Path(path), folder=True)
     if path.exists() and not path.is_dir():
         raise InvalidInput(f"{path}: exists and is not a folder; choose a folder for the output")
     try:

@@ -180,3 +180,71 @@ def _npy_header(fh, path: Path, name: str):
     if not all(isinstance(s, int) and s >= 0 for s in shape) or len(shape) > 4:
         raise InvalidInput(f"{path}: array {name!r} has shape {shape}; not an array of a run")
     return tuple(shape), np.dtype(dtype), header
+
+
+# -- sweeps: workspace and design sizes, refused before any work -----------------------------
+
+#: Most chunks one sweep may have (``--chunks``, or the sampled method's chunk count).
+MAX_CHUNKS = 100_000
+#: Most configurations of a sampled workspace, or joint-3 values of a planar-3R self-motion.
+MAX_SAMPLES = 10_000_000
+#: Most lock angles per joint of a workspace (``--theta-samples``).
+MAX_THETA_SAMPLES = 100_000
+#: Most quasi-random candidates of a design search (``--candidates``).
+MAX_CANDIDATES = 100_000
+#: Most pattern-search rounds (``--rounds``): each halves the step, and after 60 the step is
+#: below the resolution of a double on the search box.
+MAX_ROUNDS = 60
+#: Most joints of an arm a sweep accepts.
+MAX_SWEEP_JOINTS = 100
+#: Bytes one grid point of a workspace map takes in memory (masks, two float maps, the layout's
+#: integer keys and indices), besides one byte per lockable joint.
+_POINT_BYTES = 64
+
+
+def check_count(value, name: str, lo: int, hi: int) -> int:
+    """``value`` as an integer in ``[lo, hi]``, or InvalidInput naming ``name`` and the range."""
+    ok = isinstance(value, (int, np.integer)) and not isinstance(value, bool)
+    if isinstance(value, (float, np.floating)) and math.isfinite(value) and value == int(value):
+        ok, value = True, int(value)
+    if not ok or not lo <= value <= hi:
+        raise InvalidInput(f"{name} must be an integer from {lo:,} to {hi:,}, got {value!r}")
+    return int(value)
+
+
+def grid_bytes(grid: int, dims: int, lockable: int) -> int:
+    """Bytes the maps of a workspace on ``grid`` points per axis in ``dims`` axes take."""
+    return grid**dims * (_POINT_BYTES + lockable)
+
+
+def check_grid(grid, dims: int, lockable: int, name: str = "grid (--grid)") -> int:
+    """Points per axis of a workspace map, after checking its maps fit :func:`memory_budget`."""
+    grid = check_count(grid, name, 2, 10**9)
+    need, budget = grid_bytes(grid, dims, lockable), memory_budget()
+    if need > budget:
+        most = int((budget / (_POINT_BYTES + lockable)) ** (1.0 / dims))
+        raise InvalidInput(
+            f"{name} = {grid:,} is {grid:,}^{dims} points, whose maps need {need / 2**20:,.0f} "
+            f"MiB; at most {budget / 2**20:,.0f} MiB are allowed (a grid of at most {most:,})"
+        )
+    return grid
+
+
+def check_workspace(spec: dict, n_chunks: int) -> None:
+    """Refuse a workspace spec whose sizes exceed the limits above, before any chunk runs."""
+    f = len(spec["lockable"])
+    check_count(len(spec["robot"]["joints"]), "the arm's joints", 1, MAX_SWEEP_JOINTS)
+    check_grid(spec["grid"], len(spec["center"]), f)
+    check_count(spec["samples"], "samples (--samples)", 1, MAX_SAMPLES)
+    check_count(spec["theta_samples"], "theta_samples (--theta-samples)", 2, MAX_THETA_SAMPLES)
+    what = "chunks (--chunks)" if spec.get("chunks") else "chunks of the sampled method"
+    check_count(n_chunks, what, 1, MAX_CHUNKS)
+
+
+def check_design(candidates, rounds, grid) -> tuple[int, int, int]:
+    """``(candidates, rounds, grid)`` of a design search, checked against the limits above."""
+    return (
+        check_count(candidates, "candidates (--candidates)", 1, MAX_CANDIDATES),
+        check_count(rounds, "rounds (--rounds)", 0, MAX_ROUNDS),
+        check_grid(grid, 2, 3),
+    )

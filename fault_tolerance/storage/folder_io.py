@@ -11,6 +11,7 @@ from __future__ import annotations
 import contextlib
 import errno
 import os
+import stat
 import sys
 from pathlib import Path
 
@@ -73,9 +74,86 @@ def files_below(folder: Path) -> list[str]:
     return sorted(out)
 
 
+#: Flags of every file a writer creates: a new regular file, never through a symbolic link.
+NEW_FILE = os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_NOFOLLOW", 0)
+#: Flags of every file a reader of untrusted folders opens: no link followed, no FIFO waited on.
+READ_FILE = os.O_RDONLY | getattr(os, "O_NOFOLLOW", 0) | getattr(os, "O_NONBLOCK", 0)
+
+
+def refuse_link(path: str | Path, *, folder: bool = False) -> Path:
+    """Refuse (``OutputError``) a symbolic link or special file where a writer will write.
+
+    ``path`` may be absent; if it exists it must be a regular file (``folder=False``) or a real
+    folder (``folder=True``), checked with ``lstat`` so a link is never followed.
+    """
+    path = Path(path)
+    try:
+        st = os.lstat(path)
+    except FileNotFoundError:
+        return path
+    except OSError as err:
+        raise output_error(err, path) from err
+    if stat.S_ISLNK(st.st_mode):
+        raise OutputError(
+            f"{path}: is a symbolic link; a writer never follows links (its target would be "
+            "overwritten): remove the link or choose another output folder"
+        )
+    ok = stat.S_ISDIR(st.st_mode) if folder else stat.S_ISREG(st.st_mode)
+    if not ok:
+        kind = "a folder" if folder else "a regular file"
+        raise OutputError(
+            f"{path}: exists and is not {kind} ({_kind(st.st_mode)}); remove it or choose "
+            "another output folder"
+        )
+    return path
+
+
+def _kind(mode: int) -> str:
+    for test, name in (
+        (stat.S_ISDIR, "a folder"),
+        (stat.S_ISFIFO, "a FIFO"),
+        (stat.S_ISSOCK, "a socket"),
+        (stat.S_ISCHR, "a character device"),
+        (stat.S_ISBLK, "a block device"),
+    ):
+        if test(mode):
+            return name
+    return "a regular file" if stat.S_ISREG(mode) else "a special file"
+
+
+def is_regular(path: str | Path) -> bool:
+    """True if ``path`` is a regular file itself (not a link to one, not a FIFO or device)."""
+    try:
+        return stat.S_ISREG(os.lstat(path).st_mode)
+    except OSError:
+        return False
+
+
+def open_regular(path: str | Path) -> int:
+    """A read-only descriptor of the regular file ``path``, never through a link nor a FIFO.
+
+    Raises:
+        OSError: ``path`` is missing, a link (``ELOOP``) or not a regular file (``EINVAL``).
+    """
+    fd = os.open(path, READ_FILE)
+    if not stat.S_ISREG(os.fstat(fd).st_mode):
+        os.close(fd)
+        raise OSError(errno.EINVAL, "not a regular file", str(path))
+    return fd
+
+
 def write_synced(path: Path, data: bytes) -> None:
-    """Write ``data`` to ``path`` and flush it to disk before returning."""
-    with open(path, "wb") as fh:
+    """Write ``data`` to the new file ``path`` (never through a link) and flush it to disk.
+
+    A leftover regular file or link at ``path`` is removed first (the link, not its target).
+    """
+    refuse_folder = os.path.isdir(path) and not os.path.islink(path)
+    if refuse_folder:
+        raise OutputError(f"{path}: exists and is a folder; remove it or choose another folder")
+    with contextlib.suppress(FileNotFoundError):
+        os.unlink(path)
+    fd = os.open(path, NEW_FILE, 0o644)
+    with os.fdopen(fd, "wb") as fh:
         fh.write(data)
         fh.flush()
         os.fsync(fh.fileno())

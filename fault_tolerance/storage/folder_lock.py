@@ -11,19 +11,23 @@ fills it. Both are importable from :mod:`.results` too.
 from __future__ import annotations
 
 import contextlib
+import errno
 import fcntl
 import json
 import os
 import socket
+import stat
 import time
 from collections.abc import Iterator
 from pathlib import Path
 
 from fault_tolerance.errors import FolderLocked, InvalidInput, OutputError
 from fault_tolerance.storage.folder_io import (
+    READ_FILE,
     check_path_names,
     command_line,
     output_error,
+    refuse_link,
     write_synced,
 )
 
@@ -55,10 +59,7 @@ class FolderLock:
             return self
         self.path.parent.mkdir(parents=True, exist_ok=True)
         for _ in range(20):  # retry only if the file was replaced between open and flock
-            try:
-                fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o644)
-            except OSError as err:
-                raise output_error(err, self.folder) from err
+            fd = _open_lock(self.path, self.folder)
             try:
                 fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
             except BlockingIOError:
@@ -66,7 +67,7 @@ class FolderLock:
                 os.close(fd)
                 raise FolderLocked(self.folder, info) from None
             try:
-                same = os.fstat(fd).st_ino == os.stat(self.path).st_ino
+                same = os.fstat(fd).st_ino == os.lstat(self.path).st_ino
             except FileNotFoundError:
                 same = False
             if not same:  # the holder removed it as we opened it; take the new file
@@ -105,6 +106,23 @@ class FolderLock:
         self.release()
 
 
+def _open_lock(path: Path, folder: Path) -> int:
+    """Open (create) the lock file: a regular file, never through a link nor a FIFO."""
+    refuse_link(path)
+    flags = os.O_RDWR | os.O_CREAT | getattr(os, "O_NOFOLLOW", 0) | getattr(os, "O_NONBLOCK", 0)
+    try:
+        fd = os.open(path, flags, 0o644)
+    except OSError as err:
+        if err.errno == errno.ELOOP:  # became a link between the check and the open
+            refuse_link(path)
+        raise output_error(err, folder) from err
+    if not stat.S_ISREG(os.fstat(fd).st_mode):
+        os.close(fd)
+        refuse_link(path)  # names what it is
+        raise OutputError(f"{path}: the lock is not a regular file")  # pragma: no cover
+    return fd
+
+
 def lock_path(folder: str | Path) -> Path:
     """Where the lock of ``folder`` lives: ``.NAME.lock`` beside it, or inside if the parent is read-only."""
     folder = Path(os.path.abspath(folder))
@@ -118,8 +136,11 @@ def lock_holder(folder: str | Path) -> dict | None:
     """Who holds the lock of ``folder`` (pid, host, command, started), or None if nobody does."""
     path = lock_path(folder)
     try:
-        fd = os.open(path, os.O_RDONLY)
+        fd = os.open(path, READ_FILE)
     except OSError:
+        return None
+    if not stat.S_ISREG(os.fstat(fd).st_mode):
+        os.close(fd)
         return None
     try:
         try:
@@ -156,8 +177,9 @@ def in_progress(folder: str | Path, **info) -> Iterator[Path]:
     folder = check_path_names(Path(folder))
     if folder.exists() and not folder.is_dir():
         raise InvalidInput(f"{folder}: exists and is not a folder; choose a folder for the output")
+    refuse_link(folder, folder=True)
     with FolderLock(folder):
-        marker = folder / IN_PROGRESS
+        marker = refuse_link(folder / IN_PROGRESS)
         text = {
             "pid": os.getpid(),
             "command": command_line(),

@@ -37,6 +37,7 @@ from __future__ import annotations
 import contextlib
 import ctypes
 import errno
+import fnmatch
 import hashlib
 import json
 import os
@@ -52,7 +53,10 @@ from fault_tolerance.storage.folder_io import (
     command_line,
     files_below,
     fsync,
+    is_regular,
+    open_regular,
     output_error,
+    refuse_link,
     write_synced,
 )
 from fault_tolerance.storage.folder_lock import (
@@ -63,6 +67,7 @@ from fault_tolerance.storage.folder_lock import (
 __all__ = [
     "RECORD",
     "check_target",
+    "created_folders",
     "file_digest",
     "read_record",
     "staged_folder",
@@ -91,6 +96,7 @@ def staged_folder(
     *,
     replaceable: Iterable[str] = (),
     lock: bool = True,
+    aside: Iterable[str] = (),
 ) -> Iterator[Path]:
     """Yield an empty staging folder; on success record its files and move it to ``target``.
 
@@ -101,6 +107,10 @@ def staged_folder(
             :class:`~.errors.InvalidInput` before anything is written, so a user's own files are
             never swept away.
         lock: Hold :class:`FolderLock` on ``target`` while writing (re-entrant).
+        aside: Glob patterns (``"chunks-*"``) of top-level entries of an existing ``target`` that
+            live beside the result rather than in it (a sweep's finished chunks): their regular
+            files are carried into the new folder by hard links (copies where the file system
+            has none), left out of the completion record, and ignored by :func:`verify_folder`.
 
     Raises:
         FolderLocked: another live process writes ``target``.
@@ -112,11 +122,13 @@ def staged_folder(
     holder = FolderLock(target) if lock else contextlib.nullcontext()
     with holder:
         _sweep(target)
-        _check_replaceable(target, set(replaceable))
+        aside = list(aside)
+        _check_replaceable(target, set(replaceable) | {f"{a}/*" for a in aside})
         stage = _new_sibling(target, _STAGE)
         try:
             yield stage
-            write_record(stage)
+            write_record(stage, aside=aside)
+            _carry(target, stage, aside)
             _commit(stage, target)
         except OSError as err:
             raise output_error(err, target) from err
@@ -134,14 +146,47 @@ def check_target(target: str | Path, replaceable: Iterable[str] = ()) -> Path:
     return target
 
 
-def write_record(folder: str | Path, **extra) -> dict:
-    """Write the completion record of ``folder``: size and SHA-256 of each file (recursively)."""
+@contextlib.contextmanager
+def created_folders(path: str | Path) -> Iterator[Path]:
+    """Remove, when the block fails, the folders up to ``path`` it created and left empty.
+
+    A failed command leaves no empty ``--out`` (nor empty parents of it) behind; a folder that
+    holds anything (finished chunks, a user's files) is kept.
+    """
+    path = Path(os.path.abspath(path))
+    first = None
+    p = path
+    while not os.path.lexists(p) and p != p.parent:
+        first, p = p, p.parent
+    try:
+        yield path
+    except BaseException:
+        if first is not None:
+            p = path
+            while True:
+                with contextlib.suppress(OSError):
+                    os.rmdir(p)  # only if empty
+                if p == first or p == p.parent:
+                    break
+                p = p.parent
+        raise
+
+
+def write_record(folder: str | Path, *, aside: Iterable[str] = (), **extra) -> dict:
+    """Write the completion record of ``folder``: size and SHA-256 of each file (recursively).
+
+    Files under the top-level entries matching ``aside`` (glob patterns) are not part of the
+    result; the patterns are recorded so that :func:`verify_folder` ignores them too.
+    """
     folder = Path(folder)
+    aside = list(aside)
     files = {
-        rel: {"bytes": (folder / rel).stat().st_size, "sha256": file_digest(folder / rel)}
+        rel: {"bytes": os.lstat(folder / rel).st_size, "sha256": file_digest(folder / rel)}
         for rel in files_below(folder)
-        if rel != RECORD
+        if rel != RECORD and not _is_aside(rel, aside)
     }
+    if aside:
+        extra["aside"] = aside
     for rel in files:
         fsync(folder / rel)
     record = {
@@ -163,6 +208,8 @@ def read_record(folder: str | Path) -> dict:
     path = folder / RECORD
     if not folder.is_dir():
         raise IncompleteResult(f"{folder}: no such result folder")
+    if os.path.lexists(path) and not is_regular(path):
+        raise IncompleteResult(f"{path}: not a regular file (a link or special file); not a record")
     if not path.is_file():
         why = (
             f"a command is still writing it or was stopped ({IN_PROGRESS} is there)"
@@ -174,7 +221,11 @@ def read_record(folder: str | Path) -> dict:
     if path.stat().st_size > MAX_RECORD_BYTES:
         raise IncompleteResult(f"{path}: larger than {MAX_RECORD_BYTES} bytes; not a record")
     try:
-        record = json.loads(path.read_text(encoding="utf-8"))
+        fd = open_regular(path)
+        with os.fdopen(fd, "rb") as fh:
+            record = json.loads(fh.read(MAX_RECORD_BYTES).decode("utf-8"))
+    except OSError as err:
+        raise IncompleteResult(f"{path}: not a readable completion record ({err})") from None
     except (UnicodeDecodeError, json.JSONDecodeError) as err:
         raise IncompleteResult(f"{path}: not a readable completion record ({err})") from None
     files = record.get("files") if isinstance(record, dict) else None
@@ -208,7 +259,9 @@ def verify_folder(folder: str | Path, files: Iterable[str] | None = None) -> dic
     folder = Path(folder)
     record = read_record(folder)
     listed = record["files"]
-    present = set(files_below(folder)) - {RECORD}
+    found = record.get("aside")
+    aside: list[str] = [str(a) for a in found] if isinstance(found, list) else []
+    present = {r for r in files_below(folder) if not _is_aside(r, aside)} - {RECORD}
     extra = sorted(present - set(listed))
     if extra:
         raise IncompleteResult(
@@ -220,9 +273,11 @@ def verify_folder(folder: str | Path, files: Iterable[str] | None = None) -> dic
         path = folder / rel
         if rel not in listed:
             raise IncompleteResult(f"{folder}: {rel} is not part of this result ({RECORD})")
-        if not path.is_file():
-            raise IncompleteResult(f"{folder}: {rel} is missing; the folder was altered")
-        size = path.stat().st_size
+        if not is_regular(path):
+            raise IncompleteResult(
+                f"{folder}: {rel} is missing or not a regular file; the folder was altered"
+            )
+        size = os.lstat(path).st_size
         if size != listed[rel]["bytes"]:
             raise IncompleteResult(
                 f"{path}: {size} bytes, its completion record says {listed[rel]['bytes']}; "
@@ -237,9 +292,9 @@ def verify_folder(folder: str | Path, files: Iterable[str] | None = None) -> dic
 
 
 def file_digest(path: str | Path) -> str:
-    """SHA-256 of a file's bytes, in hex."""
+    """SHA-256 of a regular file's bytes, in hex (a link or FIFO raises ``OSError``)."""
     h = hashlib.sha256()
-    with open(path, "rb") as fh:
+    with os.fdopen(open_regular(path), "rb") as fh:
         for block in iter(lambda: fh.read(1 << 20), b""):
             h.update(block)
     return h.hexdigest()
@@ -248,7 +303,31 @@ def file_digest(path: str | Path) -> str:
 # -- helpers ---------------------------------------------------------------------------------
 
 
+def _is_aside(rel: str, aside: Iterable[str]) -> bool:
+    top = rel.split("/", 1)[0]
+    return "/" in rel and any(fnmatch.fnmatchcase(top, a) for a in aside)
+
+
+def _carry(target: Path, stage: Path, aside: list[str]) -> None:
+    """Hard-link the regular files of ``target``'s aside entries into ``stage`` (module doc)."""
+    if not aside or not target.is_dir():
+        return
+    for rel in files_below(target):
+        if not _is_aside(rel, aside) or not is_regular(target / rel):
+            continue  # a link or FIFO among the chunks is not carried (it would be recomputed)
+        dst = stage / rel
+        dst.parent.mkdir(parents=True, exist_ok=True)
+        if dst.exists():
+            continue
+        try:
+            os.link(target / rel, dst, follow_symlinks=False)
+        except OSError:
+            shutil.copyfile(target / rel, dst, follow_symlinks=False)
+
+
 def _make_parent(target: Path) -> Path:
+    if os.path.islink(target):
+        refuse_link(target, folder=True)
     parent = target.parent
     if target.exists() and not target.is_dir():
         raise InvalidInput(f"{target}: exists and is not a folder; choose a folder for the output")
@@ -267,7 +346,15 @@ def _check_replaceable(target: Path, replaceable: set[str]) -> None:
     ours = set(replaceable) | {RECORD, IN_PROGRESS}
     with contextlib.suppress(IncompleteResult):
         ours |= set(read_record(target)["files"])
-    foreign = sorted(rel for rel in files_below(target) if rel not in ours)
+    refuse_link(target, folder=True)
+    for rel in files_below(target):  # a link or FIFO where a result's file was: refuse, name it
+        if not any(fnmatch.fnmatchcase(rel, p) for p in replaceable if "*" in p):
+            refuse_link(target / rel)
+    foreign = sorted(
+        rel
+        for rel in files_below(target)
+        if rel not in ours and not any(fnmatch.fnmatchcase(rel, p) for p in replaceable)
+    )
     if foreign:
         raise InvalidInput(
             f"{target}: holds files that are not part of a result ({foreign[:5]}); they would be "

@@ -42,7 +42,7 @@ SHAPES = {
 TEXT_MEMBERS = ("meta", "arm")
 
 #: Types of the ``meta`` fields the toolkit reads (others are kept as they are).
-META_TYPES = {
+META_TYPES: dict[str, type | tuple[type, ...]] = {
     "robot": str,
     "algorithm": str,
     "tip": str,

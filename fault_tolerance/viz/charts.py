@@ -40,8 +40,7 @@ from fault_tolerance.viz.svg import (
 
 #: Time buckets of the decimation: each keeps the smallest and largest sample of every curve.
 BUCKETS = 300
-#: Colours of runs by algorithm (as in the figures of plots.py), then a palette for the rest.
-RUN_COLORS = {"lnva": "#1f77b4", "jvja": "#d62728", "mda": "#2ca02c", "global": "#9467bd"}
+#: Colours for runs whose algorithm's registered colour is taken or unknown.
 PALETTE = (
     "#1f77b4",
     "#d62728",
@@ -154,8 +153,15 @@ def chart_data(run, label: str, color: str, velocity_limit, joint_names) -> Char
 
 
 def run_color(algorithm: str | None, index: int, taken: set[str]) -> str:
-    """The colour of a run: its algorithm's if still free, else the next free palette colour."""
-    c = RUN_COLORS.get(str(algorithm or "").lower())
+    """The colour of a run: its algorithm's if still free, else the next free palette colour.
+
+    An algorithm's colour is its registry entry's (``ResolverEntry.colour``; a path planner's from
+    ``PATH_PLANNER_STYLES``), as in the figures of :mod:`fault_tolerance.figures.runs`.
+    """
+    from fault_tolerance.simulation.simulate import algorithm_style
+
+    known = algorithm_style(algorithm)
+    c = known[0] if known else None
     if c and c not in taken:
         return c
     for c in PALETTE[index:] + PALETTE[:index]:
@@ -282,9 +288,9 @@ def torque_panel(runs: list[ChartRun]) -> str:
     """Panel (d) of dynamics runs: applied torques τ(t) around the lock, dashed: effort limits."""
     t0, t1 = _t_range(runs)
     have = [r for r in runs if r.tau is not None]
+    taus = [np.abs(r.tau) for r in have if r.tau is not None]
     limits = [v for r in have for v in (r.effort or []) if v is not None]
-    lo, hi = _range([np.abs(r.tau) for r in have] + ([np.array(limits)] if limits else []),
-                    False, True)  # fmt: skip
+    lo, hi = _range(taus + ([np.array(limits)] if limits else []), False, True)
     ax = _Axes(t0, t1, -hi, hi, log=False)
     body = []
     for j, v in enumerate(have[0].effort or []):

@@ -44,7 +44,7 @@ def collect_runs(run) -> list[tuple[str, object]]:
         if len(folders) == 1:
             loaded = Run.load(folders[0])
             return [(str(loaded.meta.get("algorithm") or folders[0].name), loaded)]
-        items = [(p.name, Run.load(p)) for p in folders]
+        items: list[tuple[str, object]] = [(p.name, Run.load(p)) for p in folders]
     elif isinstance(run, Run):
         return [(str(run.meta.get("algorithm") or "run"), run)]
     elif isinstance(run, Mapping):

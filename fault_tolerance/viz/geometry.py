@@ -84,7 +84,7 @@ def _skeleton(arm: Arm, q: np.ndarray) -> pin.GeometryModel:
     origins = [data.oMi[j].translation for j in range(1, model.njoints)] + [
         data.oMf[arm.frame_id].translation
     ]
-    reach = max(1e-3, max(np.linalg.norm(a - b) for a in origins for b in origins))
+    reach = max(1e-3, max(float(np.linalg.norm(a - b)) for a in origins for b in origins))
     r = 0.025 * reach
     geom = pin.GeometryModel()
     for j in range(1, model.njoints):

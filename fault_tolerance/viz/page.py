@@ -33,6 +33,30 @@ def _viewer_js() -> str:
     return text
 
 
+#: What :func:`script_json` escapes: the characters that could end or reopen markup inside an
+#: inline ``<script>`` (``</script``, ``<!--``, ``]]>``), and the line separators JavaScript
+#: once treated as line ends.
+_SCRIPT_ESCAPES = {
+    "<": "\\u003c",
+    ">": "\\u003e",
+    "&": "\\u0026",
+    "\u2028": "\\u2028",
+    "\u2029": "\\u2029",
+}
+
+
+def script_json(obj, **kwargs) -> str:
+    r"""``obj`` as JSON that is inert inside an HTML ``<script>`` (names are data, never markup).
+
+    ``<``, ``>``, ``&``, U+2028 and U+2029 become ``\u003c``-style escapes, which JSON and
+    JavaScript read back as the same characters: a joint named ``<!--<script>`` stays a name.
+    """
+    text = json.dumps(obj, **kwargs)
+    for ch, esc in _SCRIPT_ESCAPES.items():
+        text = text.replace(ch, esc)
+    return text
+
+
 def _legend(info: dict) -> tuple[str, str, str]:
     """Title, heading and legend rows of the page."""
     esc = html_lib.escape
@@ -95,7 +119,8 @@ def _build_page(
 ) -> _Page:
     """Scenes and plots of ``run`` (one run, or the runs of a folder / list / dict)."""
     items = collect_runs(run)
-    scenes, charts, warnings, taken = [], [], [], set()
+    scenes, charts, warnings = [], [], []
+    taken: set[str] = set()
     for i, (label, item) in enumerate(items):
         scene = _build_scene(
             item, arm, speed=speed, fps=fps, meshes=meshes, dt=dt, package_dirs=package_dirs
@@ -140,8 +165,7 @@ def _page_html(page: _Page, *, live: bool = False) -> str:
         viewer_script = f"<script>\n{_viewer_js()}\n</script>"
 
     def js(obj) -> str:
-        # "</" cannot occur in base64 or in this JSON of plain names and numbers; escape anyway
-        return json.dumps(obj, separators=(",\n", ":")).replace("</", "<\\/")
+        return script_json(obj, separators=(",\n", ":"))
 
     return _PAGE.format(
         version=__version__,
@@ -150,7 +174,7 @@ def _page_html(page: _Page, *, live: bool = False) -> str:
         legend=legend,
         plots=page.plots,
         viewer_script=viewer_script,
-        info=json.dumps(first.info).replace("</", "<\\/"),
+        info=script_json(first.info),
         runs=js(runs),
         commands=js([] if live and len(page.scenes) == 1 else _encode(first.commands)),
         more=js(more),

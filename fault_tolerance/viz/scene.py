@@ -148,8 +148,8 @@ class _Scene:
 
     commands: list[tuple[bytes, bytes, bytes]]
     info: dict
-    motion: _Motion | None = None  # what was replayed (for the page's plots)
-    arm: Arm | None = None
+    motion: _Motion  # what was replayed (for the page's plots)
+    arm: Arm
 
 
 def _build_scene(
@@ -199,7 +199,8 @@ def _build_scene(
         animations += clips
     for i, g in enumerate(geom.geometryObjects):
         node = vis[viz.getViewerNodeName(g, pin.GeometryType.VISUAL)].path.lower()
-        shown = ([0.0, lock_tau], [lock_tau > 0, False]) if g.name in locked_names else None
+        ghost = g.name in locked_names  # names only when a joint locks, at lock_tau
+        shown = ([0.0, lock_tau], [lock_tau > 0, False]) if ghost and lock_tau is not None else None
         animations.append(_clip(node, tau, pos[i], quats[i], visible=shown))
     paths = _draw_paths(vis, arm, motion, t_frames, tau, centres, radii, len(q_frames))
     animations += paths.clips

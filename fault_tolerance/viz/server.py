@@ -23,7 +23,7 @@ import threading
 import time
 from collections.abc import Sequence
 from pathlib import Path
-from typing import IO
+from typing import IO, Any
 
 from fault_tolerance.errors import FaultToleranceError, InvalidInput
 from fault_tolerance.model.arm import Arm
@@ -168,7 +168,7 @@ class ReplayServer:
         self.url = url
         self.zmq_url = zmq_url
         self._log = log
-        self._socket = None
+        self._socket: Any = None  # a zmq REQ socket once connected (zmq is imported lazily)
         self.info: dict = {}  # what was served (see export's window.ftReplay)
         atexit.register(self.close)
 
@@ -247,7 +247,7 @@ class ReplayServer:
         import zmq
 
         if self._socket is None:
-            sock = zmq.Context.instance().socket(zmq.REQ)
+            sock: Any = zmq.Context.instance().socket(zmq.REQ)
             sock.setsockopt(zmq.LINGER, 0)
             sock.setsockopt(zmq.RCVTIMEO, int(timeout * 1000))
             sock.setsockopt(zmq.SNDTIMEO, int(timeout * 1000))

@@ -34,7 +34,13 @@ import pinocchio as pin
 from fault_tolerance.analysis import batch
 from fault_tolerance.errors import InvalidInput
 from fault_tolerance.model.arm_spec import arm_of
-from fault_tolerance.model.planar import full_turn, planar_chain, reach_2r, rigid_pair
+from fault_tolerance.model.planar import (
+    full_turn,
+    planar_chain,
+    reach_2r,
+    require_planar_chain,
+    rigid_pair,
+)
 
 OBJECTIVES = ("ftw-area", "jvj", "rcn")
 VARY = ("limits", "links,limits")
@@ -97,7 +103,7 @@ def default_task(arm) -> Task:
     if "x0" in entry and "path" in entry:
         p = entry["path"]
         return Task(tuple(entry["x0"]), p["radius"], p["omega"], p["duration"], p["sign"])
-    L = float(planar_chain(arm).lengths.sum())
+    L = float(require_planar_chain(arm).lengths.sum())
     return Task((0.35 * L / 1.5, 0.0), 0.1 * L / 1.5, 2 * np.pi, 1.0)
 
 
@@ -120,7 +126,7 @@ def links_of(params: np.ndarray, total: float) -> np.ndarray | None:
 
 def start_in_limits(arm, x0, A, lock_cols, samples: int = 720):
     """The configuration of minimum K on the self-motion at ``x0`` within ``A``, or None."""
-    chain = planar_chain(arm)
+    chain = require_planar_chain(arm)
     Av = np.stack(chain.v_limits(A[:, 0], A[:, 1]), 1)
     d = (np.asarray(x0, dtype=float) - chain.p0)[None]
     l1, l2, l3 = chain.lengths

@@ -23,7 +23,12 @@ from fault_tolerance.analysis.design.planar import (
 from fault_tolerance.analysis.sweep import run
 from fault_tolerance.errors import InvalidInput
 from fault_tolerance.model.arm_spec import arm_of, robot_spec
-from fault_tolerance.model.planar import planar_chain
+from fault_tolerance.model.planar import planar_chain, require_planar_chain
+from fault_tolerance.storage.budget import check_design
+from fault_tolerance.storage.result_folder import staged_folder
+
+#: Files of a saved design (an existing result with these is replaced whole).
+DESIGN_FILES = ("design.json", "design.png", "design.urdf", "replay.html")
 
 
 def _bounds(arm, vary: str, objective: str) -> np.ndarray:
@@ -53,20 +58,39 @@ def _baseline(arm, vary: str) -> np.ndarray:
     lo, hi = arm.lower, arm.upper
     p = np.ravel(np.stack([(lo + hi) / 2, (hi - lo) / 2], 1))
     if vary == "links,limits":
-        L = planar_chain(arm).lengths
+        L = require_planar_chain(arm).lengths
         p = np.concatenate([p, L[:2] / L.sum()])
     return p
 
 
-def _candidates(box: np.ndarray, n: int, seed: int) -> np.ndarray:
-    import warnings
+def _search(spec, box, baseline, candidates, generations, rounds, seed, opts) -> dict:
+    """Differential evolution over the free parameters of ``box``, then the pattern search (H4).
 
-    from scipy.stats import qmc
+    The first population is the baseline and ``candidates`` - 1 quasi-random designs (so
+    ``generations=0`` is the quasi-random search alone); every round is one chunked sweep.
+    """
+    from fault_tolerance.analysis.design.search_core import global_search
 
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", UserWarning)  # balance needs n = 2^k; any n is fine here
-        u = qmc.Sobol(len(box), seed=seed).random(n)
-    return np.array([clamp(box[:, 0] + r * (box[:, 1] - box[:, 0]), box) for r in u])
+    lo, width = box[:, 0], box[:, 1] - box[:, 0]
+    free = width > 0
+    rounds_seen: list[dict] = []
+
+    def params(U: np.ndarray) -> np.ndarray:
+        P = np.tile(lo, (len(U), 1))
+        P[:, free] = lo[free] + U * width[free]
+        return np.array([clamp(p, box) for p in P])
+
+    def evaluate_round(U: np.ndarray, tag: str) -> np.ndarray:
+        rounds_seen.append(_round(spec, params(U), tag, opts))
+        return rounds_seen[-1]["score"]
+
+    dims = int(free.sum())
+    start = np.clip((baseline - lo)[free] / width[free], 0.0, 1.0)
+    global_search(
+        evaluate_round, dims=dims, seed=seed, popsize=max(4, -(-candidates // dims)),
+        generations=generations, pattern_rounds=rounds, start=start,
+    )  # fmt: skip
+    return {k: np.concatenate([r[k] for r in rounds_seen]) for k in rounds_seen[0]}
 
 
 def pareto(points: np.ndarray) -> np.ndarray:
@@ -87,17 +111,21 @@ class Design:
     evaluated: dict = field(repr=False)
     workspace: object = field(repr=False, default=None)
 
-    def save(self, folder: str | Path, draw: Callable[[Design, Path], None] | None = None) -> Path:
+    def save(
+        self, folder: str | Path, draw: Callable[[Design, Path], object] | None = None
+    ) -> Path:
         """Write ``design.json`` into ``folder``, and ``design.png`` with ``draw`` when given.
 
         ``draw`` is :func:`fault_tolerance.figures.design.plot_design` for the usual figure
-        (figures sit above the analyses, so the caller passes it).
+        (figures sit above the analyses, so the caller passes it). Whole or absent like a run:
+        staged beside ``folder`` with a completion record, then renamed into place; finished
+        chunks (``chunks-*/``) are kept.
         """
         folder = Path(folder)
-        folder.mkdir(parents=True, exist_ok=True)
-        (folder / "design.json").write_text(json.dumps(self.record, indent=2) + "\n")
-        if draw is not None:
-            draw(self, folder / "design.png")
+        with staged_folder(folder, replaceable=DESIGN_FILES, aside=("chunks-*",)) as tmp:
+            (tmp / "design.json").write_text(json.dumps(self.record, indent=2) + "\n")
+            if draw is not None:
+                draw(self, tmp / "design.png")
         return folder
 
 
@@ -119,6 +147,7 @@ def design(
     rcn_max=None,
     candidates: int = 128,
     rounds: int = 4,
+    generations: int = 0,
     grid: int = 201,
     search_dt: float = 2e-3,
     seed: int = 0,
@@ -138,8 +167,11 @@ def design(
             f"design needs a planar 3R (three revolute joints about parallel z axes, planar "
             f"task); {arm.name} has {arm.n} joints and task {'/'.join(arm.task)}"
         )
-    if candidates < 1 or rounds < 0 or (rcn_max is not None and not rcn_max >= 1):
-        raise InvalidInput("candidates >= 1, rounds >= 0 and rcn_max >= 1 are required")
+    candidates, rounds, grid = check_design(candidates, rounds, grid)
+    if generations < 0:
+        raise InvalidInput(f"generations must be >= 0 (--generations), got {generations}")
+    if rcn_max is not None and not (np.isfinite(rcn_max) and rcn_max >= 1):
+        raise InvalidInput(f"rcn_max must be a finite number >= 1 (--rcn-max), got {rcn_max}")
     t0 = time.perf_counter()
     task = task or default_task(arm)
     spec = {
@@ -156,21 +188,7 @@ def design(
     }
     opts = dict(folder=folder, workers=workers, scheduler=scheduler, progress=progress)
     box = _bounds(arm, vary, objective)
-    cands = np.vstack([_baseline(arm, vary)[None], _candidates(box, candidates, seed)])
-    seen = _round(spec, cands, "candidates", opts)
-    step = (box[:, 1] - box[:, 0]) / 8
-    for r in range(rounds):
-        best = seen["params"][np.argsort(seen["score"], kind="stable")[:2]]
-        moves = [
-            clamp(b + s * step[d] * np.eye(len(box))[d], box)
-            for b in best
-            for d in range(len(box))
-            if step[d] > 0
-            for s in (-1, 1)
-        ]
-        new = _round(spec, np.array(moves), f"pattern{r}", opts)
-        seen = {k: np.concatenate([seen[k], new[k]]) for k in seen}
-        step = step / 2
+    seen = _search(spec, box, _baseline(arm, vary), candidates, generations, rounds, seed, opts)
     k = int(np.argmin(seen["score"]))
     if not np.isfinite(seen["score"][k]):
         raise InvalidInput("no candidate design is feasible: relax rcn_max or choose another task")

@@ -38,7 +38,14 @@ from fault_tolerance.analysis.sweep import run
 from fault_tolerance.analysis.workspace.result import DEFINITION, Workspace
 from fault_tolerance.errors import InvalidInput
 from fault_tolerance.model.arm_spec import arm_of, robot_spec
-from fault_tolerance.model.planar import full_turn, planar_chain, reach_2r, rigid_pair
+from fault_tolerance.model.planar import (
+    full_turn,
+    planar_chain,
+    reach_2r,
+    require_planar_chain,
+    rigid_pair,
+)
+from fault_tolerance.storage.budget import check_workspace
 
 #: Default sample counts of the planar-3R method.
 SAMPLES = 120  # joint-3 values for W(A) and the self-motion maps
@@ -214,7 +221,7 @@ def _index_table(arm, chain, lock_cols, v2, v3, valid):
 def planar_chunk(spec: dict, k: int) -> dict[str, np.ndarray]:
     """Masks and maps of the points in chunk ``k`` of a planar-3R spec (a sweep's compute)."""
     arm = arm_of(spec)
-    chain = planar_chain(arm)
+    chain = require_planar_chain(arm)
     order, keys, chunk = radius_layout(spec["grid"], spec["chunks"])
     mine = chunk == k
     idx, keys = order[mine], keys[mine]
@@ -291,7 +298,7 @@ def assemble_planar(spec: dict, chunks: list[dict]) -> Workspace:
     x, y, h = planar_grid(spec)
     ftw = pre & locks.all(axis=0)
     S, A = spec["samples"], np.asarray(spec["limits"])
-    chain = planar_chain(arm_of(spec))
+    chain = require_planar_chain(arm_of(spec))
     band = chain.lengths[2] * (A[2, 1] - A[2, 0]) / max(S - 1, 1) / 2
     error = (
         f"grid cell {h:.4g} m (area error up to about the boundary length x {h / 2:.3g} m); "
@@ -342,28 +349,26 @@ def failure_tolerant_workspace(
             sampled method, ``seed``).
     """
     spec = workspace_spec(arm, limits, lockable, **options)
-    if spec["method"] == "planar-3r":
-        chunks = run(
-            planar_chunk,
-            spec,
-            spec["chunks"],
-            folder=folder,
-            workers=workers,
-            scheduler=scheduler,
-            progress=progress,
-            desc="workspace",
-        )
-        return assemble_planar(spec, chunks)
-    from fault_tolerance.analysis.workspace.sampled import assemble_sampled, n_chunks, sampled_chunk
+    from fault_tolerance.analysis.workspace import sampled
 
+    f, points = len(spec["lockable"]), spec["grid"] ** len(spec["center"])
+    if spec["method"] == "planar-3r":
+        count, compute, assemble = spec["chunks"], planar_chunk, assemble_planar
+        bound = points * (25 + f)  # index, jump, rcn (8 bytes), pre (1), locks (f): every point
+    else:
+        per = -(-int(spec["samples"]) // sampled.CHUNK_SAMPLES)
+        count = per * (1 + f * int(spec["theta_samples"]))
+        compute, assemble, bound = sampled.sampled_chunk, sampled.assemble_sampled, points * 17
+    check_workspace(spec, count)  # every size refused before any chunk runs
     chunks = run(
-        sampled_chunk,
+        compute,
         spec,
-        n_chunks(spec),
+        count if spec["method"] == "planar-3r" else sampled.n_chunks(spec),
         folder=folder,
         workers=workers,
         scheduler=scheduler,
         progress=progress,
         desc="workspace",
+        chunk_bytes=bound + (1 << 16),
     )
-    return assemble_sampled(spec, chunks)
+    return assemble(spec, chunks)

@@ -2,12 +2,20 @@
 
 from __future__ import annotations
 
+import io
 import json
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+
+from fault_tolerance.storage.result_folder import staged_folder
+
+#: Files of a saved workspace (an existing result with these is replaced whole).
+WORKSPACE_FILES = ("workspace.json", "workspace.npz", "workspace.png")
+#: Entries of a workspace folder that live beside the result: the sweeps' finished chunks.
+CHUNKS = ("chunks-*",)
 
 DEFINITION = (
     "FTW(A) = W(A) ∩ ⋂_{i∈F} ⋂_{θ∈[lo_i,hi_i]} W_i(θ): reachable with q in the artificial limits "
@@ -92,18 +100,21 @@ class Workspace:
         return out
 
     def save(
-        self, folder: str | Path, draw: Callable[[Workspace, Path], None] | None = None
+        self, folder: str | Path, draw: Callable[[Workspace, Path], object] | None = None
     ) -> Path:
-        """Write ``workspace.json``, ``workspace.npz``, and ``workspace.png`` with ``draw``.
+        """Write ``workspace.json``, ``workspace.npz``, and ``workspace.png`` with ``draw``, whole.
 
         ``draw`` is :func:`fault_tolerance.figures.workspace.plot_workspace` for the usual figure
-        (figures sit above the analyses, so the caller passes it).
+        (figures sit above the analyses, so the caller passes it). The files are staged in a
+        sibling folder with a completion record (SHA-256 of each) and renamed into place
+        (:func:`~fault_tolerance.storage.result_folder.staged_folder`): a reader sees the previous
+        result or this one, never a mix. Finished chunks (``chunks-*/``) are kept.
         """
         folder = Path(folder)
-        folder.mkdir(parents=True, exist_ok=True)
         names = "xyz"[: len(self.axes)]
+        buf = io.BytesIO()
         np.savez_compressed(
-            folder / "workspace.npz",
+            buf,
             **{n: a for n, a in zip(names, self.axes, strict=True)},
             pre=self.pre,
             ftw=self.ftw,
@@ -111,9 +122,11 @@ class Workspace:
             jump=self.jump,
             rcn=self.rcn,
         )
-        (folder / "workspace.json").write_text(json.dumps(self.summary(), indent=2) + "\n")
-        if draw is not None:
-            draw(self, folder / "workspace.png")
+        with staged_folder(folder, replaceable=WORKSPACE_FILES, aside=CHUNKS) as tmp:
+            (tmp / "workspace.npz").write_bytes(buf.getvalue())
+            (tmp / "workspace.json").write_text(json.dumps(self.summary(), indent=2) + "\n")
+            if draw is not None:
+                draw(self, tmp / "workspace.png")
         return folder
 
 

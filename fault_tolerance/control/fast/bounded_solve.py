@@ -83,7 +83,8 @@ def workspace(n: int, m: int, sets: np.ndarray, cols: np.ndarray, mode: int):
     F = np.zeros(sum(sizes_f))
     Iw = np.zeros(_HEAD + len(_FLOAT) + len(_INT) + sum(sizes_i), dtype=np.int64)
     Iw[:6] = n, m, f, s, mode, k
-    views, o = {}, 0
+    views: dict[str, np.ndarray] = {}
+    o = 0
     for t, ((name, code), size) in enumerate(zip(_FLOAT, sizes_f, strict=True)):
         Iw[_HEAD + t] = o
         views[name] = F[o : o + size].reshape(shapes[code])
@@ -365,8 +366,15 @@ def reduced_solve(J, xdot, target, todo, post, scales, codes, F, Iw):  # pragma:
     return 0
 
 
-#: Modes of :func:`bounded_solve` by resolver name.
-SOLVE_MODES = {"lnva": 0, "jvja": 1, "mda": 2}
+def _solve_mode(name: str) -> int:
+    """The mode of :func:`bounded_solve` for resolver ``name`` (its entry's ``compiled``)."""
+    from fault_tolerance.errors import InvalidInput
+    from fault_tolerance.resolution.registry import get
+
+    mode = get(name).compiled
+    if mode not in (LNVA, JVJA, MDA):
+        raise InvalidInput(f"resolver '{name}' has no compiled bounded solve")
+    return mode
 
 
 def bounded_rates(name: str, J, xdot, sets, lo, hi, *, weights=None, unbounded=None, params=None):
@@ -394,12 +402,13 @@ def bounded_rates(name: str, J, xdot, sets, lo, hi, *, weights=None, unbounded=N
     table = -np.ones((len(sets), smax), dtype=np.int64)
     for k, S in enumerate(sets):
         table[k, : len(S)] = S
-    F, Iw, views = workspace(n, m, table, np.zeros(0, dtype=np.int64), SOLVE_MODES[name])
+    mode = _solve_mode(name)
+    F, Iw, views = workspace(n, m, table, np.zeros(0, dtype=np.int64), mode)
     w = np.ones(len(sets)) if weights is None else np.asarray(weights, dtype=float)
     views["wrel"][:] = w / w.sum()
     views["p3"][:] = [TRACE_MAX, PIVOT_TOL, RANK_RTOL**2] if params is None else params
     views["buf"][0], views["buf"][1] = lo, hi
     out = np.zeros(n) if unbounded is None else np.array(unbounded, dtype=float)
-    code = bounded_solve(J, np.ascontiguousarray(xdot, dtype=float), out, SOLVE_MODES[name], F, Iw)
+    code = bounded_solve(J, np.ascontiguousarray(xdot, dtype=float), out, mode, F, Iw)
     state = views["state"]
     return int(code), out, float(state[0]), state[2:] != 0.0, bool(state[1])

@@ -12,56 +12,68 @@ when it solves a bounded problem.
 from __future__ import annotations
 
 from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 import pinocchio as pin
 
-from fault_tolerance.errors import FaultToleranceError
+from fault_tolerance.control.workspace import BOUNDED_STEPS, FALLBACKS, ControllerWorkspace
+from fault_tolerance.errors import FaultToleranceError, InvalidInput
+from fault_tolerance.resolution.registry import KERNEL_JVJA, KERNEL_MDA, get
 
 _LWA = pin.LOCAL_WORLD_ALIGNED
 _F64 = np.dtype(np.float64)
-_MODES = {"lnva": 0, "jvja": 1, "mda": 2}
 _ERRORS = (ValueError, TypeError, RuntimeError, AttributeError, IndexError)
 
 
-def _workspace(ctrl):
-    """One float workspace per controller (its three steps share the scratch and the state)."""
+def bounded_tables(cw: ControllerWorkspace) -> tuple[tuple, np.ndarray]:
+    """``((F, Iw, views), state)``: the compiled bounded steps' workspace of ``cw``, and its state.
+
+    One per controller (its three steps share the scratch and the state); the Controller builds
+    it with its workspace (:attr:`ControllerWorkspace.box_tables`, ``box_state``).
+    """
     from fault_tolerance.control.fast.bounded_solve import workspace
     from fault_tolerance.control.lapack_steps import TRACE_MAX
 
-    if getattr(ctrl, "_box_ws", None) is None:
-        sc, n = ctrl.scenarios, ctrl.n
-        smax = max(len(S) for S in sc.sets)
-        sets = -np.ones((sc.f, smax), dtype=np.int64)
-        for k, S in enumerate(sc.sets):
-            sets[k, : len(S)] = S
-        cols = sc.columns if ctrl._singletons else np.zeros(0, dtype=np.int64)
-        F, Iw, views = workspace(n, ctrl.m, sets, cols, 0)
-        views["fw"][:] = ctrl._fw
-        views["p4"][:] = TRACE_MAX, ctrl._pivot_threshold, ctrl._rank_coef, ctrl._alpha
-        views["p3"][:] = TRACE_MAX, ctrl._pivot_threshold, ctrl._rank_coef
-        views["wrel"][:] = sc.weights / sc.weights.sum()
-        views["state"][:] = ctrl._box_state
-        ctrl._box_state = views["state"]  # last_scale / last_active read it
-        ctrl._box_ws = (F, Iw, views)
-    return ctrl._box_ws
+    sc, n = cw.scenarios, cw.n
+    smax = max(len(S) for S in sc.sets)
+    sets = -np.ones((sc.f, smax), dtype=np.int64)
+    for k, S in enumerate(sc.sets):
+        sets[k, : len(S)] = S
+    cols = sc.columns if cw.singletons else np.zeros(0, dtype=np.int64)
+    F, Iw, views = workspace(n, cw.m, sets, cols, 0)
+    views["fw"][:] = cw.fw
+    views["p4"][:] = TRACE_MAX, cw.pivot_threshold, cw.rank_coef, cw.alpha
+    views["p3"][:] = TRACE_MAX, cw.pivot_threshold, cw.rank_coef
+    views["wrel"][:] = sc.weights / sc.weights.sum()
+    views["state"][:] = cw.box_state
+    return (F, Iw, views), views["state"]  # last_scale / last_active read the state
 
 
-def compiled_bounded_step(ctrl, name: str, inner: Callable, reference: Callable, lim, prm):
+def compiled_bounded_step(
+    cw: ControllerWorkspace, name: str, inner: Callable, reference: Callable, lim, prm
+):
     """``step(q, xdot, out=None)`` of method ``name`` inside the box, compiled (see module doc).
 
-    ``inner`` is the unbounded fast step, ``reference`` the reference route (same signature);
+    ``cw.box_tables`` holds the kernel's workspace (:func:`bounded_tables`); ``inner`` is the unbounded fast step, ``reference`` the reference route (same signature);
     ``lim`` (3, n) the position and velocity limits, ``prm = [1/h, alpha]``.
     """
     from fault_tolerance.control.fast.bounded_solve import JVJA_MULTI, bounded_kernel
 
-    F, I0, views = _workspace(ctrl)
+    if cw.box_tables is None:
+        raise InvalidInput(
+            "the compiled bounded step needs a workspace built with limits=True and the numba "
+            "backend (ControllerWorkspace.box_tables)"
+        )
+    F, I0, views = cw.box_tables
     views["lim"][:] = lim
     views["prm"][:] = prm
     Iw = I0.copy()  # its own mode; the int scratch of the copy is its own too
-    Iw[4] = JVJA_MULTI if (name == "jvja" and not ctrl._singletons) else _MODES[name]
-    n, m = ctrl.n, ctrl.m
-    model, data, fid, rows = ctrl.model, ctrl.data, ctrl.frame_id, ctrl._rows
+    mode = get(name).compiled  # the kernel mode of this built-in
+    Iw[4] = JVJA_MULTI if (mode == KERNEL_JVJA and not cw.singletons) else mode
+    n, m = cw.n, cw.m
+    counts = cw.counts
+    model, data, fid, rows = cw.model, cw.data, cw.frame_id, cw.rows
     cfj, empty, ndarray = pin.computeFrameJacobian, np.empty, np.ndarray
     # Compile for this arm's Jacobian layout (here, not in the loop), then freeze the dispatcher
     # (as the unbounded step does): an argument of another type or layout raises TypeError (then
@@ -82,8 +94,8 @@ def compiled_bounded_step(ctrl, name: str, inner: Callable, reference: Callable,
             pass
         return reference(q, xdot, out)  # converts, or says what is wrong
 
-    if name == "mda":
-        return _mda_step(ctrl, inner, reference, F, Iw)
+    if mode == KERNEL_MDA:
+        return _mda_step(cw, inner, reference, F, Iw)
 
     def step(q: np.ndarray, xdot: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
         if out is None:
@@ -95,7 +107,7 @@ def compiled_bounded_step(ctrl, name: str, inner: Callable, reference: Callable,
         except _ERRORS:
             return retry(q, xdot, out)
         if status == 1:
-            ctrl.bounded_steps += 1
+            counts[BOUNDED_STEPS] += 1
         elif status:
             return reference(q, xdot, out)
         return out
@@ -105,23 +117,28 @@ def compiled_bounded_step(ctrl, name: str, inner: Callable, reference: Callable,
     return step
 
 
-def _mda_step(ctrl, inner: Callable, reference: Callable, F, Iw) -> Callable:
-    """MDA: its unbounded rates by ``inner`` (LAPACK), then the compiled box check and solve."""
+def _mda_step(cw: ControllerWorkspace, inner: Callable, reference: Any, F, Iw) -> Callable:
+    """MDA: its unbounded rates by ``inner`` (LAPACK), then the compiled box check and solve.
+
+    ``reference`` is the reference step, carrying ``slow`` and ``finish`` as attributes.
+    """
     from fault_tolerance.control.fast.bounded_solve import bounded_kernel
+    from fault_tolerance.control.indices import jacobian
 
     slow, finish = reference.slow, reference.finish
+    counts = cw.counts
 
     def mda(q: np.ndarray, xdot: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
-        before = ctrl.fallbacks
+        before = counts[FALLBACKS]
         out = inner(q, xdot, out)
-        if ctrl.fallbacks != before:  # the planner's damped rates: the reference route
+        if counts[FALLBACKS] != before:  # the planner's damped rates: the reference route
             return finish(q, np.asarray(xdot, dtype=float), out)
         try:
-            status = bounded_kernel(ctrl.jacobian(q), q, xdot, out, F, Iw)
+            status = bounded_kernel(jacobian(cw, q), q, xdot, out, F, Iw)
         except _ERRORS:  # other types or layouts
             return finish(q, np.asarray(xdot, dtype=float), out)
         if status == 1:
-            ctrl.bounded_steps += 1
+            counts[BOUNDED_STEPS] += 1
         elif status:
             return slow(q, xdot, out)  # out still holds the unbounded rates
         return out

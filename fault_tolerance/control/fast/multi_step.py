@@ -13,11 +13,14 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
+from functools import partial
 
 import numpy as np
 import pinocchio as pin
 
+from fault_tolerance.control.fallback import bad_call as _bad_call
 from fault_tolerance.control.fast.step import _factor, _trace_inverse, refusal_route
+from fault_tolerance.control.workspace import ControllerWorkspace
 from fault_tolerance.numerics.fast.dense import (
     chol_solve,
     cholesky,
@@ -140,22 +143,22 @@ def _minus_null(Y, G, c, out) -> int:  # pragma: no cover - numba
     return 0 if total < math.inf else 1
 
 
-def compiled_multi_step(ctrl) -> Callable[..., np.ndarray]:
-    """The compiled JVJA step of a controller whose scenarios may lock several joints."""
+def compiled_multi_step(cw: ControllerWorkspace) -> Callable[..., np.ndarray]:
+    """The compiled JVJA step of a Controller (its workspace ``cw``), scenarios of any size."""
     from fault_tolerance.control.lapack_steps import TRACE_MAX
 
-    model, data, fid, rows = ctrl.model, ctrl.data, ctrl.frame_id, ctrl._rows
-    n, m, sc = ctrl.n, ctrl.m, ctrl.scenarios
+    model, data, fid, rows = cw.model, cw.data, cw.frame_id, cw.rows
+    n, m, sc = cw.n, cw.m, cw.scenarios
     smax = max(len(S) for S in sc.sets)
     sets = -np.ones((sc.f, smax), dtype=np.int64)
     for k, S in enumerate(sc.sets):
         sets[k, : len(S)] = S
     w = sc.weights / sc.weights.max()  # scale-free; the sum cannot overflow
     wrel = np.ascontiguousarray(w / w.sum())
-    params = np.array([TRACE_MAX, ctrl._pivot_threshold, ctrl._rank_coef])
+    params = np.array([TRACE_MAX, cw.pivot_threshold, cw.rank_coef])
     ws = np.zeros(m * m + m * n + n + 2 * smax * smax + 2 * smax)
     cfj, ndarray = pin.computeFrameJacobian, np.ndarray
-    bad_call = ctrl._bad_call
+    bad_call = partial(_bad_call, cw)
     multi_kernel(np.zeros((m, n)), np.zeros(m), np.zeros(n), ws, sets, wrel, params)  # compile
 
     def slow(q, xdot, out, err):
@@ -165,7 +168,7 @@ def compiled_multi_step(ctrl) -> Callable[..., np.ndarray]:
                 return jvja(q, np.ascontiguousarray(x2), out)
         raise bad_call(err, q, xdot, out) from err
 
-    refused = refusal_route(ctrl, "jvja", slow)
+    refused = refusal_route(cw, "jvja", slow)
 
     def jvja(q: np.ndarray, xdot: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
         """JVJA, minimum square-sum jump rates, eq. (5) (G1, any scenarios); compiled."""

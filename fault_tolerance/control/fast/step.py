@@ -4,7 +4,8 @@
 ``G = J Jᵀ`` with the certificate ``trace(G⁻¹) ≤ TRACE_MAX`` (``σ_min(J) ≥ SIGMA_EPS``), then
 LNVA ``a = Jᵀ G⁻¹ ẋ``, or JVJA in closed form (G2) with ``Y = L⁻¹J``: ``a = Yᵀ(L⁻¹ẋ)``,
 ``N_ii = 1 − ‖Y_i‖²``, ``N c = c − Yᵀ(Y c)``, N never formed (O(m² n), linear in n).
-:func:`compiled_step` builds a :class:`~fault_tolerance.control.controller.Controller`'s step around it,
+:func:`compiled_step` builds a :class:`~fault_tolerance.control.controller.Controller`'s step around it (from its
+:class:`~fault_tolerance.control.workspace.ControllerWorkspace`),
 with all of its tables in one 2-d float workspace, taken apart by row slices, not reshapes
 (:func:`packed_step_kernel`: the fixed cost of a call is the Jacobian, the kernel and the dispatch
 of five arguments). ``Y`` and the pivots are built row by row along the rows of Pinocchio's
@@ -18,11 +19,16 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
+from functools import partial
+from typing import Any
 
 import numpy as np
 import pinocchio as pin
 
-from fault_tolerance.control.lapack_steps import _LWA, _STEP_ERRORS, F64, TRACE_MAX, Workspace
+from fault_tolerance.control.fallback import bad_call as _bad_call
+from fault_tolerance.control.fallback import fallback as _fallback
+from fault_tolerance.control.lapack_steps import _LWA, _STEP_ERRORS, F64, TRACE_MAX
+from fault_tolerance.control.workspace import ControllerWorkspace
 from fault_tolerance.errors import FaultToleranceError
 from fault_tolerance.numerics.fast.dense import (
     forward,
@@ -173,18 +179,18 @@ def _views(ws, m, n):  # pragma: no cover - numba
     return ws[0, :N_PARAMS], ws[1:3], ws[4 + m : 4 + 2 * m, :m], ws[3 : 3 + m], ws[3 + m]
 
 
-def workspace(ctrl: Workspace) -> tuple[np.ndarray, tuple]:
-    """The workspace of ``ctrl``'s compiled step and its views ``(params, fw, G, B, c)``.
+def workspace(cw: ControllerWorkspace) -> tuple[np.ndarray, tuple]:
+    """The workspace of ``cw``'s compiled step and its views ``(params, fw, G, B, c)``.
 
     Laid out as :func:`packed_step_kernel` reads it; the views returned here are exactly
     ``(4,), (2, n), (m, m), (m, n), (n,)``.
     """
-    m, n = ctrl.m, ctrl.n
+    m, n = cw.m, cw.n
     ws = np.zeros(workspace_shape.py_func(m, n))
     params, fw, G, B, c = _views.py_func(ws, m, n)
     views = params, fw[:, :n], G, B[:, :n], c[:n]
-    params[:] = TRACE_MAX, ctrl._pivot_threshold, ctrl._rank_coef, ctrl._alpha
-    views[1][:] = ctrl._fw
+    params[:] = TRACE_MAX, cw.pivot_threshold, cw.rank_coef, cw.alpha
+    views[1][:] = cw.fw
     return ws, views
 
 
@@ -229,8 +235,10 @@ def floor_kernel(J, xdot, out, G, y):  # pragma: no cover - numba
 _COMPILED: dict[str, Callable] = {}
 
 
-def compiled_kernel(name: str = "step") -> Callable:
+def compiled_kernel(name: str = "step") -> Any:
     """:func:`step_kernel` compiled by numba, once (also ``"packed"`` and ``"floor"``).
+
+    The result is a numba dispatcher (untyped: it has ``disable_compile`` besides ``__call__``).
 
     ``"packed"``: :func:`packed_step_kernel`; ``"floor"``: :func:`floor_kernel`.
 
@@ -248,21 +256,21 @@ def compiled_kernel(name: str = "step") -> Callable:
     return _COMPILED[name]
 
 
-def compiled_step(ctrl: Workspace, jvja: int) -> Callable[..., np.ndarray]:
-    """The LNVA (``jvja=0``) or single-joint JVJA (``jvja=1``) step of ``ctrl``, numba-compiled.
+def compiled_step(cw: ControllerWorkspace, jvja: int) -> Callable[..., np.ndarray]:
+    """The LNVA (``jvja=0``) or single-joint JVJA (``jvja=1``) step of ``cw``, numba-compiled.
 
     Compiles :func:`step_kernel` on first use (here, not in the loop) and runs it once.
     """
-    model, data, fid, rows = ctrl.model, ctrl.data, ctrl.frame_id, ctrl._rows
-    n, m = ctrl.n, ctrl.m
+    model, data, fid, rows = cw.model, cw.data, cw.frame_id, cw.rows
+    n, m = cw.n, cw.m
     kernel = compiled_kernel("packed")
     cfj, empty, ndarray = pin.computeFrameJacobian, np.empty, np.ndarray
-    ws, (_, _, _, B, c) = workspace(ctrl)
+    ws, (_, _, _, B, c) = workspace(cw)
     shape_n, shape_m = (n,), (m,)
-    bad_call = ctrl._bad_call
+    bad_call = partial(_bad_call, cw)
     name = "jvja" if jvja else "lnva"
     if jvja:  # N = I - YᵀY with Y = L⁻¹J in B, for the bounded step's box check (boxstep)
-        ctrl._jvja_ws[0], ctrl._jvja_ws[1], ctrl._jvja_ws[2] = B, B, c
+        cw.jvja_factors[0], cw.jvja_factors[1], cw.jvja_factors[2] = B, B, c
     # Compile for this arm's Jacobian layout (here, not in the loop), then freeze the dispatcher:
     # an argument of another type or layout raises TypeError (then `slow`) instead of compiling,
     # so the step needs no type checks of its own.
@@ -282,7 +290,7 @@ def compiled_step(ctrl: Workspace, jvja: int) -> Callable[..., np.ndarray]:
                     return step(q, x2, out)
         raise bad_call(err, q, xdot, out) from err
 
-    refused = refusal_route(ctrl, name, slow)
+    refused = refusal_route(cw, name, slow)
 
     def step(q: np.ndarray, xdot: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
         if out is None:
@@ -306,16 +314,16 @@ def compiled_step(ctrl: Workspace, jvja: int) -> Callable[..., np.ndarray]:
     return step
 
 
-def refusal_route(ctrl, name: str, slow: Callable) -> Callable[..., np.ndarray]:
-    """``route(status, q, xdot, out)``: what a compiled step of ``ctrl`` does with a refused call.
+def refusal_route(cw: ControllerWorkspace, name: str, slow: Callable) -> Callable[..., np.ndarray]:
+    """``route(status, q, xdot, out)``: what a compiled step of ``cw`` does with a refused call.
 
     Status 3 (sizes) goes to ``slow``; 1 (no certificate) and 2 (a pivot below the threshold) to
     the planner's step, after the tolerability check that names the joints (``tolerate=False``).
     Shared by the single- and multi-joint steps.
     """
-    model, data, fid, rows = ctrl.model, ctrl.data, ctrl.frame_id, ctrl._rows
-    cfj, fallback, tolerate = pin.computeFrameJacobian, ctrl._fallback, ctrl.tolerate
-    check_tolerable = ctrl.scenarios.check_tolerable
+    model, data, fid, rows = cw.model, cw.data, cw.frame_id, cw.rows
+    cfj, fallback, tolerate = pin.computeFrameJacobian, partial(_fallback, cw), cw.tolerate
+    check_tolerable = cw.scenarios.check_tolerable
 
     def route(status: int, q, xdot, out) -> np.ndarray:
         if status == 3:

@@ -7,6 +7,7 @@ turned into :class:`~.errors.URDFError` here, at the boundary.
 
 from __future__ import annotations
 
+import os
 import warnings
 from collections.abc import Mapping, Sequence
 from pathlib import Path
@@ -49,23 +50,49 @@ def read_description(
     Undeclared namespace prefixes and xacro's notices give one warning each.
     """
     path = Path(path)
-    if is_xacro(path):
-        if not path.is_file():
-            raise URDFError(f"{path}: no such xacro file")
-        data, notices = expand_xacro(path, package_dirs, xacro_args)
-        for note in dict.fromkeys(notices):
-            warnings.warn(f"{path}: xacro: {note}", stacklevel=3)
-        desc = read_urdf(path, data)
-    else:
-        if xacro_args:
-            raise URDFError(
-                f"{path}: xacro arguments {sorted(xacro_args)} given for a file that is not a "
-                "xacro file (.xacro, .urdf.xacro)"
-            )
-        desc = read_urdf(path)
+    read = read_xacro_file if is_xacro(path) else read_urdf_file
+    return read(path, package_dirs, xacro_args)
+
+
+def read_urdf_file(
+    path: Path,
+    package_dirs: Sequence[str] | None = None,
+    xacro_args: Mapping[str, str] | None = None,
+) -> URDFDescription:
+    """The checked description of a URDF file (the ``urdf`` format's reader)."""
+    path = Path(path)
+    if xacro_args:
+        raise URDFError(
+            f"{path}: xacro arguments {sorted(xacro_args)} given for a file that is not a "
+            "xacro file (.xacro, .urdf.xacro)"
+        )
+    return _with_prefix_notice(read_urdf(path))
+
+
+def read_xacro_file(
+    path: Path,
+    package_dirs: Sequence[str] | None = None,
+    xacro_args: Mapping[str, str] | None = None,
+) -> URDFDescription:
+    """The checked URDF a xacro file expands to (the ``xacro`` format's reader)."""
+    path = Path(path)
+    if not path.is_file():
+        raise URDFError(f"{path}: no such xacro file")
+    data, notices = expand_xacro(path, package_dirs, xacro_args)
+    for note in dict.fromkeys(notices):
+        warnings.warn(f"{path}: xacro: {note}", stacklevel=4)
+    return _with_prefix_notice(read_urdf(path, data))
+
+
+def _with_prefix_notice(desc: URDFDescription) -> URDFDescription:
     if desc.prefixes:
-        warnings.warn(prefix_notice(str(path), desc.prefixes), stacklevel=3)
+        warnings.warn(prefix_notice(str(desc.path), desc.prefixes), stacklevel=5)
     return desc
+
+
+def urdf_from_text(label: Path, data: bytes) -> URDFDescription:
+    """The description of a stored URDF text (an arm record), checked again like a file."""
+    return read_urdf(label, data)
 
 
 def build_model(desc: URDFDescription) -> pin.Model:
@@ -171,3 +198,60 @@ def _drop(root, which) -> list[str]:
             out.append(_mesh_of(visual) or "?")
             visual.getparent().remove(visual)
     return out
+
+
+def confined_visuals(
+    model: pin.Model, desc: URDFDescription, roots: Sequence[Path]
+) -> tuple[pin.GeometryModel | None, list[str]]:
+    """Visuals of a stored URDF text whose meshes are opened only inside ``roots``.
+
+    Returns the geometry and the refused mesh names with the reason (:func:`confine_meshes`).
+    """
+    xml, dropped = confine_meshes(desc.xml, roots)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # a mesh that fails to load: drawn without visuals
+        visual = build_visuals(model, desc._replace(xml=xml), [])
+    return visual, dropped
+
+
+def confine_meshes(xml: str, roots: Sequence[Path]) -> tuple[str, list[str]]:
+    """``xml`` with each mesh name resolved inside ``roots``, or its ``<visual>`` dropped.
+
+    A ``<mesh filename="package://PKG/REST">`` is replaced by the real path of ``ROOT/PKG/REST``
+    (or of ``ROOT/REST`` when ``ROOT`` is the package folder ``PKG`` itself) for the first root where
+    that is a file inside ``ROOT`` after links are followed. Returns the new XML and a list saying
+    which names were refused and why. ``<collision>`` elements are removed (never drawn).
+    """
+    root = _parse_safely(Path("carried URDF"), xml.encode("utf-8"))
+    real_roots = [Path(os.path.realpath(r)) for r in roots if Path(r).is_dir()]
+    dropped: list[str] = []
+    for link in root.findall("link"):
+        for col in link.findall("collision"):
+            link.remove(col)
+        for vis in link.findall("visual"):
+            for mesh in vis.iter("mesh"):
+                name = mesh.get("filename") or ""
+                found, why = _resolve_mesh(name, real_roots)
+                if found is None:
+                    dropped.append(f"{name[:80]!r}: {why}")
+                    link.remove(vis)
+                    break
+                mesh.set("filename", str(found))
+    return etree.tostring(root, encoding="unicode"), dropped
+
+
+def _resolve_mesh(name: str, roots: Sequence[Path]) -> tuple[Path | None, str]:
+    prefix = "package://"
+    if not name.startswith(prefix):
+        return None, "not a package:// name"
+    rel = name[len(prefix) :]
+    parts = rel.split("/")
+    if not rel or "\\" in rel or "\x00" in rel or any(p in ("", ".", "..") for p in parts):
+        return None, "'..', '.', empty or backslash components are not allowed"
+    for real in roots:
+        tails = [parts] + ([parts[1:]] if real.name == parts[0] and len(parts) > 1 else [])
+        for tail in tails:
+            candidate = Path(os.path.realpath(real.joinpath(*tail)))
+            if candidate.is_file() and candidate.is_relative_to(real):
+                return candidate, ""
+    return None, "not found inside the package folders given"

@@ -172,12 +172,13 @@ class _JointTree:
 
 def _joint_ends(where: str, joint, name: str, links: list[str], link_set: set) -> tuple[str, str]:
     """The parent and child links of a joint, both links of the file."""
-    ends = {}
+    ends: dict[str, str] = {}
     for end in ("parent", "child"):
         el = joint.find(end)
-        ends[end] = None if el is None else el.get("link")
-        if not ends[end]:
+        link = None if el is None else el.get("link")
+        if not link:
             raise URDFError(f"{where}: joint '{name}' has no <{end} link=\"...\"/>")
+        ends[end] = link
         if ends[end] not in link_set:
             raise URDFError(
                 f"{where}: joint '{name}' names {end} link '{ends[end]}', which is "
@@ -254,7 +255,7 @@ def _check_limit(where: str, name: str, jtype: str, limit) -> None:
 
 def _check_reachable(where, root_link, links, parent_of, root) -> None:
     """Every link hangs from the root (no cycle detached from the tree)."""
-    child_of = {}
+    child_of: dict[str, list[str]] = {}
     for joint in root.findall("joint"):
         child_of.setdefault(joint.find("parent").get("link"), []).append(
             joint.find("child").get("link")

@@ -6,9 +6,11 @@ include ``$(find pkg)/urdf/...``. Both resolve here through the package folders 
 package ``pkg`` if ``DIR/pkg`` is a folder or if ``DIR/package.xml`` names ``pkg``.
 
 xacro files (``.xacro``, ``.urdf.xacro``) are expanded with the ``xacro`` package from PyPI,
-imported only for them. Every file xacro reads passes the same byte checks as a URDF (size,
-UTF-8, no DTD or entities), and the expanded text then goes through :func:`~.urdf.read_urdf`
-like any URDF. xacro's own errors become :class:`~.errors.URDFError` naming the missing package
+imported only for them, patched by :mod:`.xacro_eval` for the expansion: ``${...}`` goes through
+a whitelist evaluator instead of ``eval``, xacro reads only regular files inside the package
+folders and the file's own folder, and the expansion is bounded in time and size. Every file
+xacro reads passes the same byte checks as a URDF (size, UTF-8, no DTD or entities), and the
+expanded text then goes through :func:`~.urdf.read_urdf` like any URDF. xacro's own errors become :class:`~.errors.URDFError` naming the missing package
 or argument; no xacro traceback reaches the user.
 
 Example:
@@ -30,7 +32,13 @@ from collections.abc import Iterator, Mapping, Sequence
 from functools import lru_cache
 from pathlib import Path
 
-from fault_tolerance.errors import InvalidInput, PackageNotFound, URDFError
+from fault_tolerance.errors import (
+    FaultToleranceError,
+    InvalidInput,
+    PackageNotFound,
+    UnsafeDescription,
+    URDFError,
+)
 
 #: What ``package_dirs`` may be: one folder or several.
 PackageDirs = Sequence[str | os.PathLike] | None
@@ -98,7 +106,12 @@ def expand_xacro(
 ) -> tuple[bytes, list[str]]:
     """The URDF text of a xacro file, and the notices xacro printed.
 
+    Expressions go through :mod:`.xacro_eval`'s whitelist evaluator, files are read only inside
+    the package folders and the file's own folder, and the expansion is bounded (see
+    docs/xacro.md).
+
     Raises:
+        UnsafeDescription: an expression, a read or the size of the expansion is refused.
         URDFError: xacro is not installed, a package or argument is missing, a file it reads is
             refused by the URDF byte checks, or the xacro is malformed.
     """
@@ -109,23 +122,39 @@ def expand_xacro(
         raise URDFError(
             f"{path}: reading xacro files needs the 'xacro' package (pip install xacro)"
         ) from err
+    from fault_tolerance.model.formats import xacro_eval
+
     args = {str(k): str(v) for k, v in (xacro_args or {}).items()}
     notices: list[str] = []
-    with _XACRO_LOCK, _patched(xacro, package_dirs, notices), _quiet() as said:
+    top = path.absolute()
+    roots = [str(top.parent), *(str(Path(d).expanduser().absolute()) for d in package_dirs or [])]
+    with (
+        _XACRO_LOCK,
+        _patched(xacro, package_dirs, notices),
+        xacro_eval.confined(xacro, top, roots, check_xml=_xml_checker(notices)),
+        _quiet() as said,
+    ):
         try:
-            doc = xacro.process_file(str(path.absolute()), mappings=args)
+            doc = xacro.process_file(str(top), mappings=args)
             text = doc.toxml()
         except URDFError:
             raise
+        except RecursionError:
+            raise UnsafeDescription(f"{path}: nested too deeply to expand") from None
         except Exception as err:  # xacro raises many kinds; none may reach the user raw
             raise _xacro_error(path, err, args) from None
         finally:
             xacro.substitution_args_context["arg"] = {}
+    if len(text) > xacro_eval.MAX_OUTPUT_CHARS:
+        raise UnsafeDescription(
+            f"{path}: the expansion is {len(text)} characters, more than the "
+            f"{xacro_eval.MAX_OUTPUT_CHARS} allowed (MAX_OUTPUT_CHARS)"
+        )
     notices += [s for s in said.getvalue().splitlines() if s.strip()]
     return text.encode("utf-8"), notices
 
 
-def declared_xacro_args(path: Path) -> list[str]:
+def declared_xacro_args(path: Path) -> list[bytes]:
     """Names of the ``<xacro:arg name=...>`` of a file (for error messages)."""
     with contextlib.suppress(OSError):
         return re.findall(rb'<xacro:arg\s+name="([^"]+)"', path.read_bytes()[:2_000_000])
@@ -148,8 +177,13 @@ def _xacro_error(path: Path, err: Exception, args: Mapping[str, str]) -> URDFErr
             + (f"; the file declares {declared}" if declared else "")
             + (f"; given {sorted(args)}" if args else "")
         )
-    if isinstance(inner, PackageNotFound):
-        return inner
+    cause: BaseException | None = err
+    for _ in range(20):  # a toolkit error (missing package, refusal) that xacro wrapped
+        if cause is None or isinstance(cause, FaultToleranceError):
+            break
+        cause = getattr(cause, "exc", None)
+    if isinstance(cause, FaultToleranceError):
+        return cause if isinstance(cause, URDFError) else URDFError(f"{path}: {cause}")
     reason = " ".join(str(err).split()) or type(err).__name__
     return URDFError(f"{path}: xacro could not expand it: {reason}")
 
@@ -162,39 +196,35 @@ def _quiet() -> Iterator[io.StringIO]:
         yield buf
 
 
-@contextlib.contextmanager
-def _patched(xacro, package_dirs: PackageDirs, notices: list[str]) -> Iterator[None]:
-    """Xacro with ``$(find)`` from our package folders, checked file reads and collected warnings."""
+def _xml_checker(notices: list[str]):
+    """The byte checks of every XML file xacro reads; undeclared prefixes become one notice."""
     from fault_tolerance.model.formats.xml_safety import check_bytes, prefix_notice
 
+    def check(data: bytes, where: str) -> bytes:
+        data, prefixes = check_bytes(data, where, require_robot=False)
+        if prefixes:
+            notices.append(prefix_notice(where, prefixes))
+        return data
+
+    return check
+
+
+@contextlib.contextmanager
+def _patched(xacro, package_dirs: PackageDirs, notices: list[str]) -> Iterator[None]:
+    """Xacro with ``$(find)`` from our package folders and its warnings collected."""
     subst = xacro.substitution_args
-    saved = (subst._eval_find, subst._eval_dict["find"], xacro.parse, xacro.warning)
-    original_parse = xacro.parse
+    saved = (subst._eval_find, subst._eval_dict["find"], xacro.warning)
 
     def find(package: str) -> str:
         return str(find_package(package, package_dirs, "xacro $(find)"))
-
-    def parse(inp, filename=None):
-        if inp is None:  # xacro opens a file (the top one or an include): check its bytes first
-            file = Path(os.path.join(xacro.root_dir, filename))
-            try:
-                data = file.read_bytes()
-            except OSError as err:
-                xacro.filestack.pop()
-                raise xacro.XacroException(f"{err.strerror}: {file}", exc=err) from None
-            data, prefixes = check_bytes(data, str(file), require_robot=False)
-            if prefixes:
-                notices.append(prefix_notice(str(file), prefixes))
-            inp = data.decode("utf-8")
-        return original_parse(inp, filename)
 
     def warning(*parts, **_):
         notices.append(" ".join(str(p) for p in parts))
 
     subst._eval_find = find
     subst._eval_dict["find"] = find
-    xacro.parse, xacro.warning = parse, warning
+    xacro.warning = warning
     try:
         yield
     finally:
-        subst._eval_find, subst._eval_dict["find"], xacro.parse, xacro.warning = saved
+        subst._eval_find, subst._eval_dict["find"], xacro.warning = saved

@@ -22,7 +22,7 @@ import re
 from collections.abc import Sequence
 from pathlib import Path
 
-from fault_tolerance.errors import URDFError
+from fault_tolerance.errors import DescriptionError, URDFError
 
 #: Largest URDF file accepted [bytes]; real robot descriptions are far smaller.
 MAX_URDF_BYTES = 20 * 1024 * 1024
@@ -62,39 +62,53 @@ def _checked(path: Path, data: bytes | None = None):
 
 
 def check_bytes(
-    data: bytes, where: str, *, require_robot: bool = True
+    data: bytes,
+    where: str,
+    *,
+    require_robot: bool = True,
+    root_tag: str = "robot",
+    kind: str = "URDF",
+    error: type[DescriptionError] = URDFError,
 ) -> tuple[bytes, tuple[str, ...]]:
     """Safety checks of XML bytes (size, UTF-8, no DTD/entities, well-formed).
 
     Returns the bytes, with a declaration added for each namespace prefix the text uses but never
     declares (Gazebo/ROS extensions such as ``<gazebo:plugin>``; URDF readers ignore those
-    elements), and the prefixes so declared. ``where`` names the source in errors.
+    elements), and the prefixes so declared. ``where`` names the source in errors; the root
+    element must be ``<root_tag>`` unless ``require_robot`` is false. ``kind`` names the format
+    in messages and ``error`` is the error raised (an MJCF file: ``root_tag="mujoco"``,
+    ``kind="MJCF file"``, ``error=MJCFError``).
     """
-    data, prefixes, root = _checked_bytes(data, where)
-    if require_robot and root.tag != "robot":
-        raise URDFError(f"{where}: the root element is <{root.tag}>, a URDF needs <robot>")
+    data, prefixes, root = _checked_bytes(data, where, kind, error)
+    if require_robot and root.tag != root_tag:
+        raise error(f"{where}: the root element is <{root.tag}>, a {kind} needs <{root_tag}>")
     return data, prefixes
 
 
-def _checked_bytes(data: bytes, where: str):
+def _checked_bytes(
+    data: bytes, where: str, kind: str = "URDF", error: type[DescriptionError] = URDFError
+):
     if len(data) > MAX_URDF_BYTES:
-        raise URDFError(
-            f"{where}: {len(data)} bytes is larger than the {MAX_URDF_BYTES} bytes allowed"
-        )
+        raise error(f"{where}: {len(data)} bytes is larger than the {MAX_URDF_BYTES} bytes allowed")
     if data.startswith(_BOMS) or b"\x00" in data:
-        raise URDFError(f"{where}: not UTF-8 text (UTF-16/32 or binary); a URDF must be UTF-8")
+        raise error(f"{where}: not UTF-8 text (UTF-16/32 or binary); a {kind} must be UTF-8")
     try:
         data.decode("utf-8")
     except UnicodeDecodeError as err:
-        raise URDFError(
-            f"{where}: not UTF-8 text (invalid byte at offset {err.start}); a URDF must be UTF-8"
+        raise error(
+            f"{where}: not UTF-8 text (invalid byte at offset {err.start}); a {kind} must be UTF-8"
         ) from None
     if _DTD.search(data):
-        raise URDFError(_DTD_MESSAGE.format(path=where))
-    data, prefixes, root = _parse_declaring_prefixes(where, data)
+        raise error(_DTD_MESSAGE.format(path=where, kind=kind))
+    try:
+        data, prefixes, root = _parse_declaring_prefixes(where, data)
+    except URDFError as err:
+        if error is URDFError:
+            raise
+        raise error(str(err)) from err.__cause__
     docinfo = root.getroottree().docinfo
     if docinfo.doctype or docinfo.internalDTD is not None or docinfo.externalDTD is not None:
-        raise URDFError(_DTD_MESSAGE.format(path=where))
+        raise error(_DTD_MESSAGE.format(path=where, kind=kind))
     return data, prefixes, root
 
 
@@ -126,6 +140,16 @@ def _parse_declaring_prefixes(where: str, data: bytes):
         return data, tuple(prefixes), _parse_safely(where, data)
 
 
+_HEAD_COMMENT = re.compile(rb"<!--.*?(?:-->|$)", re.S)
+_HEAD_ROOT = re.compile(rb"<(?![?!])([A-Za-z_][\w.:-]*)")
+
+
+def root_tag_of(head: bytes) -> str | None:
+    """The name of the first element in the first bytes of an XML file (comments skipped), or None."""
+    match = _HEAD_ROOT.search(_HEAD_COMMENT.sub(b"", head))
+    return None if match is None else match.group(1).decode("utf-8", "replace")
+
+
 def prefix_notice(where: str, prefixes: Sequence[str]) -> str:
     """The one warning for undeclared namespace prefixes."""
     return (
@@ -136,7 +160,7 @@ def prefix_notice(where: str, prefixes: Sequence[str]) -> str:
 
 _DTD_MESSAGE = (
     "{path}: document type declarations and entities (<!DOCTYPE>, <!ENTITY>) are not allowed in a "
-    "URDF; they are refused to rule out entity expansion and external entities"
+    "{kind}; they are refused to rule out entity expansion and external entities"
 )
 
 

@@ -18,11 +18,11 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from fault_tolerance.errors import InvalidInput
+from fault_tolerance.numerics.linalg import projection
 from fault_tolerance.planning.wholepath.problem import (
     PathProblem,
     kinematics,
     post_rates,
-    projections,
     reduced_condition_numbers,
 )
 
@@ -47,7 +47,7 @@ def solve_banded(
         raise InvalidInput(f"objective {objective!r} is not one of ['mean', 'max']")
     S = len(costs)
     V = np.zeros(int(max(targets[-1].max(initial=-1) + 1, 1)) if S else 1)
-    best: list[np.ndarray] = [None] * S  # type: ignore[list-item]
+    best: list[np.ndarray] = [np.empty(0, dtype=np.intp)] * S  # every stage set below
     for s in range(S - 1, -1, -1):
         tgt = targets[s]
         nxt = np.where(tgt >= 0, V[np.maximum(tgt, 0)], np.inf)
@@ -113,7 +113,7 @@ def _correct(prob: PathProblem, Q: np.ndarray, ks: np.ndarray, iters: int = 2) -
     """A few Newton steps back onto ``x(q) = x_des[k]`` (range-space moves only)."""
     for _ in range(iters):
         J, E = kinematics(prob, Q, ks)
-        Q = Q + np.einsum("bnm,bm->bn", projections(J).Jpinv, E)
+        Q = Q + np.einsum("bnm,bm->bn", projection(J).Jpinv, E)
     return Q
 
 
@@ -169,15 +169,15 @@ def trace_stages(
             q[idx] = qn
         halves.append(pts)
     stages = []
-    for b, k in enumerate(ks):
-        fwd, bwd = halves[0][b], halves[1][b]
-        Q = np.array(fwd if closed[b] else bwd[::-1] + fwd[1:])
-        if closed[b]:
+    for i, k in enumerate(ks):
+        fwd, bwd = halves[0][i], halves[1][i]
+        Q = np.array(fwd if closed[i] else bwd[::-1] + fwd[1:])
+        if closed[i]:
             Q = np.vstack([Q, Q[:1]])
-        Q = _subdivide(prob, Q, k, subdivide, closed[b])
+        Q = _subdivide(prob, Q, k, subdivide, closed[i])
         gaps = np.linalg.norm(np.diff(Q, axis=0), axis=1)
         sigma = np.concatenate([[0.0], np.cumsum(gaps)])
-        period = sigma[-1] + float(_wrapped_gap(prob, Q[-1], Q[0])) if closed[b] else np.inf
+        period = sigma[-1] + float(_wrapped_gap(prob, Q[-1], Q[0])) if closed[i] else np.inf
         stages.append(Stage(int(k), Q, sigma, period))
     return stages
 
@@ -211,7 +211,7 @@ def node_data(prob: PathProblem, st: Stage) -> NodeData:
     """``λ(a + nν) = c₀ − 2c₁ν + Wν²`` at every node of a stage (W = Σ w_S)."""
     ks = np.full(len(st.q), st.k)
     J, E = kinematics(prob, st.q, ks)
-    P = projections(J)
+    P = projection(J)
     a = np.einsum("bnm,bm->bn", P.Jpinv, prob.xd_des[st.k] + prob.feedback_gain * E)
     nv = null_vectors(J)
     d = post_rates(a, P.N, prob.sc) - a[:, None, :]
@@ -236,7 +236,7 @@ def stage_edges(
     dts = (nxt.k - st.k) * prob.dt
     ks = np.full(len(st.q), nxt.k)
     _, E = kinematics(prob, st.q, ks)
-    p = st.q + np.einsum("bnm,bm->bn", projections(nd.J).Jpinv, E)  # range motion only
+    p = st.q + np.einsum("bnm,bm->bn", projection(nd.J).Jpinv, E)  # range motion only
     _, c = cKDTree(nxt.q).query(p)
     sig_p = nxt.sigma[c] + np.einsum("bn,bn->b", nn.n[c], p - nxt.q[c])
     G2 = len(nxt.q)

@@ -143,7 +143,7 @@ def plan_path(
         objective=objective,
     )
     fixed = q0 is not None
-    start = arm.check_q(q0) if fixed else _free_start(arm, path, x0, prob)
+    start = arm.check_q(q0) if q0 is not None else _free_start(arm, path, x0, prob)
     bar, own = _bar(progress, iterations + (2 if arm.redundancy == 1 and method != "scp" else 0))
     tic = time.perf_counter()
     try:

@@ -17,8 +17,9 @@ from scipy.spatial.transform import Rotation
 
 from fault_tolerance.errors import InvalidInput
 from fault_tolerance.model.arm import Arm
-from fault_tolerance.numerics.linalg import DAMPING, RANK_RTOL, SIGMA_EPS, damped_pivots
+from fault_tolerance.numerics.linalg import projection, reduced_rates
 from fault_tolerance.planning.posture_steps import pinv_and_null
+from fault_tolerance.resolution.indices import condition_numbers, reduced_singular_values
 from fault_tolerance.resolution.scenarios import Scenarios, scenarios
 
 #: Objectives of the whole-path planner: the mean or the maximum of λ(t) over the path.
@@ -137,59 +138,14 @@ def kinematics(prob: PathProblem, Q: np.ndarray, ks: np.ndarray) -> tuple[np.nda
     return J[:, rows], err[:, rows]
 
 
-class Projections(NamedTuple):
-    """Batched :func:`~fault_tolerance.numerics.linalg.projection`: ``J⁺`` (B, n, m), ``N`` (B, n, n)."""
-
-    Jpinv: np.ndarray
-    N: np.ndarray
-    sigma_min: np.ndarray
-
-
-def projections(J: np.ndarray) -> Projections:
-    """``J⁺`` (damped near singularities) and ``N = I − J⁺J``, as :func:`linalg.projection`."""
-    Jt = np.swapaxes(J, 1, 2)
-    lam, V = np.linalg.eigh(J @ Jt)
-    lam = np.maximum(lam, 0.0)
-    smin = np.sqrt(lam[:, 0])
-    mu2 = np.where(smin < SIGMA_EPS, DAMPING**2 * (1.0 - (smin / SIGMA_EPS) ** 2), 0.0)
-    d = lam + mu2[:, None]
-    Jpinv = Jt @ ((V / (d + (d == 0.0))[:, None, :]) @ np.swapaxes(V, 1, 2))
-    keep = lam > (RANK_RTOL**2) * np.maximum(lam[:, -1:], 1e-300)
-    U = (Jt @ V) * np.where(keep, 1.0 / np.sqrt(np.where(keep, lam, 1.0)), 0.0)[:, None, :]
-    N = np.eye(J.shape[2]) - U @ np.swapaxes(U, 1, 2)
-    return Projections(Jpinv, N, smin)
-
-
 # Eqn. (2) in closed form (G1), batched, pivots damped as in simulate.
 def post_rates(a: np.ndarray, N: np.ndarray, sc: Scenarios) -> np.ndarray:
-    """Least-norm post-failure rates ``ˢq̇'`` for every scenario, shape (B, f, n)."""
-    B, n = a.shape
-    if sc.singletons:  # every scenario at once: the same elementwise operations as one by one
-        cols = np.asarray(sc.columns)
-        piv = damped_pivots(N[:, cols, cols])  # (B, f)
-        out = np.empty((B, sc.f, n))  # C order, as below: einsum sums other layouts differently
-        np.subtract(
-            a[:, None, :],
-            (a[:, cols] / piv)[:, :, None] * np.swapaxes(N[:, :, cols], 1, 2),
-            out=out,
-        )
-        out[:, np.arange(len(cols)), cols] = 0.0
-        return out
-    out = np.empty((B, sc.f, n))
-    for s, S in enumerate(sc.sets):
-        S = list(S)
-        if len(S) == 1:
-            i = S[0]
-            piv = damped_pivots(N[:, i, i])
-            out[:, s] = a - (a[:, i] / piv)[:, None] * N[:, :, i]
-        else:
-            M = N[:, S][:, :, S]
-            lam = np.linalg.eigvalsh(M)[:, 0]
-            M = M + (damped_pivots(lam) - lam)[:, None, None] * np.eye(len(S))
-            z = np.linalg.solve(M, a[:, S][..., None])[..., 0]
-            out[:, s] = a - np.einsum("bns,bs->bn", N[:, :, S], z)
-        out[:, s, S] = 0.0
-    return out
+    """Least-norm post-failure rates ``ˢq̇'`` for every scenario, shape (B, f, n).
+
+    :func:`~fault_tolerance.numerics.linalg.reduced_rates` on the stack, pivots damped as in
+    :func:`~fault_tolerance.simulation.simulate.simulate` after its first step.
+    """
+    return np.stack([reduced_rates(a, N, S, damp=True) for S in sc.sets], axis=1)
 
 
 def jumps(post: np.ndarray, qd: np.ndarray, w: np.ndarray) -> np.ndarray:
@@ -205,15 +161,8 @@ def jvja_rates(a: np.ndarray, N: np.ndarray, post: np.ndarray, w: np.ndarray) ->
 
 
 def reduced_condition_numbers(J: np.ndarray, sc: Scenarios) -> np.ndarray:
-    """Reduced condition numbers (15) ``k_S``, shape (B, f), from ``J_S J_Sᵀ`` eigenvalues."""
-    G = J @ np.swapaxes(J, 1, 2)
-    out = np.empty((len(J), sc.f))
-    for s, S in enumerate(sc.sets):
-        JS = J[:, :, list(S)]
-        ev = np.linalg.eigvalsh(G - JS @ np.swapaxes(JS, 1, 2))
-        ev = np.maximum(ev, 1e-300)
-        out[:, s] = np.minimum(np.sqrt(ev[:, -1] / ev[:, 0]), 1e8)
-    return out
+    """Reduced condition numbers (15) ``k_S``, shape (B, f): :func:`ft.rcn` on the stack."""
+    return condition_numbers(reduced_singular_values(J, sc))
 
 
 # -- trajectories ---------------------------------------------------------------------------
@@ -240,6 +189,8 @@ def rollout(
     """
     if mode not in ("lnva", "jvja", "track"):
         raise InvalidInput(f"rollout mode {mode!r} is not one of ['lnva', 'jvja', 'track']")
+    if mode == "track" and q_ref is None:
+        raise InvalidInput("rollout mode 'track' needs q_ref, the reference (T+1, n)")
     T, n, dt = prob.T, prob.n, prob.dt
     arm = prob.arm
     model, data, fid, rows = arm.model, arm.data, arm.frame_id, arm.rows
@@ -256,7 +207,7 @@ def rollout(
         a = Jpinv @ xd
         if mode == "lnva":
             qd = a
-        elif mode == "track" and k < T:
+        elif mode == "track" and q_ref is not None and k < T:
             qd = a + N @ ((q_ref[k + 1] - q) / dt)
         else:
             qd = jvja_rates(a[None], N[None], post_rates(a[None], N[None], sc), w)[0]
@@ -269,7 +220,7 @@ def evaluate(prob: PathProblem, Q: np.ndarray, QD: np.ndarray) -> Trajectory:
     """Jumps, limit violation and objective of configurations ``Q`` with rates ``QD``."""
     ks = np.arange(len(Q))
     J, E = kinematics(prob, Q, ks)
-    P = projections(J)
+    P = projection(J)
     a = np.einsum("bnm,bm->bn", P.Jpinv, prob.xd_des + prob.feedback_gain * E)
     lam = jumps(post_rates(a, P.N, prob.sc), QD, prob.sc.weights)
     return Trajectory(Q, QD, lam, violation(prob, Q, QD, J), prob.score(lam))
@@ -295,7 +246,6 @@ def feasible(traj: Trajectory, tol: float = 1e-9) -> bool:
 __all__ = [
     "OBJECTIVES",
     "PathProblem",
-    "Projections",
     "Trajectory",
     "build_problem",
     "evaluate",
@@ -304,7 +254,6 @@ __all__ = [
     "jvja_rates",
     "kinematics",
     "post_rates",
-    "projections",
     "reduced_condition_numbers",
     "rollout",
 ]

@@ -18,7 +18,7 @@ import numpy as np
 from fault_tolerance.errors import InvalidInput
 from fault_tolerance.planning.wholepath.plan import plan_path
 from fault_tolerance.simulation.setup import GLOBAL
-from fault_tolerance.simulation.simulate import PATH_PLANNERS
+from fault_tolerance.simulation.simulate import PATH_PLANNER_STYLES, PATH_PLANNERS
 
 #: Options of the planner that ``simulate(..., plan_options={...})`` passes on.
 PLAN_OPTIONS = ("objective", "method", "limits", "rcn_max", "iterations", "dp_step", "dp_stage")
@@ -102,3 +102,4 @@ def simulate_global(arm, path, *, q0, plan_options, progress, loop, **sim):
 
 
 PATH_PLANNERS[GLOBAL] = simulate_global
+PATH_PLANNER_STYLES[GLOBAL] = ("#9467bd", "global (whole-path plan)")

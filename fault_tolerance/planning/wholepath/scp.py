@@ -18,12 +18,12 @@ import numpy as np
 import scipy.sparse as sp
 
 from fault_tolerance.errors import InvalidInput
+from fault_tolerance.numerics.linalg import projection
 from fault_tolerance.planning.wholepath.problem import (
     PathProblem,
     Trajectory,
     kinematics,
     post_rates,
-    projections,
     reduced_condition_numbers,
     rollout,
 )
@@ -64,7 +64,7 @@ class _Linear(NamedTuple):
 
 def _rates_and_residuals(prob, Q, ks, Bn, v):
     J, E = kinematics(prob, Q, ks)
-    P = projections(J)
+    P = projection(J)
     a = np.einsum("bnm,bm->bn", P.Jpinv, prob.xd_des[ks] + prob.feedback_gain * E)
     qd = a + np.einsum("bij,bj->bi", P.N, np.einsum("bnr,br->bn", Bn, v))
     sw = np.sqrt(prob.sc.weights)[None, :, None]
@@ -121,7 +121,12 @@ class _Rows:
     """Accumulates sparse constraint rows with their bounds."""
 
     def __init__(self) -> None:
-        self.r, self.c, self.v, self.lo, self.hi, self.m = [], [], [], [], [], 0
+        self.r: list[np.ndarray] = []
+        self.c: list[np.ndarray] = []
+        self.v: list[np.ndarray] = []
+        self.lo: list[np.ndarray] = []
+        self.hi: list[np.ndarray] = []
+        self.m = 0
 
     def add(self, rr, cc, vv, lo, hi) -> None:
         self.r.append(rr + self.m)
@@ -206,7 +211,7 @@ def build_qp(prob: PathProblem, traj: Trajectory, lin: _Linear, mu: float, fixed
         hi = np.maximum(prob.upper[bounded] - POS_MARGIN - q, 0.0)
         cols = (kq[:, None] + bounded[None, :]).ravel()
         ineq.add(np.arange(len(cols)), cols, np.ones(len(cols)), lo.ravel(), hi.ravel())
-    if lin.dk is not None:
+    if lin.dk is not None and lin.k is not None and prob.rcn_max is not None:  # set together
         f = lin.k.shape[1]
         rr, cc, vv = _placed(lin.dk, [(kq, n)])
         ineq.add(

@@ -1,7 +1,8 @@
 """The fast path of a simulated sample: a Controller workspace and the compiled sample kernel.
 
-The workspace is a :class:`~fault_tolerance.control.controller.Controller`'s (scenario tables, rank
-coefficient, MDA gradient); the kernel is :func:`~fault_tolerance.simulation.fast.sample.sample_kernel`.
+The workspace is a :class:`~fault_tolerance.control.controller.Controller`'s
+(:class:`~fault_tolerance.control.workspace.ControllerWorkspace`: scenario tables, rank coefficient,
+MDA gradient); the kernel is :func:`~fault_tolerance.simulation.fast.sample.sample_kernel`.
 
 :func:`fault_tolerance.simulation.simulate.simulate` builds one :class:`Sampler` per run (when numba is
 installed and the run is one it covers: single-joint scenarios) and calls :meth:`Sampler.step` at
@@ -16,14 +17,19 @@ of the reference (``tests/test_fastpath.py`` compares whole runs to 1e-9, with a
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 import pinocchio as pin
 
+from fault_tolerance.control.indices import djac, rcn_gradient
 from fault_tolerance.control.lapack_steps import TRACE_MAX
+from fault_tolerance.errors import InvalidInput
 from fault_tolerance.numerics.fast import sample_dense as sd
 from fault_tolerance.numerics.linalg import PIVOT_EPS
 from fault_tolerance.resolution.bounded import SCALE_TOL, bounded_least_norm, reduced_bounded
 from fault_tolerance.resolution.indices import RCN_MAX
+from fault_tolerance.resolution.registry import get
 from fault_tolerance.simulation.fast import sample as sk
 from fault_tolerance.simulation.fast.sample_bounded import (
     DECLINED,
@@ -32,12 +38,15 @@ from fault_tolerance.simulation.fast.sample_bounded import (
     scratch,
 )
 
+if TYPE_CHECKING:
+    from fault_tolerance.control.controller import Controller
+
 _TASK_SCALED = 64  # run.FLAG_TASK_SCALED
 _LWA = pin.LOCAL_WORLD_ALIGNED
 _WORLD = pin.WORLD
 
-#: Algorithms of :func:`~fault_tolerance.simulation.simulate.simulate` the kernel computes itself.
-METHODS = {"lnva": sk.LNVA, "jvja": sk.JVJA, "mda": sk.MDA}
+#: Kernel modes (a registry entry's ``compiled``) the sample computes itself.
+MODES = (sk.LNVA, sk.JVJA, sk.MDA)
 
 
 def available() -> bool:
@@ -55,13 +64,14 @@ def covers(sc, algorithm: str, response: str, limits: bool = False) -> str | Non
         return "numba is not installed"
     if not sc.singletons:
         return "multi-joint scenarios (the reference handles them)"
-    if algorithm not in METHODS:
-        return f"algorithm {algorithm!r}"
+    mode = get(algorithm).compiled
+    if mode not in MODES:
+        return f"algorithm {algorithm!r} (no compiled kernel: its reference rates run)"
     with np.errstate(over="ignore"):
         overflow = not np.isfinite(sc.weights.sum())
     if overflow:
         return "weights whose sum overflows (the reference rescales them)"
-    if limits and algorithm == "jvja" and response == "continuation":
+    if limits and mode == sk.JVJA and response == "continuation":
         return "JVJA's continuation response under joint limits (a bounded solve at every sample)"
     return None
 
@@ -97,21 +107,27 @@ class Sampler:
         )  # fmt: skip (its workspace; the box check is the kernel's own)
         self.kernel = sk.compiled_sample_kernel()
         self.model, self.data, self.fid = arm.model, self.ctrl.data, arm.frame_id
-        self.rows = self.ctrl._rows
+        self.cw = self.ctrl.workspace
+        self.rows = self.cw.rows
         self.position_only = bool(np.all(np.asarray(arm.rows) < 3))
         self.full_pose = list(arm.rows) == [0, 1, 2, 3, 4, 5]
         self.trans_rows = np.asarray(arm.rows)
         self.arm, self.s, self.kp = arm, s, float(s.feedback_gain)
-        self.method = METHODS[s.algorithm]
+        mode = get(s.algorithm).compiled
+        if mode is None:  # covers() sends such a run to the reference sample
+            raise InvalidInput(
+                f"algorithm {s.algorithm!r} has no compiled kernel; run it with engine='reference'"
+            )
+        self.method: int = mode
         self.continuation = s.response == "continuation"
-        if self.continuation and s.algorithm == "jvja":
+        if self.continuation and self.method == sk.JVJA:
             self.method = sk.GIVEN  # (G3) rates from the planner, the rest compiled
         self.cols = np.ascontiguousarray(sc.columns, dtype=np.int64)
         self.w = np.ascontiguousarray(sc.weights, dtype=float)
         self.vmax = np.ascontiguousarray(s.vmax, dtype=float)
         self.params = np.zeros(sd.N_PARAMS)
         p = self.params
-        p[sk.P_TRACE], p[sd.P_PIVOT], p[sd.P_RANK] = TRACE_MAX, PIVOT_EPS, self.ctrl._rank_coef
+        p[sk.P_TRACE], p[sd.P_PIVOT], p[sd.P_RANK] = TRACE_MAX, PIVOT_EPS, self.cw.rank_coef
         p[sk.P_WSUM], p[sk.P_GAIN], p[sk.P_MAXSTEP] = float(sc.weights.sum()), s.gain, s.max_step
         p[sk.P_RCN_MAX], p[sk.P_CONT] = RCN_MAX, 1.0 if self.continuation else 0.0
         p[sk.P_LOCK] = -1 if s.lock_col is None else s.lock_col
@@ -128,10 +144,12 @@ class Sampler:
         o = 3 * m * m + m * n
         self.a_ws, self.qd_ws = self.ws[o : o + n], self.ws[o + 4 * n : o + 5 * n]
         self.finish = sk.finish_kernel
-        self.boxed = None  # the Controller's bounded step, built at the first sample that needs it
+        self.boxed: Controller | None = (
+            None  # the Controller's bounded step, built at the first sample that needs it
+        )
         self.reduced_ws = None  # the compiled reduced robots' workspace (boxsolve), built likewise
         self.bounded_tables = None  # the compiled bounded sample's tables
-        if self.ONE_CALL and s.limits and s.algorithm in ("jvja", "lnva"):
+        if self.ONE_CALL and s.limits and self.method in (sk.JVJA, sk.LNVA):
             self._compiled_tables()
         #: Samples handed to the reference code (not certified, the lock, a bound met after it),
         #: and samples that met a bound, solved by the bounded resolvers here.
@@ -155,7 +173,7 @@ class Sampler:
         Jw = pin.getFrameJacobian(model, data, fid, _WORLD)
         Jl = pin.getFrameJacobian(model, data, fid, _LWA)  # also updates data.oMf[fid]
         J = Jl[self.rows]
-        grad = self.ctrl.rcn_gradient(J, self.ctrl._djac(Jw, Jl, data.oMf[fid].translation))
+        grad = rcn_gradient(self.cw, J, djac(self.cw, Jw, Jl, data.oMf[fid].translation))
         return J, np.ascontiguousarray(grad)
 
     def _task(self, x_des: np.ndarray):
@@ -188,7 +206,7 @@ class Sampler:
         xd_cmd = xd_des + self.kp * err if self.kp else xd_des
         method, qd_in = (sk.LOCKED if state.locked else self.method), self.zeros
         if method == sk.GIVEN:
-            from fault_tolerance.resolution.resolvers import jvja
+            from fault_tolerance.resolution.jvja import jvja
 
             qd_in = jvja(J, xd_cmd, self.s.sc, response="continuation", tolerate=True)
         if self.bounded_tables:  # the bounded sample in the same compiled call
@@ -257,7 +275,7 @@ class Sampler:
             return self._bounded(state, k, J, xd_cmd, x, x_des, err, method)
         self.bounded_samples += 1
         self.bounded_compiled += 1
-        self.boxed.bounded_steps += int(info[0])
+        self._boxed().bounded_steps += int(info[0])
         self.reduced_compiled += int(info[1])
         return flag
 
@@ -271,11 +289,12 @@ class Sampler:
             from fault_tolerance.control.fast.bounded_solve import JVJA, LNVA
 
             ctrl = self._boxed()
-            if getattr(ctrl, "_box_ws", None) is None:
+            tables = ctrl.workspace.box_tables
+            if tables is None:
                 self.bounded_tables = ()
                 return None
-            mode = JVJA if self.s.algorithm == "jvja" else LNVA
-            F, Iw, views = own_workspace(*ctrl._box_ws[:2], mode)
+            mode = JVJA if get(self.s.algorithm).compiled == sk.JVJA else LNVA
+            F, Iw, views = own_workspace(*tables[:2], mode)
             self.box_views = views
             F2, Iw2 = self._reduced_workspace()[:2]
             TF, TI = scratch(len(self.cols), self.arm.n)
@@ -352,12 +371,12 @@ class Sampler:
             m, n = self.arm.m, self.arm.n
             sets = self.cols.reshape(-1, 1).copy()
             F, Iw, views = workspace(n, m, sets, self.cols, 1)
-            views["p3"][:] = TRACE_MAX, self.ctrl._pivot_threshold, self.ctrl._rank_coef
+            views["p3"][:] = TRACE_MAX, self.cw.pivot_threshold, self.cw.rank_coef
             self.reduced_ws = (F, Iw, views["buf"], np.zeros((len(sets), n)), np.zeros(len(sets)),
                                reduced_solve)  # fmt: skip
         return self.reduced_ws
 
-    def _boxed(self):
+    def _boxed(self) -> Controller:
         """The Controller whose bounded step solves the samples that meet a bound.
 
         Its fastest backend: with numba, the compiled bounded step of :mod:`fault_tolerance.control.fast.bounded_step`
