@@ -206,3 +206,25 @@ def test_stacks_get_what_each_matrix_gets_alone():
                     rtol=1e-12,
                     atol=1e-12,
                 )
+
+
+@pytest.mark.parametrize("response", ["least_norm", "continuation"])
+@pytest.mark.parametrize("lockable", [[0, 2, 4], [(0, 1), 3, (2, 5)]])
+def test_jvja_rates_on_a_stack_are_jvja_row_by_row(response, lockable):
+    """resolution.jvja.jvja_rates on a stack (the batched API's and the whole-path planner's
+    JVJA) equals ft.resolve's jvja per row, exact and damped pivots (1e-10)."""
+    from fault_tolerance.numerics.linalg import damped_pivots, projection
+    from fault_tolerance.resolution.jvja import jvja, jvja_rates
+    from fault_tolerance.resolution.scenarios import scenarios
+
+    rng = np.random.default_rng(5)
+    Js, xds = rng.normal(size=(12, 3, 6)), rng.normal(size=(12, 3))
+    sc = scenarios(lockable, 6, r=3)
+    P = projection(Js)
+    a = np.einsum("bij,bj->bi", P.Jpinv, xds)
+    for damp in (False, True):
+        piv = damped_pivots(sc.pivots(P.N)) if damp else sc.pivots(P.N)
+        got = jvja_rates(a, P.N, sc, piv, response, damp)
+        for b in range(len(Js)):
+            ref = jvja(Js[b], xds[b], lockable, response=response, tolerate=damp)
+            np.testing.assert_allclose(got[b], ref, rtol=1e-10, atol=1e-10)

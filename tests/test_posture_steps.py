@@ -212,13 +212,10 @@ def test_post_rates_of_all_scenarios_at_once_equal_one_by_one(name, task):
 @pytest.mark.parametrize("gain", [0.0, 10.0])
 def test_rollout_steps_are_the_plain_steps(gain):
     """rollout's rates equal a plain loop with linalg.projection (LNVA and JVJA), bit for bit."""
+    from fault_tolerance.numerics.linalg import damped_pivots
     from fault_tolerance.paper.cases import CASES
-    from fault_tolerance.planning.wholepath.problem import (
-        build_problem,
-        jvja_rates,
-        post_rates,
-        rollout,
-    )
+    from fault_tolerance.planning.wholepath.problem import build_problem, rollout
+    from fault_tolerance.resolution.jvja import jvja_rates
 
     case = CASES["fig7"]
     arm = ft.load_arm(case.robot)
@@ -235,8 +232,8 @@ def test_rollout_steps_are_the_plain_steps(gain):
             P = projection(arm.jacobian(q))
             a = P.Jpinv @ xd
             if mode == "jvja":
-                post = post_rates(a[None], P.N[None], prob.sc)
-                a = jvja_rates(a[None], P.N[None], post, prob.sc.weights)[0]
+                piv = damped_pivots(prob.sc.pivots(P.N))
+                a = jvja_rates(a, P.N, prob.sc, piv, damp=True)
             assert _same(traj.q[k], q) and _same(traj.qd[k], a)
             q = q + prob.dt * a
 

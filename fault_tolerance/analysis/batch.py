@@ -35,6 +35,7 @@ from fault_tolerance.resolution.indices import (
     condition_numbers,
     reduced_singular_values,
 )
+from fault_tolerance.resolution.jvja import jvja_rates
 from fault_tolerance.resolution.registry import KERNEL_JVJA, KERNEL_LNVA, get, names
 from fault_tolerance.resolution.scenarios import Scenarios, scenarios
 
@@ -117,30 +118,12 @@ def _reduced(base: np.ndarray, N: np.ndarray, S: list[int], good: np.ndarray) ->
 
 
 def _jvja_rows(a, N, sc: Scenarios, good, response: str) -> np.ndarray:
-    """JVJA (5) from ``a = J⁺ẋ`` and ``N`` per row; weights over the largest (no overflow)."""
-    weights = sc.weights / sc.weights.max()
-    W = weights.sum()
-    if response == "least_norm":
-        if sc.singletons:
-            c = np.zeros_like(a)
-            cols = sc.columns
-            piv = np.where(good[:, None], N[:, cols, cols], 1.0)
-            c[:, cols] = weights * a[:, cols] / piv
-            return a - np.einsum("bij,bj->bi", N, c) / W
-        shift = sum(
-            w * (a - _reduced(a, N, list(S), good)) for S, w in zip(sc.sets, weights, strict=True)
-        )
-        return a - shift / W
-    Wm = np.zeros_like(N)
-    for members, w in zip(sc.sets, weights, strict=True):
-        S = list(members)
-        M = np.where(good[:, None, None], N[:, S][:, :, S], np.eye(len(S)))
-        cols = np.asarray(S)
-        Wm[np.ix_(np.arange(len(N)), cols, cols)] += w * np.linalg.inv(M)
-    NWN = N @ Wm @ N
-    rhs = np.einsum("bij,bj->bi", N @ Wm, a)
-    z = -np.einsum("bij,bj->bi", np.linalg.pinv(NWN, rcond=1e-10, hermitian=True), rhs)
-    return a + np.einsum("bij,bj->bi", N, z)
+    """JVJA (5) of every row: :func:`~fault_tolerance.resolution.jvja.jvja_rates` on the stack.
+
+    Rows not ``good`` (an intolerable scenario) get ``N = I``: finite numbers the caller drops.
+    """
+    N = np.where(good[:, None, None], N, np.eye(N.shape[-1]))
+    return jvja_rates(a, N, sc, sc.pivots(N), response)
 
 
 def resolve(

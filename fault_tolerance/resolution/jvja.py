@@ -74,25 +74,57 @@ def jvja(
     proj = proj or projection(J)
     N = proj.N
     a = proj.Jpinv @ xdot
-    w = _unit_weights(sc)
     pivots = damped_pivots(sc.pivots(N)) if tolerate else sc.check_tolerable(N)
+    return jvja_rates(a, N, sc, pivots, response, tolerate)
+
+
+# Eqn. (5) from a = J⁺ẋ and N, (G2) and (G3): the one implementation of JVJA's rates.
+def jvja_rates(
+    a: np.ndarray,
+    N: np.ndarray,
+    sc: Scenarios,
+    pivots: np.ndarray,
+    response: str = "least_norm",
+    damp: bool = False,
+) -> np.ndarray:
+    """JVJA's rates from ``a`` (n,) and ``N`` (n, n), or stacks ``a`` (..., n), ``N`` (..., n, n).
+
+    ``pivots`` (f,) or (..., f): the smallest eigenvalues of the ``N[S, S]`` (checked or damped by
+    the caller); ``damp``: the multi-joint blocks damped the same way. The batched API calls this
+    on stacks, :func:`jvja` on one configuration.
+    """
+    w = _unit_weights(sc)
     if response == "least_norm":
         if sc.singletons:
             c = np.zeros_like(a)
-            c[sc.columns] = w * a[sc.columns] / pivots
-            return a - N @ c / w.sum()
+            c[..., sc.columns] = w * a[..., sc.columns] / pivots
+            if a.ndim == 1:
+                return a - N @ c / w.sum()
+            return a - np.einsum("...ij,...j->...i", N, c) / w.sum()
         shift = sum(
-            wS * N[:, list(S)] @ np.linalg.solve(pivot_block(N, S, tolerate), a[list(S)])
-            for S, wS in zip(sc.sets, w, strict=True)
+            wS * _block_solve(N, list(S), a, damp) for S, wS in zip(sc.sets, w, strict=True)
         )
         return a - shift / w.sum()
     if response == "continuation":
         W = np.zeros_like(N)
         for S, wS in zip(sc.sets, w, strict=True):
-            W[np.ix_(S, S)] += wS * np.linalg.inv(pivot_block(N, S, tolerate))
-        z = -np.linalg.pinv(N @ W @ N, rcond=1e-10, hermitian=True) @ (N @ W @ a)
-        return a + N @ z
+            rows, cols = np.ix_(S, S)
+            W[..., rows, cols] += wS * np.linalg.inv(pivot_block(N, S, damp))
+        NW = N @ W
+        G = np.linalg.pinv(NW @ N, rcond=1e-10, hermitian=True)
+        if a.ndim == 1:
+            return a + N @ (-G @ (NW @ a))
+        z = -np.einsum("...ij,...j->...i", G, np.einsum("...ij,...j->...i", NW, a))
+        return a + np.einsum("...ij,...j->...i", N, z)
     raise InvalidInput(f"response {response!r} is not one of {RESPONSES}")
+
+
+def _block_solve(N: np.ndarray, S: list[int], a: np.ndarray, damp: bool) -> np.ndarray:
+    """``N[:, S] N[S, S]⁻¹ a_S`` of one projector (n,) or of a stack (..., n)."""
+    M = pivot_block(N, S, damp)
+    if a.ndim == 1:
+        return N[:, S] @ np.linalg.solve(M, a[S])
+    return (N[..., :, S] @ np.linalg.solve(M, a[..., S][..., None]))[..., 0]
 
 
 # Eqn. (5) the explicit way: one pseudo-inverse per scenario (reference, slow).

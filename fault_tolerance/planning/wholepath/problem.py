@@ -17,9 +17,10 @@ from scipy.spatial.transform import Rotation
 
 from fault_tolerance.errors import InvalidInput
 from fault_tolerance.model.arm import Arm
-from fault_tolerance.numerics.linalg import projection, reduced_rates
+from fault_tolerance.numerics.linalg import damped_pivots, projection, reduced_rates
 from fault_tolerance.planning.posture_steps import pinv_and_null
 from fault_tolerance.resolution.indices import condition_numbers, reduced_singular_values
+from fault_tolerance.resolution.jvja import jvja_rates
 from fault_tolerance.resolution.scenarios import Scenarios, scenarios
 
 #: Objectives of the whole-path planner: the mean or the maximum of λ(t) over the path.
@@ -154,12 +155,6 @@ def jumps(post: np.ndarray, qd: np.ndarray, w: np.ndarray) -> np.ndarray:
     return np.einsum("f,bfn,bfn->b", w, d, d)
 
 
-def jvja_rates(a: np.ndarray, N: np.ndarray, post: np.ndarray, w: np.ndarray) -> np.ndarray:
-    """JVJA's rates (5): ``a + N · mean_w(ˢq̇' − a)``, the minimiser of λ on ``J q̇ = ẋ``."""
-    mean = np.einsum("f,bfn->bn", w, post) / w.sum()
-    return a + np.einsum("bij,bj->bi", N, mean - a)
-
-
 def reduced_condition_numbers(J: np.ndarray, sc: Scenarios) -> np.ndarray:
     """Reduced condition numbers (15) ``k_S``, shape (B, f): :func:`ft.rcn` on the stack."""
     return condition_numbers(reduced_singular_values(J, sc))
@@ -197,7 +192,7 @@ def rollout(
     Q = np.empty((T + 1, n))
     QD = np.empty((T + 1, n))
     q = np.asarray(q0, dtype=float).copy()
-    sc, w, eye = prob.sc, prob.sc.weights, np.eye(n)
+    sc, eye = prob.sc, np.eye(n)
     for k in range(T + 1):
         J = pin.computeFrameJacobian(model, data, q, fid, pin.LOCAL_WORLD_ALIGNED).reshape(6, n)
         xd = prob.xd_des[k]
@@ -210,7 +205,7 @@ def rollout(
         elif mode == "track" and q_ref is not None and k < T:
             qd = a + N @ ((q_ref[k + 1] - q) / dt)
         else:
-            qd = jvja_rates(a[None], N[None], post_rates(a[None], N[None], sc), w)[0]
+            qd = jvja_rates(a, N, sc, damped_pivots(sc.pivots(N)), damp=True)  # (5), as simulate
         Q[k], QD[k] = q, qd
         q = q + dt * qd
     return evaluate(prob, Q, QD)
@@ -251,7 +246,6 @@ __all__ = [
     "evaluate",
     "feasible",
     "jumps",
-    "jvja_rates",
     "kinematics",
     "post_rates",
     "reduced_condition_numbers",
