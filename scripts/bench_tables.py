@@ -60,7 +60,7 @@ def targets_table(bench: dict) -> str:
 
 
 def ratio_table(bench: dict) -> str:
-    """Rows: arms (the chains of the scaling table); medians in µs and the #11 ratios."""
+    """Rows: arms (the chains of the scaling table); medians in µs and the ratios."""
     lines = [
         "| arm | Jacobian | floor | LNVA | JVJA | JVJA / LNVA | JVJA / floor | two-joint JVJA "
         "| simulated JVJA sample | the same under limits (÷ bounded step, no bound) |",

@@ -216,3 +216,27 @@ def test_no_function_over_80_lines():
         if n > FUNCTION_LINES
     }
     assert not over, over
+
+
+def test_no_issue_numbers_outside_the_changelog():
+    """Issue numbers and development history belong to CHANGELOG.md: none in the package,
+    tests, scripts, notebooks or pyproject (this file's own pattern excepted)."""
+    import re
+
+    root = PKG.parent
+    pattern = re.compile(r"\(#\d+\)|\bissue \d+|#1[0-9]\b|#2[0-9]\b")
+    paths = [
+        p
+        for d in ("fault_tolerance", "tests", "scripts", "notebooks")
+        for p in (root / d).rglob("*")
+    ]
+    found = [
+        f"{p.relative_to(root)}:{i}"
+        for p in paths + [root / "pyproject.toml"]
+        if p.is_file()
+        and p.suffix in (".py", ".ipynb", ".toml", ".md")
+        and p.name != "test_architecture.py"
+        for i, line in enumerate(p.read_text(encoding="utf-8", errors="replace").splitlines(), 1)
+        if pattern.search(line)
+    ]
+    assert not found, found

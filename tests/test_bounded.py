@@ -1,4 +1,4 @@
-"""Bounded resolvers (issue 12): equal to a generic QP solver (quadprog) on the same problem."""
+"""Bounded resolvers: equal to a generic QP solver (quadprog) on the same problem."""
 
 import numpy as np
 import pytest
@@ -263,7 +263,7 @@ def test_velocity_defaults_where_urdf_has_none():
 
 
 #: A configuration of the bench's chain_14 pool (inside the limits) whose reduced robot of joint 8
-#: raised InfeasibleBounds (issue 12); its task velocity.
+#: raised InfeasibleBounds; its task velocity.
 CHAIN14_Q = np.array([
     -2.3923756975384443, -3.075698276536998, 1.8522491693721665, 2.674856937765739,
     -1.8800748833421963, 1.9498193872681737, -2.103904791012074, -2.7374498891695667,

@@ -1,4 +1,4 @@
-"""The compiled bounded solve (boxkernel, boxsolve, boxfast) equals the reference and quadprog (#12)."""
+"""The compiled bounded solve (boxkernel, boxsolve, boxfast) equals the reference and quadprog."""
 
 import os
 import subprocess

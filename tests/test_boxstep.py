@@ -1,4 +1,4 @@
-"""Controller(limits=True): the bounded step equals the bounded planner (issue 12)."""
+"""Controller(limits=True): the bounded step equals the bounded planner."""
 
 import numpy as np
 import pytest

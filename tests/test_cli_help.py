@@ -1,4 +1,4 @@
-"""Every option of every command has help text that states its default (issue #16)."""
+"""Every option of every command has help text that states its default."""
 
 from __future__ import annotations
 

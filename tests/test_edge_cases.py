@@ -1,4 +1,4 @@
-"""Where the fast path and the reference disagreed (issue 11, item 4): now agree or refuse clearly."""
+"""Where the fast path and the reference disagreed: now agree or refuse clearly."""
 
 from __future__ import annotations
 

@@ -341,7 +341,7 @@ def test_a_chunk_may_not_be_moved_to_another_index(tmp_path, capfd):
 
 
 def test_a_tampered_workspace_chunk_does_not_change_the_area(tmp_path, workspace_out):
-    """The issue's case: a tampered chunk once changed area_ftw; now the rerun recomputes it
+    """The case: a tampered chunk once changed area_ftw; now the rerun recomputes it
     (stderr says so) and the area is the clean one."""
     out = copy_tree(workspace_out, tmp_path / "out")
     clean = json.loads((out / "workspace.json").read_text())

@@ -1,4 +1,4 @@
-"""Runs with joint limits on (issue 12): inside the limits before and after a lock, by default."""
+"""Runs with joint limits on: inside the limits before and after a lock, by default."""
 
 import json
 import subprocess

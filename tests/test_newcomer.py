@@ -1,4 +1,4 @@
-"""Rough edges a newcomer hits (issue 16 item 4): unknown robots, ``--lockable none``, the
+"""Rough edges a newcomer hits: unknown robots, ``--lockable none``, the
 README's bench tables."""
 
 from __future__ import annotations
@@ -126,7 +126,7 @@ def test_bench_tables_prints_the_saved_run(tmp_path):
 
 
 def test_bench_tables_ratios_are_the_scaling_table(tmp_path):
-    """--ratios: one row per arm, medians and the #11 ratios computed from them."""
+    """--ratios: one row per arm, medians and the ratios computed from them."""
     ops = {"jacobian": 1.0, "floor": 2.0, "lnva": 2.2, "jvja": 2.4, "sim_jvja": 19.2,
            "sim_jvja_lim": 24.0, "jvja_bounded_free": 3.0}  # fmt: skip
     bench = {

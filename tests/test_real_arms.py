@@ -199,7 +199,7 @@ def test_inspect_simulate_and_replay_from_the_command_line(name, tmp_path):
     )  # fmt: skip
     assert p.returncode == 0, p.stderr
     # the diagnostics may say that k_S passes the paper's RCN threshold of 100 (a quality warning
-    # that issue 10 does not exclude); any other warning (velocity, near-singular,
+    # that the start rules do not exclude); any other warning (velocity, near-singular,
     # near-intolerable, off the path) fails
     assert not [line for line in _only_expected_warnings(p.stderr) if RCN_WARNING not in line], (
         p.stderr

@@ -77,7 +77,7 @@ def lock_run(robot: str) -> tuple[ft.Arm, Run]:
 
 @pytest.fixture(scope="module")
 def planar():
-    """The issue's example: planar 3R, circle, joint2 locks at 0.5 s."""
+    """The example: planar 3R, circle, joint2 locks at 0.5 s."""
     return lock_run("planar_3r")
 
 

@@ -1,4 +1,4 @@
-"""Whole-path planner (issue 13): the DP is exact on its grid, plans keep the task and the limits,
+"""Whole-path planner: the DP is exact on its grid, plans keep the task and the limits,
 and from the same start the plan's mean jump is never above LNVA's and JVJA's."""
 
 import numpy as np

@@ -19,14 +19,14 @@ the rows' blocks taking turns over ten rounds so that a drift of the machine hit
 Garbage collection is off while timing (as ``timeit`` does).
 Configurations come from a seeded pool of generic postures (no singularity, no near-intolerable
 scenario). The table gives the median and the 99th percentile of a call in microseconds, then
-the issue's targets with PASS / FAIL. ``--json FILE`` keeps everything (with the machine) for
+the targets with PASS / FAIL. ``--json FILE`` keeps everything (with the machine) for
 ``--compare A.json B.json``.
 
 Example:
     fault-tolerance bench --robots planar_3r panda_pose --steps 2000 --json new.json
 
 Layout: :mod:`.cases` (arms, pool, the rows of each arm, by group), :mod:`.timing` (how a call is
-timed), :mod:`.routes` (the generic-solver routes), :mod:`.targets` (the issue's targets),
+timed), :mod:`.routes` (the generic-solver routes), :mod:`.targets` (the targets),
 :mod:`.report` (tables, JSON, ``--compare``), :mod:`.machine` (the machine), :mod:`.command`
 (options and the run).
 """

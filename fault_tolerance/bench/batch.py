@@ -1,6 +1,6 @@
 """Benchmark of the batched API: time per configuration against a loop over the plain API.
 
-The case of issue 14: the Panda, position task, five lockable joints, 20 000 configurations.
+The case: the Panda, position task, five lockable joints, 20 000 configurations.
 Both sides compute the Jacobian (Pinocchio), JVJA's rates, their jump (9)/(10) and the reduced
 condition numbers (15) of every configuration; the loop is timed on a subset (``reference``
 configurations) and scaled per configuration. Used by ``fault-tolerance bench``.
@@ -14,7 +14,7 @@ import numpy as np
 
 from fault_tolerance.analysis import batch
 
-#: The issue's target: at least this many times less time per configuration than the loop.
+#: The target: at least this many times less time per configuration than the loop.
 TARGET_SPEEDUP = 10.0
 LOCKABLE = [0, 1, 2, 3, 4]
 

@@ -104,7 +104,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--plan",
         action="store_true",
         help="time the whole-path planner (algorithm 'global') instead: planar 3R, spatial 4R, "
-        "Panda pose and position 1 s paths, with the issue's time targets and memory",
+        "Panda pose and position 1 s paths, with the time targets and memory",
     )
 
 

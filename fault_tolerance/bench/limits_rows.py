@@ -1,4 +1,4 @@
-"""Benchmark rows of the joint limits (issue 12): the bounded JVJA step and a generic QP route.
+"""Benchmark rows of the joint limits: the bounded JVJA step and a generic QP route.
 
 * ``jvja_bounded_free``: ``Controller(limits=True)`` JVJA step where no bound is active (the fast
   step and the box check);

@@ -1,4 +1,4 @@
-"""``fault-tolerance bench --plan``: wall time and memory of the whole-path planner (issue 13).
+"""``fault-tolerance bench --plan``: wall time and memory of the whole-path planner.
 
 One planning call (:func:`fault_tolerance.planning.wholepath.plan.plan_path`) per case, timed with
 ``time.perf_counter``; memory is the peak of Python allocations during a second, traced call

@@ -1,10 +1,10 @@
-"""The issue's targets, evaluated on a benchmark's results: one dict per target, PASS / FAIL / info."""
+"""The targets, evaluated on a benchmark's results: one dict per target, PASS / FAIL / info."""
 
 from __future__ import annotations
 
 #: The issues' targets.
 MAX_JVJA_OVER_LNVA = 1.5
-#: Tighter JVJA / LNVA bounds of issue 11 for some arms.
+#: Tighter JVJA / LNVA bounds for some arms.
 JVJA_OVER_LNVA_BY_ARM = {"panda_pose": 1.15, "panda_position": 1.15, "chain_50": 1.3}
 MAX_JVJA_OVER_FLOOR = 1.3
 MAX_SIM_OVER_STEP = 10.0
@@ -12,10 +12,10 @@ MAX_MULTI_OVER_SINGLE = 2.0
 MIN_EXPLICIT_OVER_JVJA = 10.0
 EXPLICIT_TARGET_ARMS = ("panda_pose", "panda_position")
 MAX_JVJA_P99_US = 100.0
-#: Joint limits (#12): bounded JVJA step / unbounded, with no bound and with two bounds active.
+#: Joint limits: bounded JVJA step / unbounded, with no bound and with two bounds active.
 MAX_BOUNDED_FREE_OVER_JVJA = 1.3
 MAX_BOUNDED_TWO_OVER_JVJA = 4.0
-#: Dynamics (#23): one dynamics sample (control law + ABA step) / one kinematic JVJA step.
+#: Dynamics: one dynamics sample (control law + ABA step) / one kinematic JVJA step.
 MAX_DYN_OVER_STEP = 20.0
 
 #: Generic routes that must be slower than the fast JVJA step: (row, label).
@@ -89,7 +89,7 @@ def arm_targets(key: str, ops: dict) -> list[dict]:
 
 
 def _issue11(key: str, med, jv) -> list[dict]:
-    """Floor, simulated sample and multi-joint targets (issue 11), when their rows are there."""
+    """Floor, simulated sample and multi-joint targets, when their rows are there."""
     out = []
     floor, sim, multi = med("floor"), med("sim_jvja"), med("jvja_multi")
     if jv and floor:
@@ -131,5 +131,5 @@ def _limit_targets(key, jv, med) -> list[dict]:
 
 
 def targets(results: dict) -> list[dict]:
-    """The issue's targets, evaluated on medians (p99 for the latency bound)."""
+    """The targets, evaluated on medians (p99 for the latency bound)."""
     return [item for key, res in results.items() for item in arm_targets(key, res["ops"])]

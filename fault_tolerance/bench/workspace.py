@@ -1,4 +1,4 @@
-"""Benchmark of the workspace sweep: one Dask worker against two (issue 14's scaling targets).
+"""Benchmark of the workspace sweep: one Dask worker against two.
 
 ``fault-tolerance bench --workspace [GRID]`` runs the same command (:func:`command`) as separate
 processes: a 201 x 201 planar-3R map on one worker (target: under 30 s), then a GRID x GRID map
@@ -28,7 +28,7 @@ import numpy as np
 
 from fault_tolerance.errors import FaultToleranceError
 
-#: The issue's targets: two workers at least this many times faster than one on a large map ...
+#: The targets: two workers at least this many times faster than one on a large map ...
 TARGET_SPEEDUP = 1.7
 #: ... and a 201 x 201 planar-3R map within this many seconds on one worker.
 MAX_SMALL_S = 30.0

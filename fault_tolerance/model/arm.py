@@ -315,5 +315,5 @@ class Arm:
         )
 
 
-#: Names that lived in this module before the split into catalog / chains / loading (#11);
+#: Names that lived in this module before the split into catalog / chains / loading;
 #: kept importable from here for code written against the old layout.

@@ -1,4 +1,4 @@
-"""Whole-path minimum-jump planning (issue 13; MATH.md "Whole-path planning").
+"""Whole-path minimum-jump planning.
 
 The local planners choose the rates at each instant; this package plans the whole path: it
 minimises the mean (or the maximum) of the square-sum jump λ(t) subject to ``J q̇ = ẋ_cmd`` at every
