@@ -32,6 +32,7 @@ import numpy as np
 
 from fault_tolerance.errors import (
     FaultToleranceError,
+    InfeasibleBounds,
     IntolerableAtStart,
     IntolerableFailure,
     InvalidInput,
@@ -184,6 +185,11 @@ def _seeds(arm: Arm, sc: Scenarios, rng, max_seeds: int):
 _CHEAP_FIRST = ("lnva", "jvja", "mda")
 
 
+#: Errors of a run from one candidate start that refuse that candidate only (its solves, its
+#: scenarios there); an invalid option or description still ends the command.
+CANDIDATE_REFUSALS = (InfeasibleBounds, IntolerableFailure)
+
+
 def _check(arm, q0, path, algorithms, sc, sim_options):
     """Simulate ``path`` from ``q0``: ``(problem, caveat, largest k_S, runs)``."""
     from fault_tolerance.simulation.simulate import simulate
@@ -191,7 +197,10 @@ def _check(arm, q0, path, algorithms, sc, sim_options):
     order = sorted(algorithms, key=lambda a: _CHEAP_FIRST.index(a) if a in _CHEAP_FIRST else 9)
     worst, caveat, runs = 0.0, None, {}
     for alg in order:
-        run = simulate(arm, path, alg, q0=q0, lockable=sc, **sim_options)
+        try:
+            run = simulate(arm, path, alg, q0=q0, lockable=sc, **sim_options)
+        except CANDIDATE_REFUSALS as err:  # one refused candidate, not the end of the search
+            return f"{alg}: refused ({str(err).splitlines()[0][:200]})", None, worst, {}
         problem = run_problem(arm, run)
         if problem:
             return f"{alg}: {problem}", None, worst, {}
