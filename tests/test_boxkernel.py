@@ -204,12 +204,12 @@ def test_controller_compiled_step_equals_reference(robot, task, lockable, weight
     assert checked > trials // 2 and compiled > 0, (checked, ctrl.bounded_steps)
 
 
-def test_damped_reduced_robots_compiled():
-    """A reduced Jacobian near its singularity: the reference's damped rates, compiled."""
+def test_near_singular_reduced_robots_left_to_the_exact_reference():
+    """A reduced Jacobian near its singularity: the compiled solve refuses, the exact reference solves."""
     arm = ft.load_arm("panda")
     ctrl = Controller(arm, [0, 2, 4, 6], backend="numba")
     rng = np.random.default_rng(4)
-    damped = 0
+    refused = 0
     for trial in range(120):
         q = arm.random_q(rng)
         if trial % 2:
@@ -228,10 +228,10 @@ def test_damped_reduced_robots_compiled():
         smin = min(
             np.linalg.svd(np.delete(J, S, 1), compute_uv=False)[-1] for S in ctrl.scenarios.sets
         )
-        compiled = ctrl.bounded_reference_steps == before and ctrl.bounded_steps > bounded_before
-        if compiled and smin < 1e-3:
-            damped += 1
-    assert damped >= 5
+        to_reference = ctrl.bounded_reference_steps > before and ctrl.bounded_steps > bounded_before
+        if to_reference and smin < 1e-3:
+            refused += 1
+    assert refused >= 5
 
 
 def test_reference_route_is_taken_and_counted():

@@ -69,7 +69,8 @@ def test_central_differences_of_the_dynamics(name):
         dqdd_dtau, np.linalg.inv(M), atol=1e-5 * np.abs(np.linalg.inv(M)).max()
     )
     dT = [
-        (dyn.kinetic_energy(q, qd + h * e) - dyn.kinetic_energy(q, qd - h * e)) / (2 * h) for e in eye
+        (dyn.kinetic_energy(q, qd + h * e) - dyn.kinetic_energy(q, qd - h * e)) / (2 * h)
+        for e in eye
     ]
     np.testing.assert_allclose(dT, M @ qd, atol=1e-5)
     dtau_dq = np.column_stack(

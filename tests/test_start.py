@@ -128,3 +128,22 @@ def test_proposal_keeps_the_start_point_when_it_can():
     with pytest.raises(ft.IntolerableAtStart, match="same start point") as info:
         check_start(arm, sc, arm.q_reference, x0=x0, algorithms=("lnva",))
     np.testing.assert_allclose(arm.fk(np.array(info.value.q0)), x0, atol=1e-8)
+
+
+def test_a_refused_candidate_is_one_refused_candidate(monkeypatch):
+    """A run that raises InfeasibleBounds from one candidate start refuses that candidate only."""
+    import fault_tolerance.simulation.simulate as simulation
+
+    real, calls = simulation.simulate, []
+
+    def first_refused(*args, **kwargs):
+        calls.append(kwargs.get("q0"))
+        if len(calls) == 1:
+            raise ft.InfeasibleBounds("the task scaling did not converge (injected)")
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(simulation, "simulate", first_refused)
+    arm = ft.load_arm("planar_3r")
+    choice = ft.default_start(arm)
+    assert len(calls) >= 2 and choice.tried >= 2
+    assert not np.allclose(choice.q0, calls[0])  # the refused candidate was not chosen

@@ -279,7 +279,9 @@ def _extras(run_, arm, html: bool):
 
 def print_dynamics_table(runs) -> None:
     """Peak torque and its ratio to the effort limit, per run of ``--dynamics``."""
-    print(f"{'algorithm':13} {'peak |τ| [N·m]':>15} {'peak |τ|/τmax':>14} {'saturated samples':>18}")
+    print(
+        f"{'algorithm':13} {'peak |τ| [N·m]':>15} {'peak |τ|/τmax':>14} {'saturated samples':>18}"
+    )
     for alg, run_ in runs.items():
         s = run_.summary()
         ratio = s["torque_peak_ratio"]

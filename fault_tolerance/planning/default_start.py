@@ -32,6 +32,7 @@ import numpy as np
 
 from fault_tolerance.errors import (
     FaultToleranceError,
+    InfeasibleBounds,
     IntolerableAtStart,
     IntolerableFailure,
     InvalidInput,
@@ -180,6 +181,11 @@ def _seeds(arm: Arm, sc: Scenarios, rng, max_seeds: int):
         )
 
 
+#: Errors of a run from one candidate start that refuse that candidate only (its solves, its
+#: scenarios there); an invalid option or description still ends the command.
+CANDIDATE_REFUSALS = (InfeasibleBounds, IntolerableFailure)
+
+
 def _check(arm, q0, path, algorithms, sc, sim_options):
     """Simulate ``path`` from ``q0``: ``(problem, caveat, largest k_S, runs)``.
 
@@ -196,7 +202,10 @@ def _check(arm, q0, path, algorithms, sc, sim_options):
         own = dict(sim_options)
         if "options" in own:
             own["options"] = options_for(alg, own["options"])
-        run = simulate(arm, path, alg, q0=q0, lockable=sc, **own)
+        try:
+            run = simulate(arm, path, alg, q0=q0, lockable=sc, **own)
+        except CANDIDATE_REFUSALS as err:  # one refused candidate, not the end of the search
+            return f"{alg}: refused ({str(err).splitlines()[0][:200]})", None, worst, {}
         problem = run_problem(arm, run)
         if problem:
             return f"{alg}: {problem}", None, worst, {}

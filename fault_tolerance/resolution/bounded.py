@@ -31,7 +31,7 @@ from typing import NamedTuple
 import numpy as np
 
 from fault_tolerance.errors import InvalidInput
-from fault_tolerance.numerics.linalg import damped_pivots, projection, reduced_rates
+from fault_tolerance.numerics.linalg import PIVOT_EPS, projection, reduced_rates
 from fault_tolerance.resolution.box_qp import BOX_TOL, BoxSolution, solve_box
 from fault_tolerance.resolution.indices import RESPONSES
 from fault_tolerance.resolution.registry import check_task, get, split
@@ -99,23 +99,75 @@ def bounded_least_norm(J, xdot, lo, hi, target=None, proj=None) -> BoxSolution:
     return solve_box(p0, a, _null_basis(proj.N), lo, hi)
 
 
+#: ``ẋ`` is in the range of ``J_S`` when its least-squares residual is below this, relative.
+RANGE_RTOL = 1e-12
+#: Singular values of ``J_S`` below this times ``σ_max`` are zero in (L4a) (SVD rounding ~1e-16).
+EXACT_RANK_RTOL = 1e-13
+
+
+# Eqn. (L4a): the exact, undamped parametrisation of the reduced robot's task set.
+def exact_task_set(Js: np.ndarray, xdot: np.ndarray):
+    """``(d, Z, reachable)``: ``J_S d = ẋ`` (least norm, undamped), ``Z`` orthonormal null basis.
+
+    From one SVD ``J_S = U Σ Vᵀ``: singular values below ``EXACT_RANK_RTOL σ_max`` are zero, ``d =
+    V_k Σ_k⁻¹ U_kᵀ ẋ`` (large near a singularity: the box, not damping, keeps the rates finite),
+    ``Z = V[:, k:]``. ``reachable`` is False when ``ẋ`` leaves the range of ``J_S`` (then only
+    ``s = 0`` is feasible, at any box).
+    """
+    U, sv, Vt = np.linalg.svd(Js, full_matrices=True)
+    k = int(np.sum(sv > EXACT_RANK_RTOL * max(float(sv[0]) if len(sv) else 0.0, 1e-300)))
+    c = U[:, :k].T @ xdot
+    d = Vt[:k].T @ (c / sv[:k])
+    resid = float(np.linalg.norm(xdot - U[:, :k] @ c))
+    reachable = resid <= RANGE_RTOL * max(float(np.linalg.norm(xdot)), 1e-300)
+    return d, Vt[k:].T, reachable
+
+
+def exact_reduced_least_norm(Js, xdot, lo, hi, target=None) -> BoxSolution:
+    """(L4) exactly: ``min ‖v − c‖²`` at the largest ``s`` with ``J_S v = s ẋ`` in ``[lo, hi]``.
+
+    No damping at any ``σ_min(J_S)``: ``s`` is the largest feasible task scaling (the LP's), the
+    rates the nearest ones at that ``s``. ``ẋ`` outside the range of ``J_S``: ``s = 0``.
+    """
+    d, Z, reachable = exact_task_set(Js, xdot)
+    p0 = np.zeros(Js.shape[1]) if target is None else Z @ (Z.T @ target)
+    if not reachable:
+        sol = solve_box(p0, np.zeros_like(d), Z, lo, hi)  # only s = 0 keeps J_S v ∥ ẋ
+        return BoxSolution(sol.qd, 0.0, sol.active, sol.iterations)
+    return solve_box(p0, d, Z, lo, hi)
+
+
 def reduced_bounded(J, xdot, S, lo, hi, target=None, guess=None) -> BoxSolution:
     """The reduced robot (joints ``S`` locked) under the box: (L4) with ``J_S``, in full size (n,).
 
-    ``guess``: its unbounded rates when known (closed form (G1)); inside the box they are the
-    answer. ``target`` (n,): the rates it stays nearest to (continuation response), else 0.
+    ``guess``: its exact unbounded rates when known (closed form (G1), undamped); inside the box
+    and on its task set they are the answer. ``target`` (n,): the rates it stays nearest to
+    (continuation response), else 0. Exact at any ``σ_min(J_S)`` (:func:`exact_reduced_least_norm`).
     """
     n = J.shape[1]
-    if guess is not None and np.all(guess >= lo - BOX_TOL) and np.all(guess <= hi + BOX_TOL):
+    if guess is not None and _inside(guess, lo, hi) and _on_task(J, guess, xdot, S):
         return BoxSolution(np.clip(guess, lo, hi), 1.0, np.zeros(n, dtype=bool), 0)
     keep = np.array([j for j in range(n) if j not in set(S)], dtype=int)
     c = None if target is None else np.asarray(target)[keep]
-    sol = bounded_least_norm(J[:, keep], xdot, lo[keep], hi[keep], c)
+    sol = exact_reduced_least_norm(J[:, keep], xdot, lo[keep], hi[keep], c)
     qd = np.zeros(n)
     qd[keep] = sol.qd
     active = np.zeros(n, dtype=bool)
     active[keep] = sol.active
     return BoxSolution(qd, sol.scale, active, sol.iterations)
+
+
+def _on_task(J, v, xdot, S) -> bool:
+    """``J v = ẋ`` to rounding with ``v_S = 0``: a (G1) guess the reduced robot may take as is."""
+    if not np.all(np.isfinite(v)) or np.any(v[list(S)] != 0.0):
+        return False
+    scale = float(np.abs(J).max(initial=0.0) * np.abs(v).sum() + np.abs(xdot).max(initial=0.0))
+    return bool(np.abs(J @ v - xdot).max(initial=0.0) <= 1e-10 * max(scale, 1e-300))
+
+
+def exact_guesses_allowed(proj, pivots) -> bool:
+    """The (G1) rates are exact reduced least-norm rates: ``J`` undamped, no pivot damped."""
+    return (not proj.damped) and bool(np.min(pivots, initial=np.inf) >= PIVOT_EPS)
 
 
 def _scenarios(J, lockable, weights, joint_names) -> Scenarios:
@@ -127,9 +179,10 @@ def reduced_under_limits(J, xdot, sc: Scenarios, lo, hi, *, proj=None, tolerate=
     """Bounded least-norm rates of every reduced robot (L4), shape (f, n), and their scalings (f,)."""
     proj = proj or projection(J)
     a = proj.Jpinv @ xdot
-    if not tolerate:
-        sc.check_tolerable(proj.N)
-    guesses = [reduced_rates(a, proj.N, S, damp=tolerate) for S in sc.sets]
+    pivots = sc.pivots(proj.N) if tolerate else sc.check_tolerable(proj.N)
+    guesses: list[np.ndarray | None] = [None] * sc.f  # each reduced robot solved from its J_S
+    if exact_guesses_allowed(proj, pivots):
+        guesses = [reduced_rates(a, proj.N, S) for S in sc.sets]
     sols = [
         reduced_bounded(J, xdot, S, lo, hi, guess=g) for S, g in zip(sc.sets, guesses, strict=True)
     ]
@@ -162,7 +215,7 @@ def _continuation(J, xdot, sc, lo, hi, proj, tolerate, H=None) -> BoxSolution:
     L = np.linalg.cholesky(G)
     x0 = a - Z @ np.linalg.solve(G, Z.T @ (H @ a))
     M = np.linalg.solve(L, Z.T).T  # Z L⁻ᵀ
-    return solve_box(np.zeros_like(x0), x0, M, lo, hi)
+    return solve_box(np.zeros_like(x0), x0, M, lo, hi, Z=Z, H=H)  # s found with Z, well conditioned
 
 
 def _jvja_least_norm(J, xdot, sc, lo, hi, proj, tolerate):
@@ -227,11 +280,13 @@ def bounded_jvja(
     if response == "least_norm" and sc.singletons:  # fast path: nothing meets a bound
         N = proj.N
         a = proj.Jpinv @ xdot
-        pivots = damped_pivots(sc.pivots(N)) if tolerate else sc.check_tolerable(N)
+        pivots = sc.pivots(N) if tolerate else sc.check_tolerable(N)
         cols = sc.columns
-        post = a - (a[cols] / pivots)[:, None] * N[cols]  # (G1) for every scenario (N symmetric)
+        exact = exact_guesses_allowed(proj, pivots)  # damped (G1) rates are not the reduced LNVA
+        post = a - (a[cols] / np.maximum(pivots, PIVOT_EPS))[:, None] * N[cols]  # (G1), N symmetric
+        post[np.arange(sc.f), cols] = 0.0
         qd = sc.weights @ post / sc.weights.sum()  # (G2): the mean is already on the task's set
-        if _inside(qd, lo, hi) and _inside(post, lo, hi):
+        if exact and _inside(qd, lo, hi) and _inside(post, lo, hi):
             ones = np.ones(sc.f)
             return BoundedRates(np.clip(qd, lo, hi), 1.0, np.zeros(n, dtype=bool), ones)
     if response == "least_norm":

@@ -21,6 +21,7 @@ from fault_tolerance.resolution.bounded import (
     SCALE_TOL,
     _scenarios,
     check_bounds,
+    exact_guesses_allowed,
     reduced_bounded,
     reduced_under_limits,
 )
@@ -41,11 +42,11 @@ def post_failure_under_limits(
         return reduced_under_limits(J, xdot, sc, lo, hi, proj=proj, tolerate=tolerate)
     if response != "continuation":
         raise InvalidInput(f"response {response!r} is not one of {RESPONSES}")
-    if not tolerate:
-        sc.check_tolerable(proj.N)
+    pivots = sc.pivots(proj.N) if tolerate else sc.check_tolerable(proj.N)
+    exact = exact_guesses_allowed(proj, pivots)  # else every reduced robot is solved from J_S
     sols = []
     for S in sc.sets:
-        guess = reduced_rates(qd, proj.N, S, damp=tolerate)  # (G3), unbounded
+        guess = reduced_rates(qd, proj.N, S) if exact else None  # (G3), unbounded
         sols.append(reduced_bounded(J, xdot, S, lo, hi, target=qd, guess=guess))
     return np.array([s.qd for s in sols]), np.array([s.scale for s in sols])
 
@@ -83,11 +84,15 @@ def jvj_under_limits(
 
 
 def tolerable_under_limits(J, xdot, lockable=None, *, bounds, joint_names: Sequence[str] = ()):
-    """Task scaling ``s_S`` each reduced robot needs under ``bounds`` (f,); ``s_S < 1``: intolerable."""
+    """Task scaling ``s_S`` each reduced robot needs under ``bounds`` (f,); ``s_S < 1``: intolerable.
+
+    The largest feasible scaling of each reduced robot's LP (L4), at any ``σ_min(J_S)``: a scenario
+    that loses the task (``N[S, S]`` singular) has ``s_S = 0`` (or what its box still allows).
+    """
     J = np.asarray(J, dtype=float)
     lo, hi = check_bounds(bounds, J.shape[1])
     sc = _scenarios(J, lockable, None, joint_names)
-    _, scales = reduced_under_limits(J, np.asarray(xdot, dtype=float), sc, lo, hi)
+    _, scales = reduced_under_limits(J, np.asarray(xdot, dtype=float), sc, lo, hi, tolerate=True)
     return scales
 
 

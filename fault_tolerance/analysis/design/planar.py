@@ -32,7 +32,7 @@ import numpy as np
 import pinocchio as pin
 
 from fault_tolerance.analysis import batch
-from fault_tolerance.errors import InvalidInput
+from fault_tolerance.errors import InfeasibleBounds, IntolerableFailure, InvalidInput
 from fault_tolerance.model.arm_spec import arm_of
 from fault_tolerance.model.planar import (
     full_turn,
@@ -150,7 +150,13 @@ def task_indices(arm, A, task: Task, lock_cols, dt: float) -> dict:
     q0 = start_in_limits(arm, task.x0, A, lock_cols)
     if q0 is None:
         return {"feasible": False, "reason": "x0 is not reachable within the limits"}
-    r = simulate(arm, task.path(), "jvja", q0=q0, lockable=lock_cols, dt=dt)
+    try:
+        r = simulate(arm, task.path(), "jvja", q0=q0, lockable=lock_cols, dt=dt)
+    except (
+        InfeasibleBounds,
+        IntolerableFailure,
+    ) as err:  # one refused design, not the search's end
+        return {"feasible": False, "reason": str(err).splitlines()[0][:200]}
     inside = bool(np.all((r.q >= A[:, 0] - 1e-9) & (r.q <= A[:, 1] + 1e-9)))
     return {
         "feasible": inside,

@@ -14,8 +14,8 @@ numba (and tested so). See docs/MATH.md "Joint limits, compiled".
 
 Codes of :func:`bounded_solve`: 0 solved, 1 no certificate ``σ_min(J) ≥ SIGMA_EPS`` (the
 reference damps), 2 a pivot below the threshold (intolerable, or damped with ``tolerate``), 3 a
-reduced Jacobian too near the reference's damping or rank threshold to decide (a damped one is
-solved, with the reference's damped rates), 4 no rates in the box reach any ``s ≥ 0``, 5 the
+reduced Jacobian near its singularity (``σ_min(J_S) < SIGMA_EPS``, where the reference solves the
+reduced robot exactly from ``J_S`` with no damping) or too near that threshold to decide, 4 no rates in the box reach any ``s ≥ 0``, 5 the
 active set did not converge. Every code but 0 is left to the reference.
 """
 
@@ -29,7 +29,6 @@ from fault_tolerance.control.fast.step import compiled_kernel
 from fault_tolerance.numerics.linalg import RANK_RTOL
 from fault_tolerance.resolution.box_qp import BOX_TOL
 from fault_tolerance.resolution.fast.box_basis import (
-    damped_rates,
     factor,
     null_basis,
     reduced_basis,
@@ -158,10 +157,8 @@ def _jvja_target(
             ps[sc], pb[sc] = 1.0, 0.0
             continue
         mu2 = undamped(J, S, k, tr * trinv, params, Gs)
-        if mu2 < 0.0:
+        if mu2 != 0.0:  # undecided, or near J_S's singularity: the reference solves it exactly
             return 3
-        if mu2 > 0.0 and not damped_rates(J, xdot, S, k, Gs, mu2, post, zr):
-            return 3  # near its singularity the reference's reduced robot takes damped rates
         rs = reduced_basis(Z, r, S, k, Zs, zr)
         if rs < 0:
             return 3
@@ -305,7 +302,8 @@ def reduced_solve(J, xdot, target, todo, post, scales, codes, F, Iw):  # pragma:
 
     As :func:`fault_tolerance.resolution.bounded.reduced_bounded` without a guess: ``min ‖q̇ − c‖²`` s.t.
     ``J_S q̇ = s ẋ`` in the box ``buf[0], buf[1]`` of the workspace, ``c = target`` (zeros: the
-    least-norm rates; the reference damps ``J_S`` near its singularity and so does this).
+    least-norm rates). Near ``J_S``'s singularity the scenario is left to the reference (code 3),
+    which solves it exactly without damping.
     ``codes[i]`` gets 0 (solved) or the module doc's code for scenario ``todo[i]`` (left to the
     reference). Returns 1 when ``J`` has no certificate (nothing solved), else 0.
     """
@@ -333,7 +331,7 @@ def reduced_solve(J, xdot, target, todo, post, scales, codes, F, Iw):  # pragma:
             codes[i] = 2
             continue
         mu2 = undamped(J, S, k, tr * trinv, p3, Gs)
-        if mu2 < 0.0 or (mu2 > 0.0 and not damped_rates(J, xdot, S, k, Gs, mu2, d, zr)):
+        if mu2 != 0.0:  # near J_S's singularity the reference solves it exactly (undamped)
             codes[i] = 3
             continue
         rs = reduced_basis(Z, r, S, k, Zs, zr)

@@ -12,7 +12,8 @@ the same rows are "flat" as in the reference. See docs/MATH.md "Joint limits, co
 
 Return codes: 0 solved, 1 a Farkas certificate (:func:`nearest_rates`), 4 no rates in the box
 reach any ``s ≥ 0`` (:class:`~fault_tolerance.errors.InfeasibleBounds` in the reference), 5 the
-active set did not converge (the reference raises too).
+active set or the task scaling did not converge: the caller hands the step to the reference,
+whose scaling then bisects (docs/MATH.md (L3b)) and so converges.
 """
 
 from __future__ import annotations
