@@ -73,6 +73,9 @@ SHORTER = {
     "bench": {"--robots": "planar_3r", "--steps": "3", "--warmup": "1",
               "--batch-configurations": "0"},
 }  # fmt: skip
+#: The same for a DH design (``design --vary dh``): one population, no pattern search.
+SHORTER_DH = {"--popsize": "4", "--generations": "0", "--rounds": "0", "--workers": "0",
+              "--no-progress": None}  # fmt: skip
 #: Examples that need what a test cannot give (a live viewer, a Dask cluster): parsed, not run.
 PARSED_ONLY = ("--open", "--scheduler")
 
@@ -130,7 +133,10 @@ def test_every_help_example_runs(tmp_path, monkeypatch, capsys):
         if any(opt in argv for opt in PARSED_ONLY):
             build_parser().parse_args(argv)
             continue
-        code = main(shorten(argv, SHORTER.get(cmd, {})))
+        dh = (
+            cmd == "design" and "--vary" in argv and argv[argv.index("--vary") + 1].startswith("dh")
+        )
+        code = main(shorten(argv, SHORTER_DH if dh else SHORTER.get(cmd, {})))
         err = capsys.readouterr().err
         assert code == 0, (argv, err)
     assert (tmp_path / "replay.html").stat().st_size > 100_000

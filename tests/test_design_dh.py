@@ -147,13 +147,13 @@ def test_cli_design_dh_and_its_urdf_reproduce(tmp_path):
     rec = json.loads((out / "design.json").read_text())
     assert rec["kind"] == "dh" and rec["pareto"] and rec["rcn_max"] <= 100
     q0 = ",".join(f"{v:.17g}" for v in rec["q0"])
-    sim = [sys.executable, "-m", "fault_tolerance", "simulate", "--urdf", str(out / "design.urdf"),
+    sim = [sys.executable, "-m", "fault_tolerance", "simulate", "--description", str(out / "design.urdf"),
            "--tip", "tool", "--task", "position", "--lockable", "joint1,joint2,joint3",
            "--q0", q0, "--radius", "0.075", "--rows", "y,z", "--algorithms", "jvja",
            "--no-limits", "--no-progress", "--out", str(tmp_path / "check")]  # fmt: skip
     p = subprocess.run(sim, capture_output=True, text=True, timeout=900)
     assert p.returncode == 0, p.stderr
-    got = json.loads((tmp_path / "check" / "jvja" / "summary.json").read_text())
+    got = json.loads((tmp_path / "check" / "jvja" / "summary.json").read_text())["summary"]
     assert got["jvj_mean"] == pytest.approx(rec["mean_jvj"], rel=1e-6)
     assert got["rcn_max"] == pytest.approx(rec["K_max"], rel=1e-6)  # summary.json: max K(t)
 

@@ -253,7 +253,8 @@ def default_start(
         >>> import fault_tolerance as ft
         >>> arm = ft.load_arm("ur5")
         >>> start = ft.default_start(arm)
-        >>> bool(ft.start.inside_limits(arm, start.q0, ft.start.LIMIT_MARGIN))
+        >>> from fault_tolerance.planning.start_checks import LIMIT_MARGIN, inside_limits
+        >>> bool(inside_limits(arm, start.q0, LIMIT_MARGIN))
         True
     """
     sc = lockable_scenarios(arm, lockable)

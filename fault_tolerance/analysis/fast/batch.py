@@ -17,7 +17,7 @@ Multi-joint scenarios are not run here (no cheap error estimate for ``λ_min(N[S
 
 Example:
     >>> import numpy as np
-    >>> from fault_tolerance import batch_kernel
+    >>> from fault_tolerance.analysis.fast import batch as batch_kernel
     >>> from fault_tolerance.resolution.scenarios import scenarios
     >>> Js = np.array([[[1.0, 0.5, 0.2]], [[0.0, 0.0, 0.0]]])        # B = 2, m = 1, n = 3
     >>> out, status = batch_kernel.rates(Js, np.ones((2, 1)), scenarios([0, 1], 3, r=2))
