@@ -28,7 +28,9 @@ def task():
 @pytest.mark.parametrize("response", ["least_norm", "continuation"])
 @pytest.mark.parametrize("half_width", [0.05, 0.3, 5.0])  # scaled, some bounds active, inside
 @pytest.mark.parametrize("w", EXTREME)
-def test_bounded_jvja_rates_do_not_depend_on_the_scale_of_the_weights(task, response, half_width, w):
+def test_bounded_jvja_rates_do_not_depend_on_the_scale_of_the_weights(
+    task, response, half_width, w
+):
     """Weights c·1 give the rates and scale of weights 1: never q̇ = 0 with s = 1 for ẋ ≠ 0."""
     J, xd = task
     box = (-half_width * np.ones(3), half_width * np.ones(3))
