@@ -126,3 +126,39 @@ def test_lock_reports_the_jump_at_the_lock_instant_with_units():
     )
     assert q.returncode == 0, q.stderr
     assert "(rad/s)², of which joint2's lock" in q.stdout
+
+
+def test_replay_page_of_several_runs_names_start_and_winner(tmp_path):
+    """A replay page of a folder of runs lists their start and the λ winners; one run: nothing."""
+    pytest.importorskip("fault_tolerance.viz")
+    from fault_tolerance.viz.page import export_html
+
+    arm = ft.load_arm("planar_3r")
+    q0 = ft.initial_posture(arm, [0.35, 0.0]).q
+    path = CirclePath([0.35, 0.0], 0.1, 2 * np.pi, 0.3)
+    runs = {a: simulate(arm, path, a, q0=q0, dt=0.01) for a in ("lnva", "jvja")}
+    for a, r in runs.items():
+        r.save(tmp_path / "runs" / a)
+    html = export_html(tmp_path / "runs", tmp_path / "page.html").read_text()
+    block = html[html.index('<ul id="ft-comparison"') : html.index("</ul>")]
+    assert "every method from the same q0" in block
+    winner = compare_runs(runs).mean_winners[0]
+    assert f"winner: λ mean {'='.join(winner)}" in block
+    one = export_html(runs["jvja"], tmp_path / "one.html", arm).read_text()
+    assert 'id="ft-comparison"' not in one
+
+
+def test_report_table_names_the_winner_from_the_cases_one_start():
+    """REPORT.md's λ table says which method won on mean and on max λ, ties named together."""
+    from fault_tolerance.paper.report import write_report
+
+    algs = {
+        "lnva": {"jvj_mean": 3.0, "jvj_max": 5.0, "rcn_mean": 1.0, "rcn_max": 1.0},
+        "jvja": {"jvj_mean": 2.0, "jvj_max": 5.0, "rcn_mean": 1.0, "rcn_max": 1.0},
+        "mda": {"jvj_mean": 4.0, "jvj_max": 4.0, "rcn_mean": 1.0, "rcn_max": 1.0},
+    }
+    text = write_report({"cases": {"fig2": {"algorithms": algs}}})
+    header = next(ln for ln in text.splitlines() if ln.startswith("| case | λ mean"))
+    assert "winner (mean / max), from the case's one q0" in header
+    row = next(ln for ln in text.splitlines() if ln.startswith("| fig2 | 3"))
+    assert row.rstrip().endswith("| jvja / mda |")
