@@ -93,6 +93,9 @@ def test_global_scores_are_the_runs_own_and_never_beaten(objective):
     for a, r in locals_.items():
         assert meta["scores"][a] == pytest.approx(float(stat(r.jvj)), rel=1e-9)
         assert stat(g.jvj) <= stat(r.jvj) * (1 + 1e-12)
+    best = min(float(stat(r.jvj)) for r in locals_.values())
+    expect = max(0.0, (best - float(stat(g.jvj))) / best)
+    assert meta["improvement_over_best_local"] == pytest.approx(expect, rel=1e-6, abs=1e-12)
     if meta["run"] != "plan" or meta["method"].startswith("warm start"):
         assert "note" in meta and f"the {objective} of λ" in meta["note"]  # says why
 

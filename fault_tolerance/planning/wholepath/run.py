@@ -111,16 +111,21 @@ def _run_summary(plan, runs: dict, choice: str) -> dict:
 
     ``scores``: the objective of the plan's run, of LNVA's and JVJA's runs from the same start and
     of the run reported (``final``), [(rad/s)²]; the planner's own estimates stay under
-    ``planned_scores``. ``improvement`` is over the best local run; ``note`` says when the plan is
-    not a plan of its own (a local run is reported, or the plan is that run).
+    ``planned_scores`` / ``planned_improvement``. ``improvement`` is over the warm start's run,
+    ``improvement_over_best_local`` over the better of LNVA and JVJA; ``note`` says when the plan
+    is not a plan of its own (a local run is reported, or the plan is that run).
     """
     scores = {a: _objective(r, plan.objective) for a, r in runs.items()}
     scores["final"] = scores[choice]
     local = min(("lnva", "jvja"), key=lambda a: scores[a])
     gain = max(0.0, (scores[local] - scores["final"]) / max(abs(scores[local]), 1e-300))
+    warm = scores.get(plan.warm_start, scores[local])
+    over_warm = max(0.0, (warm - scores["final"]) / max(abs(warm), 1e-300))
     out = plan.summary()
     out["planned_scores"] = out.pop("scores")
-    out |= {"scores": scores, "improvement": gain, "best_local": local, "run": choice}
+    out["planned_improvement"] = out.pop("improvement")
+    out |= {"scores": scores, "improvement": over_warm, "improvement_over_best_local": gain,
+            "best_local": local, "run": choice}  # fmt: skip
     what = f"the {plan.objective} of λ"
     if choice != "plan":
         out["note"] = (
