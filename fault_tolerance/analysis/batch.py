@@ -4,7 +4,9 @@ Every function takes stacks of Jacobians ``Js`` (B, m, n) and works in chunks of
 :data:`CHUNK` rows, so the temporaries stay bounded for any B (the output is allocated once).
 The linear algebra is the scalar one (:mod:`.linalg`: one eigendecomposition of ``J Jᵀ`` per
 row, damped near singularities; (G1)/(G2) for the reduced rates), done by NumPy's stacked
-``eigh``/``solve``, so the results equal the scalar API's to rounding (tests: 1e-9 relative).
+``eigh``/``solve``, so the results equal the scalar API's to rounding: measured at most 1.05e-11
+relative on random and ill-conditioned rows of the shipped arms and the Panda, tested at
+``BATCH_RTOL = 1e-10`` (docs/batch.md, :mod:`.batch_agreement`).
 
 Example:
     >>> import numpy as np, fault_tolerance as ft

@@ -83,8 +83,16 @@ def add_parser(sub) -> argparse.ArgumentParser:
     return s
 
 
-def _lock_time(args, arm, path, q0, joint: str, duration: float, gain: dict):
+#: λ [(rad/s)²] at or below which a planned run's jump counts as zero (eq. 8 holds to rounding).
+ZERO_JUMP = 1e-24
+
+
+def _lock_time(args, arm, path, q0, joint: str, duration: float, gain: dict, lockable, feedback):
     """``--at``: a time, or the moment of the largest / smallest jump of the planned run.
+
+    The planned run is the lock run without its lock: the same lockable joints and feedback gain,
+    so the moment is chosen on the motion the lock then interrupts; λ is its total (9)/(10), and
+    the locking joint's own part is printed beside it.
 
     Returns ``(t_lock, planned)``; ``planned`` is the run without a lock (``None`` for a time).
     """
@@ -98,20 +106,38 @@ def _lock_time(args, arm, path, q0, joint: str, duration: float, gain: dict):
         path,
         args.algorithm,
         q0=q0,
-        lockable=[joint],
+        lockable=lockable,
         dt=args.dt,
         duration=duration,
+        feedback_gain=feedback,
         response=args.response,
         limits=not args.no_limits,
         **gain,
     )
+    top = float(np.max(planned.jvj))
+    if top <= ZERO_JUMP:  # λ ≡ 0 to rounding: no moment has a larger jump than another
+        t_lock = float(planned.t[0])
+        print(
+            f"the planned run's jump of {joint} is zero at every sample to rounding (largest "
+            f"λ = {top:.3g} (rad/s)² <= {ZERO_JUMP:g}): no moment of {args.at} jump exists; "
+            f"the lock is at the first sample, t = {t_lock:.3f} s"
+        )
+        return t_lock, planned
     k = int(np.argmax(planned.jvj) if args.at == "max" else np.argmin(planned.jvj))
     t_lock = float(planned.t[k])
     print(  # the λ the figure's last panel marks (plots.planned_jump)
         f"{args.at} jump of {joint} in the planned run at t = {t_lock:.3f} s "
-        f"(λ = {planned_jump(planned, t_lock):.4g})"
+        f"(λ = {planned_jump(planned, t_lock):.4g} (rad/s)²{_own_part(planned, joint, k)})"
     )
     return t_lock, planned
+
+
+def _own_part(planned, joint: str, k: int) -> str:
+    """``", of which joint2 0.12"``: the locking joint's scenario's part of λ at sample ``k``."""
+    sets = planned.meta.get("lockable") or []
+    if [joint] not in sets or len(sets) == 1:
+        return ""
+    return f", of which {joint}'s lock {planned.jvj_parts[k, sets.index([joint])]:.4g}"
 
 
 def run(args) -> int:
@@ -164,7 +190,7 @@ def _run(args) -> int:
     if choice is not None:
         print(choice.reason())
     announce_first_run(gain["engine"])
-    t_lock, planned = _lock_time(args, arm, path, q0, joint, duration, gain)
+    t_lock, planned = _lock_time(args, arm, path, q0, joint, duration, gain, lockable, feedback)
     progress = bar(int(round(duration / args.dt)) + 1, not args.no_progress, "lock")
     run_ = simulate(
         arm,
@@ -188,7 +214,8 @@ def _run(args) -> int:
     s = run_.summary()
     print(f"{joint} locks at t = {t_lock:.3f} s; servo: {servo.describe()}; K_p = {feedback} 1/s")
     print(
-        f"jump at the lock {s.get('jump_at_lock', 0.0):.4g} (rad/s)²; path error peak after the lock "
+        f"jump at the lock instant t = {t_lock:.3f} s: ‖q̇_after − q̇_before‖² = "
+        f"{s.get('jump_at_lock', 0.0):.4g} (rad/s)²; path error peak after the lock "
         f"{1e3 * s['path_error_peak_after_lock']:.3f} mm (before: {1e3 * s['path_error_max_before_lock']:.3f} mm)"
     )
     if run_.orientation_error is not None:  # radians apart from metres
@@ -254,7 +281,7 @@ def _run_dynamics(args) -> int:
     if choice is not None:
         print(choice.reason())
     duration = args.duration or path.duration
-    t_lock, _ = _lock_time(args, arm, path, q0, joint, duration, gain)
+    t_lock, _ = _lock_time(args, arm, path, q0, joint, duration, gain, lockable, feedback)
     brake = _brake_torque(args, arm, joint)
     models = {"ideal": dynamics_model(args), f"finite {brake:g} N·m": dynamics_model(args, brake)}
     out = output_folder(Path(args.out)) if args.out else None

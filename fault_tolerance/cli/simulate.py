@@ -26,6 +26,8 @@ from fault_tolerance.cli.dynamics_options import (
 )
 from fault_tolerance.cli.start_options import choose_start
 from fault_tolerance.errors import InvalidInput
+from fault_tolerance.simulation.compare import compare_runs
+from fault_tolerance.storage.atomic import to_json, write_atomic
 
 NAME = "simulate"
 HELP = "one task run with one or several algorithms"
@@ -57,6 +59,13 @@ def add_parser(sub) -> argparse.ArgumentParser:
     )
     add_plan_options(s)
     add_dynamics_options(s)
+    s.add_argument(
+        "--global-start",
+        default="same",
+        choices=["same", "free"],
+        help="global: start from the same q0 as the other methods (default, a like-for-like "
+        "table) or free on the self-motion of the path's start (the plan chooses it)",
+    )
     s.add_argument(
         "--out", default=None, help="output folder (default: none, only the table is printed)"
     )
@@ -116,16 +125,34 @@ def _sim_options(args, algs: list[str]) -> tuple[dict, dict]:
 
 
 def _global_start(alg: str, args) -> dict:
-    """For ``global``: its plan options, and a free start (q0=None) when only --x0 was given."""
+    """For ``global``: its plan options, and a free start (q0=None) with ``--global-start free``.
+
+    By default ``global`` starts where the other methods start, so that one table compares
+    methods, not starts.
+    """
     if alg != "global":
         return {}
     opts = {"objective": args.objective}
     if args.rcn_max is not None:
         opts["rcn_max"] = args.rcn_max
     extra: dict = {"plan_options": opts}
-    if args.q0 is None and args.x0 is not None:
-        extra["q0"] = None  # free on the self-motion of x0: the plan chooses its start
+    if getattr(args, "global_start", "same") == "free":
+        extra["q0"] = None  # free on the self-motion of the path's start: the plan chooses it
     return extra
+
+
+def _check_global_start(args, algs) -> None:
+    """``--global-start free`` needs ``global`` among the algorithms and no ``--q0``."""
+    if getattr(args, "global_start", "same") != "free":
+        return
+    if "global" not in algs:
+        raise InvalidInput(
+            "--global-start free needs global among --algorithms (it sets global's start)"
+        )
+    if args.q0 is not None:
+        raise InvalidInput(
+            "--global-start free frees global's start; it cannot be combined with --q0"
+        )
 
 
 def run(args) -> int:
@@ -194,6 +221,7 @@ def _run(args, out: Path | None) -> int:
 
     arm = load_robot(args)
     algs = _algorithms(args)
+    _check_global_start(args, algs)
     options, resolver = _sim_options(args, algs)
     out = output_folder(out) if out else None
     stepwise = [a for a in algs if a in registered()] or [TRACKED_PAST_PLAN]  # checks the start
@@ -246,9 +274,18 @@ def _run(args, out: Path | None) -> int:
         return EXIT_INTERRUPTED
     if progress:
         progress.close()
+    _report(runs, arm, algs, out, args.dynamics)
+    return 0
+
+
+def _report(runs, arm, algs, out, dynamics: bool = False) -> None:
+    """The table, its start and winner lines, warnings, and the comparison files in ``out``."""
     print_table(runs)
-    if args.dynamics:
+    if dynamics:
         print_dynamics_table(runs)
+    comparison = compare_runs(runs)
+    for line in comparison.lines() + _plan_lines(runs):
+        print(line)
     for alg, run_ in runs.items():
         report_warnings(NAME, alg, run_, arm)
         print(f"{alg}: {limits_line(run_)}")
@@ -258,8 +295,18 @@ def _run(args, out: Path | None) -> int:
 
         title = plain(f"{arm.name}: {', '.join(algs)}")  # names are data, not mathtext
         plots.save_figure(plots.plot_comparison(runs, title), out / "comparison")
-        print(f"wrote {out}/ (run.npz, run.csv, summary.json per algorithm; comparison.png/.svg)")
-    return 0
+        write_atomic(out / "comparison.json", to_json(comparison.as_dict()))
+        print(
+            f"wrote {out}/ (run.npz, run.csv, summary.json per algorithm; comparison.png/.svg, "
+            "comparison.json)"
+        )
+
+
+def _plan_lines(runs) -> list[str]:
+    """What the global plan did, when it is not a plan of its own (``global.note`` of its meta)."""
+    run_ = runs.get("global")
+    note = (run_.meta.get("global") or {}).get("note") if run_ is not None else None
+    return [f"global: {note}"] if note else []
 
 
 def _extras(run_, arm, html: bool):

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from fault_tolerance.simulation.compare import compare_runs
 from fault_tolerance.simulation.run import Run
 from fault_tolerance.simulation.simulate import simulate
 
@@ -45,6 +46,7 @@ def case_global(case, result: dict, *, progress=None) -> tuple[Run, dict]:
     algs = {"global": _stats(run, arm)} | {a: _stats(r, arm) for a, r in result["runs"].items()}
     plan = run.meta["global"]
     best_local = min(algs[a]["jvj_mean"] for a in ("lnva", "jvja"))
+    fair = compare_runs({"global": run, **result["runs"]}).as_dict()
     entry = {
         "q0": np.asarray(q0).tolist(),
         "algorithms": algs,
@@ -53,6 +55,10 @@ def case_global(case, result: dict, *, progress=None) -> tuple[Run, dict]:
         "improvement_over_warm_start": plan["improvement"],
         "improvement_over_best_local": (best_local - algs["global"]["jvj_mean"]) / best_local,
         "smallest_mean_jump": min(algs, key=lambda a: algs[a]["jvj_mean"]),
+        "same_start": fair["same_start"],
+        "start_of": fair["start_of"],
+        "winner_jvj_mean": fair["winner_jvj_mean"]["methods"],
+        "winner_jvj_max": fair["winner_jvj_max"]["methods"],
         "seconds": plan.get("seconds"),
     }
     return run, entry
@@ -107,6 +113,21 @@ def experiment_global(exp, *, duration: float | None = None, progress=None) -> t
     return runs, entry
 
 
+def _start_cell(e: dict) -> str:
+    """``same q0`` or which start each method used (entries from before lack the key: ``—``)."""
+    if "same_start" not in e:
+        return "—"
+    if e["same_start"]:
+        return "same q0 for all"
+    return ", ".join(f"{a}: {k}" for a, k in e["start_of"].items())
+
+
+def _winner_cell(e: dict) -> str:
+    if "winner_jvj_mean" not in e:
+        return "—"
+    return f"{'='.join(e['winner_jvj_mean'])} / {'='.join(e['winner_jvj_max'])}"
+
+
 def report_section(beyond: dict) -> str:
     """The REPORT.md section "Beyond the paper: whole-path planning" (Markdown)."""
     lines = [
@@ -118,8 +139,8 @@ def report_section(beyond: dict) -> str:
         "a * marks a run that leaves a joint's position limits or exceeds a velocity limit.",
         "",
         "| case | " + " | ".join(f"{a} mean λ / max λ / mean K" for a in COMPARED) + " | method "
-        "| vs warm start | vs best local |",
-        "|---|" + "---|" * (len(COMPARED) + 3),
+        "| vs warm start | vs best local | start | winner mean λ / max λ |",
+        "|---|" + "---|" * (len(COMPARED) + 5),
     ]
     for key, e in beyond.get("cases", {}).items():
         cells = []
@@ -138,7 +159,8 @@ def report_section(beyond: dict) -> str:
             f"| {key} | "
             + " | ".join(cells)
             + f" | {e['method']} | {100 * e['improvement_over_warm_start']:.1f} % "
-            f"| {100 * e['improvement_over_best_local']:.1f} % |"
+            f"| {100 * e['improvement_over_best_local']:.1f} % | {_start_cell(e)} "
+            f"| {_winner_cell(e)} |"
         )
     cases = beyond.get("cases", {})
     if cases:

@@ -25,8 +25,8 @@ def _verdict(ok_count: int, total: int) -> str:
 
 def _claim_jvja_smallest(cases: dict) -> tuple[str, list[str]]:
     rows = [
-        "| case | λ mean LNVA [(rad/s)²] | λ mean JVJA [(rad/s)²] | λ mean MDA [(rad/s)²] | λ max LNVA [(rad/s)²] | λ max JVJA [(rad/s)²] | λ max MDA [(rad/s)²] | JVJA smallest (mean / max) |",
-        "|---|---|---|---|---|---|---|---|",
+        "| case | λ mean LNVA [(rad/s)²] | λ mean JVJA [(rad/s)²] | λ mean MDA [(rad/s)²] | λ max LNVA [(rad/s)²] | λ max JVJA [(rad/s)²] | λ max MDA [(rad/s)²] | JVJA smallest (mean / max) | winner (mean / max), from the case's one q0 |",
+        "|---|---|---|---|---|---|---|---|---|",
     ]
     ok = 0
     for key, c in cases.items():
@@ -37,9 +37,16 @@ def _claim_jvja_smallest(cases: dict) -> tuple[str, list[str]]:
         rows.append(
             f"| {key} | {_f(a['lnva']['jvj_mean'])} | {_f(a['jvja']['jvj_mean'])} | {_f(a['mda']['jvj_mean'])} "
             f"| {_f(a['lnva']['jvj_max'])} | {_f(a['jvja']['jvj_max'])} | {_f(a['mda']['jvj_max'])} "
-            f"| {'yes' if mean_ok else 'no'} / {'yes' if max_ok else 'no'} |"
+            f"| {'yes' if mean_ok else 'no'} / {'yes' if max_ok else 'no'} "
+            f"| {_winner(a, 'jvj_mean')} / {_winner(a, 'jvj_max')} |"
         )
     return _verdict(ok, len(cases)), rows
+
+
+def _winner(algs: dict, key: str) -> str:
+    """The method(s) with the smallest ``key`` (ties within 1e-9 relative all named)."""
+    best = min(v[key] for v in algs.values())
+    return "=".join(a for a, v in algs.items() if v[key] <= best + 1e-9 * abs(best))
 
 
 def _claim_mda_dexterity(cases: dict) -> tuple[str, list[str]]:

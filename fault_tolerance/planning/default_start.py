@@ -16,7 +16,13 @@ the way docs/MATH.md ("The default start") describes:
    caller's algorithms; it is accepted when every sample stays inside the limits, none is
    near-singular or near-intolerable, and the task error stays below :data:`ERROR_TOL`.
    Among accepted candidates one whose reduced condition numbers stay below
-   :data:`~.posture.RCN_THRESHOLD` is preferred (step iii of the paper's planning loop).
+   :data:`~.posture.RCN_THRESHOLD` is preferred (step iii of the paper's planning loop);
+5. with joint limits on (the default), a candidate where some lockable scenario cannot keep the
+   task's first velocity inside the rate box (it is intolerable *under limits* at ``t = 0``,
+   :func:`~.start_checks.under_limits_at_start`) is set aside before it is simulated; only when no
+   candidate of any seed is tolerable under limits are they tried, fewest such scenarios first,
+   and the choice then names them and offers ``--lockable`` without them
+   (:attr:`StartChoice.under_limits`).
 
 :func:`explain_intolerable` turns an intolerable scenario at a given start into an error that says
 whether the scenario is intolerable structurally (at every sampled configuration) or only at this
@@ -48,6 +54,7 @@ from fault_tolerance.planning.start_checks import (
     run_caveat,
     run_problem,
     start_problem,
+    under_limits_at_start,
 )
 from fault_tolerance.resolution.indices import condition_numbers, reduced_singular_values
 from fault_tolerance.resolution.scenarios import Scenarios
@@ -80,6 +87,9 @@ class StartChoice:
         note: A caveat, e.g. that no candidate kept the RCN below the threshold.
         checked: Seconds of the task that were checked when that is less than all of it.
         runs: The checked runs from ``q0`` by algorithm (reuse them instead of simulating again).
+        under_limits: ``None`` when joint limits were not checked (limits off, no task); else the
+            scenarios intolerable under the joint limits at ``t = 0`` from ``q0`` (empty: none).
+        lockable_without: The lockable joints outside ``under_limits`` (for ``--lockable``).
     """
 
     q0: np.ndarray
@@ -94,6 +104,26 @@ class StartChoice:
     note: str = ""
     checked: float | None = None
     runs: dict = field(default_factory=dict, repr=False, compare=False)
+    under_limits: tuple[str, ...] | None = None
+    lockable_without: tuple[str, ...] = ()
+
+    def limits_claim(self) -> str:
+        """What the start claims about the joint limits at ``t = 0`` (empty when not checked)."""
+        if self.under_limits is None:
+            return ""
+        if not self.under_limits:
+            return ", also under the joint limits at t = 0 (rate box (L1) at q0)"
+        offer = (
+            f"--lockable {','.join(self.lockable_without)} leaves out each"
+            if self.lockable_without
+            else "every lockable joint is among them"
+        )
+        return (
+            f"; but under the joint limits at t = 0 (rate box (L1) at q0) a lock of "
+            f"{', '.join(self.under_limits)} cannot keep the task there (intolerable under limits; "
+            f"no start tried has every lock tolerable): {offer} of the locks intolerable at the "
+            "starts tried; or run a slower path (--radius, --duration) or --no-limits"
+        )
 
     def reason(self) -> str:
         """One line: the start and why it was chosen."""
@@ -109,7 +139,8 @@ class StartChoice:
             f"start q0 = {np.round(self.q0, 4).tolist()} rad: minimum square-sum RCN K = "
             f"{self.K:.4g} on the self-motion through x0 = {np.round(self.x0, 4).tolist()} "
             f"({self.origin}); inside the limits, σ_min(J) = {self.sigma_min:.3g}, every lockable "
-            f"joint tolerable{checked}" + (f"; {self.note}" if self.note else "")
+            f"joint tolerable{self.limits_claim()}{checked}"
+            + (f"; {self.note}" if self.note else "")
         )
 
 
@@ -187,17 +218,19 @@ CANDIDATE_REFUSALS = (InfeasibleBounds, IntolerableFailure)
 
 
 def _check(arm, q0, path, algorithms, sc, sim_options):
-    """Simulate ``path`` from ``q0``: ``(problem, caveat, largest k_S, runs)``.
+    """Simulate ``path`` from ``q0``: ``(problem, caveat, largest k_S, runs, flagged at t = 0)``.
 
     The runs go in the registry's order (the built-ins first, cheapest first: LNVA, JVJA, MDA),
-    so a bad start fails fast; ``sim_options["options"]`` gives each resolver those it takes.
+    so a bad start fails fast; ``sim_options["options"]`` gives each resolver those it takes. The
+    last is whether a run flagged a lock at its first sample as intolerable under limits.
     """
     from fault_tolerance.resolution.registry import names
+    from fault_tolerance.simulation.run import FLAG_INTOLERABLE_UNDER_LIMITS
     from fault_tolerance.simulation.simulate import options_for, simulate
 
     known = names()
     order = sorted(algorithms, key=lambda a: known.index(a) if a in known else len(known))
-    worst, caveat, runs = 0.0, None, {}
+    worst, caveat, runs, flagged = 0.0, None, {}, False
     for alg in order:
         own = dict(sim_options)
         if "options" in own:
@@ -205,14 +238,15 @@ def _check(arm, q0, path, algorithms, sc, sim_options):
         try:
             run = simulate(arm, path, alg, q0=q0, lockable=sc, **own)
         except CANDIDATE_REFUSALS as err:  # one refused candidate, not the end of the search
-            return f"{alg}: refused ({str(err).splitlines()[0][:200]})", None, worst, {}
+            return f"{alg}: refused ({str(err).splitlines()[0][:200]})", None, worst, {}, False
         problem = run_problem(arm, run)
         if problem:
-            return f"{alg}: {problem}", None, worst, {}
+            return f"{alg}: {problem}", None, worst, {}, False
         runs[alg] = run
         worst = max(worst, float(np.max(run.rcn)))
         caveat = caveat or (None if run_caveat(run) is None else f"{alg}: {run_caveat(run)}")
-    return None, caveat, worst, runs
+        flagged = flagged or bool(run.flags[0] & FLAG_INTOLERABLE_UNDER_LIMITS)
+    return None, caveat, worst, runs, flagged
 
 
 def default_start(
@@ -261,34 +295,83 @@ def default_start(
     _refuse_structural(arm, sc, seed)  # no start can help such a scenario: say so, not search
     make, x0 = _task_maker(arm, path, x0)
     sources = _start_points(arm, sc, x0, seed, max_seeds)
-    last, tried, fallback = "no regular configuration found within the joint limits", 0, None
+    found, last, held = _search(arm, sc, sources, make, tuple(algorithms), sim_options, horizon)
+    if found is not None:
+        return found
+    where = f"at x0 = {np.round(x0, 4).tolist()}" if x0 is not None else "from mid-range seeds"
+    aside = (
+        f"; {held} candidates were not tolerable under the joint limits at t = 0 either"
+        if held
+        else ""
+    )
+    raise InvalidInput(
+        f"no start {where} for {arm.name} passed the checks ({last}{aside}); give --q0 or --x0, a "
+        "smaller path (--radius) or fewer lockable joints"
+    )
+
+
+def _search(arm, sc, sources, make, algorithms, sim_options, horizon):
+    """``(choice or None, last reason, candidates set aside)``: steps 3-5 of the module doc."""
+    last, tried, fallback, aside = (
+        "no regular configuration found within the joint limits",
+        0,
+        None,
+        [],
+    )
     for seed_q, point, origin in sources:
         task = make(point)
         options, checked = _horizon(task, sim_options, horizon)
         for _, q in _candidates(arm, point, sc, seed_q):
-            tried += 1
-            problem, caveat, worst, runs = (
-                (None, None, 0.0, {})
-                if task is None
-                else _check(arm, q, task, tuple(algorithms), sc, options)
-            )
-            if problem:
-                last = f"the start {np.round(q, 3).tolist()} {problem}"
+            bad = under_limits_at_start(arm, q, task, sc, options)
+            if bad:  # intolerable under limits at t = 0: tried only if no other start passes
+                aside.append((len(bad), len(aside), q, point, origin, task, options, checked, bad))
                 continue
-            choice = _choice(arm, q, point, sc, worst, origin, task, algorithms, tried, runs)
-            if checked is not None:  # only the first seconds ran: nothing to reuse
-                choice = replace(choice, runs={}, checked=checked)
-            if caveat is None:
-                return choice
-            if fallback is None or worst < fallback.run_rcn_max:
+            tried += 1
+            choice, caveat, last = _try(arm, sc, (q, point, origin, task), algorithms, options,
+                                        checked, tried, bad, last)  # fmt: skip
+            if choice is not None and caveat is None:
+                return choice, last, 0
+            if choice is not None and (
+                fallback is None or choice.run_rcn_max < fallback.run_rcn_max
+            ):
                 fallback = replace(choice, note=f"the best start found has a caveat: {caveat}")
         if fallback is not None:  # this seed gave a usable start: do not search further
-            return replace(fallback, tried=tried)
-    where = f"at x0 = {np.round(x0, 4).tolist()}" if x0 is not None else "from mid-range seeds"
-    raise InvalidInput(
-        f"no start {where} for {arm.name} passed the checks ({last}); give --q0 or --x0, a smaller "
-        "path (--radius) or fewer lockable joints"
+            return replace(fallback, tried=tried), last, 0
+    every = tuple(dict.fromkeys(name for a in aside for name in a[-1]))  # bad at some start tried
+    for _, _, q, point, origin, task, options, checked, bad in sorted(aside, key=lambda a: a[:2]):
+        tried += 1
+        choice, caveat, last = _try(arm, sc, (q, point, origin, task), algorithms, options,
+                                    checked, tried, bad, last, every)  # fmt: skip
+        if choice is not None:
+            note = f"the best start found has a caveat: {caveat}" if caveat else ""
+            return replace(choice, note=note), last, 0
+    return None, last, len(aside)
+
+
+def _try(arm, sc, where, algorithms, options, checked, tried, bad, last, drop=()):
+    """Simulate one candidate: ``(choice or None, caveat, last reason)``.
+
+    ``bad``: its scenarios intolerable under limits at t = 0; ``drop``: those of every candidate
+    set aside, which the offered ``--lockable`` leaves out.
+    """
+    q, point, origin, task = where
+    problem, caveat, worst, runs, flagged = (
+        (None, None, 0.0, {}, False)
+        if task is None
+        else _check(arm, q, task, algorithms, sc, options)
     )
+    if not problem and flagged and not bad:  # the run is the judge of what it finds at t = 0
+        problem = "is intolerable under the joint limits at t = 0 in its run"
+    if problem:
+        return None, None, f"the start {np.round(q, 3).tolist()} {problem}"
+    choice = _choice(arm, q, point, sc, worst, origin, task, algorithms, tried, runs)
+    if checked is not None:  # only the first seconds ran: nothing to reuse
+        choice = replace(choice, runs={}, checked=checked)
+    if bad is not None:
+        locked = {n for name in (*bad, *drop) for n in name.split("+")}
+        without = tuple(dict.fromkeys(n for S in sc.sets for n in sc.name(S) if n not in locked))
+        choice = replace(choice, under_limits=tuple(bad), lockable_without=without)
+    return choice, caveat, last
 
 
 def _task_maker(arm: Arm, path, x0):

@@ -64,6 +64,30 @@ def start_problem(arm: Arm, q: np.ndarray, sc: Scenarios) -> str | None:
     return None
 
 
+def under_limits_at_start(arm: Arm, q: np.ndarray, task, sc: Scenarios, sim_options: dict):
+    """Scenarios that cannot keep the task's first velocity inside the rate box at ``q`` (L1), (L4).
+
+    ``None`` when joint limits are off (``sim_options["limits"] is False``) or there is no task:
+    nothing to check. Otherwise the names (``"joint2"``, ``"joint1+joint2"``) of the scenarios
+    whose reduced robot needs a task scaling ``s_S < 1`` at ``t = 0``, with the box the run uses
+    (horizon ``max(horizon, dt)``) and the velocity it commands there (``ẋ_des(0)``, the start
+    being on the path).
+    """
+    from fault_tolerance.model.joint_limits import RATE_HORIZON, arm_rate_box
+    from fault_tolerance.resolution.bounded import SCALE_TOL
+    from fault_tolerance.resolution.limits import tolerable_under_limits
+
+    if task is None or not sim_options.get("limits", True):
+        return None
+    h = sim_options.get("horizon") or RATE_HORIZON
+    box = arm_rate_box(arm, q, max(float(h), float(sim_options.get("dt", 0.0) or 0.0)))
+    xd = np.asarray(task.xdot(0.0), dtype=float)
+    scales = tolerable_under_limits(arm.jacobian(q), xd, sc, bounds=box)
+    return tuple(
+        "+".join(sc.name(S)) for S, s in zip(sc.sets, scales, strict=True) if s < 1.0 - SCALE_TOL
+    )
+
+
 def run_problem(arm: Arm, run) -> str | None:
     """Why a checked run disqualifies its start (limits, singular J, task error), or ``None``."""
     from fault_tolerance.simulation.run import FLAG_NEAR_SINGULAR

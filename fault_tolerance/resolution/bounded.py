@@ -193,7 +193,7 @@ def _continuation_metric(N: np.ndarray, sc: Scenarios, tolerate: bool) -> np.nda
     from fault_tolerance.numerics.linalg import pivot_block
 
     W = np.zeros_like(N)
-    for S, w in zip(sc.sets, sc.weights, strict=True):
+    for S, w in zip(sc.sets, sc.relative_weights, strict=True):
         W[np.ix_(S, S)] += w * np.linalg.inv(pivot_block(N, S, tolerate))
     return W + CONTINUATION_EPS * max(float(np.trace(W)) / len(W), 1e-300) * np.eye(len(W))
 
@@ -220,7 +220,8 @@ def _continuation(J, xdot, sc, lo, hi, proj, tolerate, H=None) -> BoxSolution:
 
 def _jvja_least_norm(J, xdot, sc, lo, hi, proj, tolerate):
     post, scales = reduced_under_limits(J, xdot, sc, lo, hi, proj=proj, tolerate=tolerate)
-    c = sc.weights @ post / sc.weights.sum()  # the weighted mean of what the reduced robots do
+    w = sc.relative_weights  # scale-free (5): no overflow, no underflow
+    c = w @ post / w.sum()  # the weighted mean of what the reduced robots do
     a = proj.Jpinv @ xdot
     return solve_box(proj.N @ c, a, _null_basis(proj.N), lo, hi), scales
 
@@ -285,7 +286,8 @@ def bounded_jvja(
         exact = exact_guesses_allowed(proj, pivots)  # damped (G1) rates are not the reduced LNVA
         post = a - (a[cols] / np.maximum(pivots, PIVOT_EPS))[:, None] * N[cols]  # (G1), N symmetric
         post[np.arange(sc.f), cols] = 0.0
-        qd = sc.weights @ post / sc.weights.sum()  # (G2): the mean is already on the task's set
+        w = sc.relative_weights
+        qd = w @ post / w.sum()  # (G2): the mean is already on the task's set
         if exact and _inside(qd, lo, hi) and _inside(post, lo, hi):
             ones = np.ones(sc.f)
             return BoundedRates(np.clip(qd, lo, hi), 1.0, np.zeros(n, dtype=bool), ones)

@@ -16,6 +16,9 @@ import numpy as np
 from fault_tolerance.errors import IntolerableFailure, InvalidScenario
 from fault_tolerance.numerics.linalg import PIVOT_TOL, min_pivot
 
+#: Largest ratio of two scenario weights: over the largest, every weight stays a normal float.
+MAX_WEIGHT_RATIO = 1e300
+
 
 @dataclass(frozen=True)
 class Scenarios:
@@ -37,6 +40,23 @@ class Scenarios:
             )
         if not np.all(np.isfinite(self.weights)) or np.any(self.weights <= 0):
             raise InvalidScenario(f"weights must be finite and > 0, got {list(self.weights)}")
+        with np.errstate(over="ignore"):
+            ratio = float(self.weights.max() / self.weights.min())  # inf for 1e308 / 5e-324
+        if not ratio <= MAX_WEIGHT_RATIO:
+            raise InvalidScenario(
+                f"weights span a ratio of {ratio:.3g} (largest over smallest); over the largest the "
+                f"smallest would vanish: give weights within a ratio of {MAX_WEIGHT_RATIO:g}"
+            )
+
+    @property
+    def relative_weights(self) -> np.ndarray:
+        """The weights over the largest (W1), shape (f,), in (0, 1].
+
+        The resolvers (5), (G2), (G3) and (L2) do not change when every weight is multiplied by
+        one number, so they use these: no sum or product of them overflows or underflows, and
+        1e308 or 5e-324 weights give the same rates as weights 1.
+        """
+        return self.weights / self.weights.max()
 
     @property
     def f(self) -> int:

@@ -37,6 +37,7 @@ from fault_tolerance.simulation.run import (
     FLAG_NEAR_INTOLERABLE,
     FLAG_NEAR_SINGULAR,
     FLAG_OVER_SPEED,
+    FLAG_TASK_SCALED,
     Run,
 )
 
@@ -146,6 +147,43 @@ def near_intolerable(run: Run) -> RunWarning | None:
     )
 
 
+#: Largest joint rate [rad/s] that counts as "no motion" and smallest task rate that counts as motion.
+ZERO_RATE = 1e-12
+
+
+def zero_rates(run: Run) -> np.ndarray:
+    """Samples whose commanded rates are all zero while the task moves (``ẋ_des ≠ 0``), shape (K,)."""
+    qd = run.qd if run.qd_cmd is None else run.qd_cmd
+    if len(run.t) < 2:
+        return np.zeros(len(run.t), dtype=bool)
+    xd = np.gradient(run.x_des, run.t, axis=0)  # the path's rate, from its samples
+    moving = np.linalg.norm(xd, axis=1) > ZERO_RATE
+    return moving & (np.max(np.abs(qd), axis=1) <= ZERO_RATE)
+
+
+def task_scaled(run: Run) -> RunWarning | None:
+    """Samples where the bounded rates kept only part of the task (s < 1, (L3)) or none of it.
+
+    Counted are the samples flagged ``FLAG_TASK_SCALED`` (the joint limits made the resolver
+    scale the task velocity) and those whose commanded rates are zero although the path moves
+    (:func:`zero_rates`): the tool then falls behind its path by design, not by error.
+    """
+    scaled = (run.flags & FLAG_TASK_SCALED) != 0
+    still = zero_rates(run)
+    bad = scaled | still
+    if not bad.any():
+        return None
+    parts = [f"{int(scaled.sum())} with the task scaled (s < 1)"] if scaled.any() else []
+    if still.any():
+        parts.append(f"{int(still.sum())} with zero rates while the path moves")
+    return RunWarning(
+        "task_scaled",
+        f"{int(bad.sum())} of {len(run.t)} samples where the joint rates keep only part of the "
+        f"task velocity ({'; '.join(parts)}; {_span(run, bad)}): the tool falls behind its path "
+        "there",
+    )
+
+
 def _locked(run: Run) -> np.ndarray:
     lock = run.meta.get("lock")
     if lock:
@@ -200,6 +238,7 @@ def check_run(run: Run, arm=None) -> list[RunWarning]:
         rcn_beyond(run),
         near_singular(run),
         near_intolerable(run),
+        task_scaled(run),
         tracking_error(run),
         lock_loses_path(run),
     ]

@@ -133,7 +133,24 @@ def _build_page(
             chart_data(data, label, color, scene.arm.velocity_limit, scene.arm.joint_names)
         )
         warnings.append(_warnings_of(item, scene.arm))
-    return _Page(scenes, [c.label for c in charts], plots_html(charts, warnings))
+    plots = _comparison_html(items) + plots_html(charts, warnings)
+    return _Page(scenes, [c.label for c in charts], plots)
+
+
+def _comparison_html(items) -> str:
+    """With two runs or more: which start each used and the λ winners (:mod:`.compare`), as HTML.
+
+    Empty for one run or for bare joint positions (no λ to compare).
+    """
+    from fault_tolerance.simulation.compare import compare_runs
+    from fault_tolerance.simulation.run import Run
+
+    runs = {label: item for label, item in items if isinstance(item, Run)}
+    if len(runs) < 2:
+        return ""
+    lines = compare_runs(runs).lines()
+    body = "".join(f"<li>{html_lib.escape(line.strip())}</li>" for line in lines)
+    return f'<ul id="ft-comparison" class="ft-comparison">{body}</ul>'
 
 
 #: Scene commands a page keeps when it switches the run shown (the camera stays where it is).

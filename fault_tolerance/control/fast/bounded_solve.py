@@ -403,6 +403,7 @@ def bounded_rates(name: str, J, xdot, sets, lo, hi, *, weights=None, unbounded=N
     mode = _solve_mode(name)
     F, Iw, views = workspace(n, m, table, np.zeros(0, dtype=np.int64), mode)
     w = np.ones(len(sets)) if weights is None else np.asarray(weights, dtype=float)
+    w = w / w.max()  # scale-free; the sum cannot overflow
     views["wrel"][:] = w / w.sum()
     views["p3"][:] = [TRACE_MAX, PIVOT_TOL, RANK_RTOL**2] if params is None else params
     views["buf"][0], views["buf"][1] = lo, hi

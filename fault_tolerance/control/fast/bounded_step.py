@@ -45,7 +45,7 @@ def bounded_tables(cw: ControllerWorkspace) -> tuple[tuple, np.ndarray]:
     views["fw"][:] = cw.fw
     views["p4"][:] = TRACE_MAX, cw.pivot_threshold, cw.rank_coef, cw.alpha
     views["p3"][:] = TRACE_MAX, cw.pivot_threshold, cw.rank_coef
-    views["wrel"][:] = sc.weights / sc.weights.sum()
+    views["wrel"][:] = sc.relative_weights / sc.relative_weights.sum()  # no overflow
     views["state"][:] = cw.box_state
     return (F, Iw, views), views["state"]  # last_scale / last_active read the state
 

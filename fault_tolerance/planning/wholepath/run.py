@@ -86,19 +86,60 @@ def simulate_global(arm, path, *, q0, plan_options, progress, loop, **sim):
         run = loop(arm, path, plan.warm_start_used, q0=plan.q0, progress=progress, **sim)
     else:
         run = loop(arm, path, "global", q0=plan.q0, progress=progress, reference=plan.q_ref, **sim)
-    choice = "plan"
-    if sim.get("lock_joint") is None:  # the guarantee, on simulate's own numbers
-        runs = {"plan": run}
-        for alg in ("lnva", "jvja"):
-            runs[alg] = loop(arm, path, alg, q0=plan.q0, **sim)
-        choice = min(
-            runs,
-            key=lambda a: (_over_limits(arm, runs[a], limits), _objective(runs[a], plan.objective)),
-        )
-        run = runs[choice]
+    if sim.get("lock_joint") is not None:  # no comparison: the planner's own scores, said so
+        run.meta["algorithm"] = "global"
+        run.meta["global"] = plan.summary() | {
+            "run": "plan",
+            "scores_from": "the planner's model of the run without a lock",
+        }
+        return run
+    runs = {"plan": run}  # the guarantee, on simulate's own numbers
+    for alg in ("lnva", "jvja"):
+        runs[alg] = loop(arm, path, alg, q0=plan.q0, **sim)
+    choice = min(
+        runs,
+        key=lambda a: (_over_limits(arm, runs[a], limits), _objective(runs[a], plan.objective)),
+    )
+    run = runs[choice]
     run.meta["algorithm"] = "global"
-    run.meta["global"] = plan.summary() | {"run": choice}
+    run.meta["global"] = _run_summary(plan, runs, choice)
     return run
+
+
+def _run_summary(plan, runs: dict, choice: str) -> dict:
+    """The plan's metadata with the scores of the runs themselves (what summary.json reports).
+
+    ``scores``: the objective of the plan's run, of LNVA's and JVJA's runs from the same start and
+    of the run reported (``final``), [(rad/s)²]; the planner's own estimates stay under
+    ``planned_scores`` / ``planned_improvement``. ``improvement`` is over the warm start's run,
+    ``improvement_over_best_local`` over the better of LNVA and JVJA; ``note`` says when the plan
+    is not a plan of its own (a local run is reported, or the plan is that run).
+    """
+    scores = {a: _objective(r, plan.objective) for a, r in runs.items()}
+    scores["final"] = scores[choice]
+    local = min(("lnva", "jvja"), key=lambda a: scores[a])
+    gain = max(0.0, (scores[local] - scores["final"]) / max(abs(scores[local]), 1e-300))
+    warm = scores.get(plan.warm_start, scores[local])
+    over_warm = max(0.0, (warm - scores["final"]) / max(abs(warm), 1e-300))
+    out = plan.summary()
+    out["planned_scores"] = out.pop("scores")
+    out["planned_improvement"] = out.pop("improvement")
+    out |= {"scores": scores, "improvement": over_warm, "improvement_over_best_local": gain,
+            "best_local": local, "run": choice}  # fmt: skip
+    what = f"the {plan.objective} of λ"
+    if choice != "plan":
+        out["note"] = (
+            f"no plan beat the {choice} run from the same start on {what} "
+            f"({scores['final']:.4g} (rad/s)²); global reports that run"
+        )
+    elif plan.warm_start_used:
+        out["note"] = (
+            f"the optimiser found nothing below the {plan.warm_start_used} run on {what} from "
+            f"this start ({scores['final']:.4g} (rad/s)²): the plan is that run"
+        )
+    elif gain <= 0.0:
+        out["note"] = f"the plan ties the {local} run on {what} ({scores['final']:.4g} (rad/s)²)"
+    return out
 
 
 PATH_PLANNERS[GLOBAL] = simulate_global
