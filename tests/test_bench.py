@@ -190,8 +190,8 @@ def _failing_target(always: bool, monkeypatch):
         calls["targets"] += 1
         items = real_targets(results)
         for t in items:
-            if t["name"] == "jvja_over_lnva" and (always or calls["targets"] == 1):
-                t["pass"] = False
+            if t["name"] == "jvja_over_lnva":  # fails, then (unless always) passes: no timing luck
+                t["pass"] = not (always or calls["targets"] == 1)
         return items
 
     def bench_arm(*a, **k):

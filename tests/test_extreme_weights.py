@@ -1,4 +1,4 @@
-"""Extreme scenario weights (issue 25, item 3): scale-free rates, refused spans, warned scaling."""
+"""Extreme scenario weights: scale-free rates, refused spans, warned scaling."""
 
 from __future__ import annotations
 

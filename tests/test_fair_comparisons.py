@@ -1,4 +1,4 @@
-"""Fair comparisons (issue 25, item 7): one start per table, a named winner, honest global plans."""
+"""Fair comparisons: one start per table, a named winner, honest global plans."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""The default start under joint limits (issue 25, item 4): its claim is what the run finds at t = 0."""
+"""The default start under joint limits: its claim is what the run finds at t = 0."""
 
 from __future__ import annotations
 
