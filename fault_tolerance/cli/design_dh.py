@@ -90,9 +90,7 @@ def _total(text: str, table) -> float | None:
     if text == "free":
         return None
     if text == "fixed":
-        return sum(abs(j.a) + abs(j.d) for j in table.joints) + float(
-            np.linalg.norm(table.tool_xyz)
-        )
+        return table.length
     try:
         return float(text)
     except ValueError:
@@ -171,8 +169,7 @@ def _replay(d, spec, out: Path) -> None:
     from fault_tolerance.viz.page import export_html
 
     arm = arm_from_dh(d.table, task="position")
-    t = spec["task"]
-    path = DHTask(tuple(t["x0"]), t["radius"], t["omega"], t["duration"], tuple(t["rows"])).path()
+    path = DHTask.from_spec(spec["task"]).path()
     run = simulate(arm, path, "jvja", q0=np.array(d.record["q0"]), lockable=spec["lockable"],
                    limits=False)  # fmt: skip
     export_html(run, out / "replay.html", arm)

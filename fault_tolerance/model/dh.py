@@ -128,6 +128,11 @@ class DHTable:
         """Number of joints."""
         return len(self.joints)
 
+    @property
+    def length(self) -> float:
+        """Total length [m]: the sum of every ``|a|``, ``|d|`` and the tool offset's norm."""
+        return sum(abs(j.a) + abs(j.d) for j in self.joints) + float(np.linalg.norm(self.tool_xyz))
+
     def with_joint(self, i: int, **changes: Any) -> DHTable:
         """The table with joint ``i`` (0-based) changed (``a=``, ``d=``, ``lower=``, …)."""
         joints = list(self.joints)

@@ -23,6 +23,7 @@ from dataclasses import asdict, dataclass, replace
 
 import numpy as np
 
+from fault_tolerance.analysis.design.search import DESIGN_FILES, pareto
 from fault_tolerance.errors import FaultToleranceError, InvalidInput
 from fault_tolerance.model.dh import DHTable, arm_from_dh, table_from_dict
 from fault_tolerance.planning.paper_loop import plan
@@ -129,9 +130,7 @@ def candidate_table(base: DHTable, params: Sequence[DHParam], u, total_length=No
             raise InvalidInput(f"{p.name}: the table has {table.n} joints")
         table = table.with_joint(p.joint - 1, **{p.field: p.value(ui)})
     if total_length is not None:
-        total = sum(abs(j.a) + abs(j.d) for j in table.joints) + float(
-            np.linalg.norm(table.tool_xyz)
-        )
+        total = table.length
         if total <= 0:
             raise InvalidInput("a fixed total length needs an arm with a non-zero length")
         s = total_length / total
@@ -168,6 +167,11 @@ class DHTask:
     def path(self) -> CirclePath:
         """The task path."""
         return CirclePath(np.array(self.x0), self.radius, self.omega, self.duration, rows=self.rows)
+
+    @classmethod
+    def from_spec(cls, task: dict) -> DHTask:
+        """The task of a design spec's (JSON) ``task`` entry."""
+        return cls(**{**task, "x0": tuple(task["x0"]), "rows": tuple(task["rows"])})
 
 
 def evaluate_table(
@@ -238,9 +242,7 @@ def spec_params(spec: dict) -> tuple[DHParam, ...]:
 def evaluate_candidate(spec: dict, u) -> dict:
     """One candidate of a spec at unit coordinates ``u``, with its score."""
     table = candidate_table(spec_table(spec), spec_params(spec), u, spec["total_length"])
-    task = DHTask(
-        **{**spec["task"], "x0": tuple(spec["task"]["x0"]), "rows": tuple(spec["task"]["rows"])}
-    )
+    task = DHTask.from_spec(spec["task"])
     rec = evaluate_table(
         table, task, spec["lockable"], rcn_max=spec["rcn_max"], dt=spec["search_dt"],
         seeds=SEARCH_SEEDS,
@@ -340,7 +342,6 @@ class DHDesign:
         """
         from pathlib import Path
 
-        from fault_tolerance.analysis.design.search import DESIGN_FILES
         from fault_tolerance.model.dh import dh_urdf
         from fault_tolerance.storage.result_folder import staged_folder
 
@@ -353,18 +354,6 @@ class DHDesign:
             if extra is not None:
                 extra(tmp)
         return folder
-
-
-def _pareto(points: np.ndarray) -> list[int]:
-    """Rows of ``points`` (P, 2) that no other row beats in both (minimisation), finite only."""
-    keep = []
-    for i, p in enumerate(points):
-        if not np.all(np.isfinite(p)):
-            continue
-        dominated = np.any(np.all(points <= p, axis=1) & np.any(points < p, axis=1))
-        if not dominated:
-            keep.append(i)
-    return keep
 
 
 def dh_design(
@@ -420,14 +409,12 @@ def _values(table: DHTable, params: Sequence[DHParam]) -> dict[str, float]:
 
 def _dh_record(spec, chosen: DHTable, base: DHTable, found, seen: dict, seed: int) -> dict:
     """design.json: the chosen table and values, the baseline, the Pareto front, the settings."""
-    task = DHTask(
-        **{**spec["task"], "x0": tuple(spec["task"]["x0"]), "rows": tuple(spec["task"]["rows"])}
-    )
+    task = DHTask.from_spec(spec["task"])
     final = evaluate_table(chosen, task, spec["lockable"], rcn_max=spec["rcn_max"])
     base_rec = evaluate_table(base, task, spec["lockable"], rcn_max=spec["rcn_max"])
     pts = np.stack([seen["mean_jvj"], seen["rcn_max"]], 1)
     pts[~seen["feasible"].astype(bool)] = np.nan
-    front = _pareto(pts)
+    front = pareto(pts).tolist()
     params = spec_params(spec)
     return {
         "kind": "dh",
