@@ -44,7 +44,14 @@ from fault_tolerance.numerics.fast.rank_one_eigen import eigenpairs, highest_roo
 from fault_tolerance.numerics.fast.small_eigen import njit
 from fault_tolerance.resolution.indices import RCN_MAX, RCN_SINGULAR
 
-__all__ = ["compiled_mda_step", "gradient_workspace", "mda_kernel", "rcn_gradient_kernel"]
+__all__ = [
+    "compiled_mda_step",
+    "gradient_kernel",
+    "gradient_view",
+    "gradient_workspace",
+    "mda_kernel",
+    "rcn_gradient_kernel",
+]
 
 _INF = math.inf
 _EPS = 2.220446049250313e-16
@@ -288,6 +295,44 @@ def gradient_scratch(m, n):  # pragma: no cover - numba
 
 
 @njit
+def _task_gram(Jf, rix, J, G, L) -> None:  # pragma: no cover - numba
+    """``J = Jf[rix]`` and ``G = J Jᵀ`` into the lower triangles of ``G`` and ``L``."""
+    m, n = J.shape
+    for r in range(m):
+        for c in range(n):
+            J[r, c] = Jf[rix[r], c]
+    for r in range(m):
+        for c in range(r + 1):
+            s = 0.0
+            for k in range(n):
+                s += J[r, k] * J[c, k]
+            G[r, c] = s
+            L[r, c] = s
+
+
+@njit
+def gradient_kernel(Jf, F, Iw, m) -> int:  # pragma: no cover - numba
+    """``∇K`` alone (the simulated sample's MDA): into ``F``'s gradient view (:func:`gradient_view`)."""
+    n = Jf.shape[1]
+    f = Iw.shape[0] - m
+    if f < 1 or F.shape[0] != workspace_size(m, n) or Jf.shape[0] != 6:
+        return BAD_SIZE
+    o = N_PARAMS
+    J = F[o : o + m * n].reshape((m, n))
+    G = F[o + m * n : o + m * n + m * m].reshape((m, m))
+    L = F[o + m * n + m * m : o + m * n + 2 * m * m].reshape((m, m))
+    o += 2 * m * n + 2 * m * m + m
+    _task_gram(Jf, Iw[f:], J, G, L)
+    return rcn_gradient_kernel(Jf, J, G, Iw, F[0:N_PARAMS], F[o + n :], F[o : o + n])
+
+
+def gradient_view(F: np.ndarray, m: int, n: int) -> np.ndarray:
+    """The gradient ``∇K`` in the workspace ``F`` (written by both kernels), shape (n,)."""
+    o = N_PARAMS + 2 * m * n + 2 * m * m + m
+    return F[o : o + n]
+
+
+@njit
 def mda_kernel(Jf, xdot, out, F, Iw) -> int:  # pragma: no cover - numba
     """MDA rates ``a − α N ∇K`` (the step capped at ``max_step``) into ``out``; a status.
 
@@ -312,17 +357,7 @@ def mda_kernel(Jf, xdot, out, F, Iw) -> int:  # pragma: no cover - numba
     zm, grad = F[o : o + m], F[o + m : o + m + n]
     o += m + n
     scratch = F[o:]
-    rix = Iw[f:]
-    for r in range(m):
-        for c in range(n):
-            J[r, c] = Jf[rix[r], c]
-    for r in range(m):
-        for c in range(r + 1):
-            s = 0.0
-            for k in range(n):
-                s += J[r, k] * J[c, k]
-            G[r, c] = s
-            L[r, c] = s
+    _task_gram(Jf, Iw[f:], J, G, L)
     if not cholesky(L, m):
         return UNCERTIFIED
     tr = trace_inverse(L, zm, m)
