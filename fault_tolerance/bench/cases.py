@@ -47,10 +47,11 @@ DESCRIPTIONS = {
     "sim_jvja": "one simulated JVJA sample: rates, λ parts, k_S, K, σ_min, flags, record",
     "sim_lnva": "one simulated LNVA sample: rates, λ parts, k_S, K, σ_min, flags, record",
     "sim_jvja_lim": "one simulated JVJA sample under joint limits (rate box checked; default)",
+    "sim_mda": "one simulated MDA sample (∇K compiled): rates, λ parts, k_S, K, σ_min, flags",
     "lnva": "LNVA step, fast path (Jacobian included)",
     "jvja": "JVJA step, closed form G2, fast path (Jacobian included)",
     "rcn": "RCN of all scenarios, one batched eigvalsh (Jacobian included)",
-    "mda": "MDA step, fast path (Jacobian and its derivatives included)",
+    "mda": "MDA step, compiled (Jacobian, ∇K from the kinematic Hessian, null step included)",
     "lnva_resolve": "arm.jacobian + ft.resolve('lnva')",
     "jvja_resolve": "arm.jacobian + ft.resolve('jvja')",
     "mda_resolve": "ft.resolve('mda', arm=, q=) with arm.jacobian(_derivatives)",
@@ -181,7 +182,7 @@ def floor_rows(case: Case) -> dict[str, Row]:
 
 
 def simulated_rows(case: Case) -> dict[str, Row]:
-    """One sample of ``simulate`` (the loop body), LNVA and JVJA, along a 1 s circle of 1 cm.
+    """One sample of ``simulate`` (the loop body), LNVA, JVJA and MDA, along a 1 s circle of 1 cm.
 
     The paper's sample (no limits) and JVJA's under the joint limits (simulate's default), each
     sample of one run in order.
@@ -196,7 +197,7 @@ def simulated_rows(case: Case) -> dict[str, Row]:
     q0 = case.qs[0]
     path = CirclePath(arm.fk(q0)[: arm.m], 0.01, 2 * np.pi, 1.0, rows=(0, 1))
     rows: dict[str, Row] = {}
-    for alg, limits in (("lnva", False), ("jvja", False), ("jvja", True)):
+    for alg, limits in (("lnva", False), ("jvja", False), ("jvja", True), ("mda", False)):
         s = sim._setup(arm, path, alg, q0, sc, None, "least_norm", 1e-3, None, 0.0, 1e-2,
                        None, None, None, limits=limits)  # fmt: skip
         rec = sim._allocate(s.steps + 1, arm.n, arm.m, sc.f, s.dt)

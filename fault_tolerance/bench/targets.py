@@ -17,6 +17,8 @@ MAX_BOUNDED_FREE_OVER_JVJA = 1.3
 MAX_BOUNDED_TWO_OVER_JVJA = 4.0
 #: Dynamics: one dynamics sample (control law + ABA step) / one kinematic JVJA step.
 MAX_DYN_OVER_STEP = 20.0
+#: The compiled MDA step / the JVJA step (both with their Jacobian), per default arm.
+MAX_MDA_OVER_JVJA = 2.0
 
 #: Generic routes that must be slower than the fast JVJA step: (row, label).
 SLOWER_ROUTES = (
@@ -76,6 +78,15 @@ def arm_targets(key: str, ops: dict) -> list[dict]:
         r = dyn / jv
         out.append(_item(key, "dyn_over_jvja", "dynamics sample / kinematic JVJA step", r,
                          MAX_DYN_OVER_STEP, "<=", r <= MAX_DYN_OVER_STEP))  # fmt: skip
+    mda, sim_mda = med("mda"), med("sim_mda")
+    if jv and mda:
+        r = mda / jv
+        out.append(_item(key, "mda_over_jvja", "MDA step / JVJA step", r, MAX_MDA_OVER_JVJA,
+                         "<=", r <= MAX_MDA_OVER_JVJA))  # fmt: skip
+    if jv and sim_mda:
+        r = sim_mda / jv
+        out.append(_item(key, "sim_mda_over_jvja", "simulated MDA sample / JVJA step", r,
+                         None, None, None))  # fmt: skip
     rs = med("jvja_resolve")
     if jv and rs:
         out.append(_item(key, "resolve_over_jvja", "ft.resolve / JVJA", rs / jv, None, None, None))

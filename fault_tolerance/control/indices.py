@@ -14,7 +14,7 @@ import numpy as np
 import pinocchio as pin
 
 from fault_tolerance.control.workspace import ControllerWorkspace
-from fault_tolerance.resolution.indices import RCN_MAX
+from fault_tolerance.resolution.indices import RCN_MAX, RCN_SINGULAR
 
 __all__ = [
     "djac",
@@ -124,7 +124,8 @@ def rcn_gradient(ws: ControllerWorkspace, J: np.ndarray, dJ: np.ndarray) -> np.n
 
     One batched ``eigh`` of ``J_S J_Sᵀ`` gives σ² and the left singular vectors ``u``; the
     right ones are ``v = J_Sᵀu/σ``, and :math:`\partial\sigma/\partial q_j = u^T \partial_j
-    J_S\, v`.
+    J_S\, v`. A singular reduced robot (``σ_min <= σ_max / RCN_SINGULAR``) adds nothing, as in
+    the reference (eq. S1).
     """
     n, m = ws.n, ws.m
     lam, U = np.linalg.eigh(reduced_gram(ws, J))
@@ -139,5 +140,7 @@ def rcn_gradient(ws: ControllerWorkspace, J: np.ndarray, dJ: np.ndarray) -> np.n
     V /= np.where(norms > 0.0, norms, 1.0)[:, None, :]
     X = np.matmul(dJ.reshape(n * m, n), V).reshape(-1, n, m, 2)  # (∂J/∂q_j) v
     D = np.einsum("fjms,fms->fjs", X, Ue)  # (f, n, 2): ∂σ_max/∂q_j, ∂σ_min/∂q_j
-    k = smax / smin
+    live = sminr > smax / RCN_SINGULAR  # singular reduced robots add nothing (eq. S1)
+    smin = np.where(live, smin, 1.0)
+    k = np.where(live, smax / smin, 0.0)
     return (2.0 * k / smin) @ D[:, :, 0] - (2.0 * k * smax / smin**2) @ D[:, :, 1]

@@ -20,6 +20,11 @@ from fault_tolerance.resolution.scenarios import Scenarios, scenarios
 RCN_MAX = 1e8
 #: Largest reduced condition number k_S accepted along a planned run (the paper's Sec. III.D (iii)).
 RCN_THRESHOLD = 100.0
+#: A reduced robot with ``σ_min(J_S) <= σ_max(J_S) / RCN_SINGULAR`` is singular for the gradient of
+#: K (eq. S1): its term is 0. There the derivative of σ_min has no sign (moving either way along it
+#: raises σ_min alike) and Gram-based routes see σ_min only to ~1e-8 σ_max, so every route leaves
+#: the term out at this threshold, far above that noise and below the RCN cap.
+RCN_SINGULAR = 1e6
 
 RESPONSES = ("least_norm", "continuation")
 
@@ -171,7 +176,9 @@ def rcn_gradient(
     Singular values move as :math:`\partial\sigma/\partial q_j = u^T (\partial J_S/\partial q_j) v`
     (u, v its singular vectors), so
     :math:`\partial k/\partial q_j = (\sigma_{max}' \sigma_{min} - \sigma_{max}\sigma_{min}')/\sigma_{min}^2`.
-    ``dJ`` is ``Arm.jacobian_derivatives(q)``, shape (n, m, n).
+    ``dJ`` is ``Arm.jacobian_derivatives(q)``, shape (n, m, n). A singular reduced robot,
+    ``σ_min(J_S) <= σ_max(J_S) / RCN_SINGULAR``, adds nothing (eq. S1 in docs/MATH.md): the one
+    definition of MDA's direction there, which every route (Controller, simulate) follows.
     """
     J = finite(J, "J", ndim=2)
     m, n = J.shape
@@ -181,6 +188,8 @@ def rcn_gradient(
     for S in sc.sets:
         keep = [j for j in range(n) if j not in S]
         U, s, Vt = np.linalg.svd(J[:, keep], full_matrices=False)
+        if not s[-1] > s[0] / RCN_SINGULAR:  # a singular reduced robot: no term (eq. S1)
+            continue
         smax, smin = s[0], max(s[-1], s[0] / RCN_MAX)
         dS = dJ[:, :, keep]  # (n, m, n_keep)
         dmax = np.einsum("i,jik,k->j", U[:, 0], dS, Vt[0])

@@ -22,6 +22,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 import pinocchio as pin
 
+from fault_tolerance.control.fast.mda_step import gradient_kernel, gradient_view, gradient_workspace
 from fault_tolerance.control.indices import djac, rcn_gradient
 from fault_tolerance.control.lapack_steps import TRACE_MAX
 from fault_tolerance.errors import InvalidInput
@@ -163,12 +164,21 @@ class Sampler:
         self.run_flags = (run.FLAG_BOUND_ACTIVE, run.FLAG_INTOLERABLE_UNDER_LIMITS,
                           run.FLAG_STEP_LIMITED, run.FLAG_LOCKED)  # fmt: skip
         self.g1_posts = g1_posts
+        self.mda = None  # (F, Iw, ∇K view) of the compiled gradient, single-joint scenarios
+        if self.method == sk.MDA and sc.singletons:
+            F, Iw = gradient_workspace(self.cw)
+            self.mda = (F, Iw, gradient_view(F, arm.m, arm.n))
 
     def _jacobian(self, q: np.ndarray):
         """``(J, ∇K or zeros)``; the tip placement is then in ``data.oMf[fid]``."""
         model, data, fid = self.model, self.data, self.fid
         if self.method != sk.MDA:
             return pin.computeFrameJacobian(model, data, q, fid, _LWA)[self.rows], self.zeros
+        Jf = pin.computeFrameJacobian(model, data, q, fid, _LWA)  # also updates data.oMf[fid]
+        if self.mda is not None:  # ∇K compiled (control/fast/mda_step), the NumPy route if refused
+            F, Iw, grad = self.mda
+            if not gradient_kernel(Jf, F, Iw, self.arm.m):
+                return Jf[self.rows], grad
         pin.computeJointJacobians(model, data, q)
         Jw = pin.getFrameJacobian(model, data, fid, _WORLD)
         Jl = pin.getFrameJacobian(model, data, fid, _LWA)  # also updates data.oMf[fid]

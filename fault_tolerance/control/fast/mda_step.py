@@ -1,0 +1,441 @@
+"""The MDA step in one compiled kernel (numba backend): ``q̇ = J⁺ẋ − α N ∇K`` after the Jacobian.
+
+:func:`mda_kernel` takes the 6-row ``LOCAL_WORLD_ALIGNED`` frame Jacobian ``Jf`` of one
+``pin.computeFrameJacobian`` call and does the rest as scalar loops:
+
+* the certificate and the least-norm rates as the LNVA / JVJA step (:mod:`.step`): one Cholesky
+  factor of ``G = J Jᵀ``, ``trace(G⁻¹) ≤ TRACE_MAX``, ``Y = L⁻¹J``, ``a = Yᵀ(L⁻¹ẋ)``;
+* ``∇K`` (:func:`rcn_gradient_kernel`, eq. 15 and its gradient): ``G = V diag(d) Vᵀ`` once; each
+  scenario's ``W_S = G − J_i J_iᵀ`` by its secular equation (the extreme eigenvalues,
+  :mod:`fault_tolerance.numerics.fast.rank_one_eigen`), the eigenvectors from the secular formula
+  ``u ∝ V (diag(d) − μ)⁻¹ Vᵀ J_i`` refined by one inverse-iteration step on ``W_S − μ I``;
+  ``∂λ/∂q_j = 2 ũᵀ (∂J/∂q_j) J_Sᵀ u`` with the kinematic Hessian never formed (eq. H1, suffix
+  sums, ``O(n)`` per vector);
+* the singular reduced robots (``σ_min ≤ σ_max / RCN_SINGULAR``) add nothing (eq. S1), as in the
+  reference :func:`fault_tolerance.resolution.indices.rcn_gradient`;
+* the null step ``α N ∇K = α(∇K − Yᵀ(Y ∇K))``, capped at ``max_step`` as
+  :func:`fault_tolerance.resolution.mda.mda` caps it.
+
+Single-joint scenarios only (the Controller takes :func:`~fault_tolerance.control.lapack_steps.lapack_mda`
+for multi-joint ones). Plain Python without numba (valid, and tested so: ``.py_func``).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from functools import partial
+
+import numpy as np
+import pinocchio as pin
+
+from fault_tolerance.control.fallback import fallback as _fallback
+from fault_tolerance.control.lapack_steps import _LWA, _STEP_ERRORS, TRACE_MAX
+from fault_tolerance.control.workspace import ControllerWorkspace
+from fault_tolerance.errors import FaultToleranceError
+from fault_tolerance.numerics.fast.dense import (
+    cholesky,
+    least_norm,
+    null_apply,
+    rank_ok,
+    trace_inverse,
+)
+from fault_tolerance.numerics.fast.rank_one_eigen import eigenpairs, highest_root, lowest_root
+from fault_tolerance.numerics.fast.small_eigen import njit
+from fault_tolerance.resolution.indices import RCN_MAX, RCN_SINGULAR
+
+__all__ = [
+    "compiled_mda_step",
+    "gradient_kernel",
+    "gradient_view",
+    "gradient_workspace",
+    "mda_kernel",
+    "rcn_gradient_kernel",
+]
+
+_INF = math.inf
+_EPS = 2.220446049250313e-16
+#: Entries of the parameter block (the first of the float workspace).
+P_TRACE, P_RANK, P_GAIN, P_MAXSTEP, P_RCN_MAX, P_SINGULAR = range(6)
+N_PARAMS = 6
+#: Statuses: done; no certificate of ``σ_min(J) ≥ SIGMA_EPS`` (the planner's damped step); the
+#: eigen solver gave up (the NumPy step); wrong sizes.
+OK, UNCERTIFIED, NO_EIGEN, BAD_SIZE = 0, 1, 2, 3
+
+
+@njit
+def _triple(a0, a1, a2, b0, b1, b2, c0, c1, c2) -> float:  # pragma: no cover - numba
+    """``c · (a × b)``."""
+    return c0 * (a1 * b2 - a2 * b1) + c1 * (a2 * b0 - a0 * b2) + c2 * (a0 * b1 - a1 * b0)
+
+
+# Eqn. (H1): ∂J_k/∂q_j = [ω_j × a_k; ω_j × ω_k] (j < k), [ω_k × a_j; 0] (j ≥ k), LWA columns.
+@njit
+def hessian_contract(Jf, ut, x, S, D) -> None:  # pragma: no cover - numba
+    r"""``D_j = ũᵀ (∂J/∂q_j) x`` for every joint j, the Hessian never formed (eq. H1).
+
+    ``Jf`` (6, n) the ``LOCAL_WORLD_ALIGNED`` Jacobian, columns ``[a_k; ω_k]``; ``ũ`` (6) a
+    row-space vector (zero off the task rows). With the suffix sums :math:`A_j = \sum_{k>j} x_k
+    a_k`, :math:`\Omega_j = \sum_{k>j} x_k \omega_k` and the prefix :math:`P_j = \sum_{k\le j} x_k
+    \omega_k`: :math:`D_j = \tilde u_{lin}\cdot(\omega_j \times A_j + P_j \times a_j) + \tilde
+    u_{ang}\cdot(\omega_j \times \Omega_j)`. ``S`` (n, 6) scratch.
+    """
+    n = Jf.shape[1]
+    for r in range(6):
+        S[n - 1, r] = 0.0
+    for j in range(n - 2, -1, -1):
+        xk = x[j + 1]
+        for r in range(6):
+            S[j, r] = S[j + 1, r] + xk * Jf[r, j + 1]
+    p0, p1, p2 = 0.0, 0.0, 0.0
+    for j in range(n):
+        xj = x[j]
+        w0, w1, w2 = Jf[3, j], Jf[4, j], Jf[5, j]
+        p0 += xj * w0
+        p1 += xj * w1
+        p2 += xj * w2
+        t = _triple(w0, w1, w2, S[j, 0], S[j, 1], S[j, 2], ut[0], ut[1], ut[2])
+        t += _triple(p0, p1, p2, Jf[0, j], Jf[1, j], Jf[2, j], ut[0], ut[1], ut[2])
+        t += _triple(w0, w1, w2, S[j, 3], S[j, 4], S[j, 5], ut[3], ut[4], ut[5])
+        D[j] = t
+
+
+@njit
+def _lu_factor(W, mu, M, perm, m) -> None:  # pragma: no cover - numba
+    """``P (W − μ I) = L U`` in ``M`` (partial pivoting, the row order in ``perm``).
+
+    A zero pivot (the shift is an exact eigenvalue) is replaced by ``ε ‖W‖``: inverse iteration.
+    """
+    scale = 0.0
+    for i in range(m):
+        perm[i] = i
+        for j in range(m):
+            M[i, j] = W[i, j] - (mu if i == j else 0.0)
+            scale = max(scale, abs(W[i, j]))
+    tiny = _EPS * max(scale, 1e-300)
+    for c in range(m):
+        p = c
+        for r in range(c + 1, m):
+            if abs(M[r, c]) > abs(M[p, c]):
+                p = r
+        if p != c:
+            for j in range(m):
+                M[c, j], M[p, j] = M[p, j], M[c, j]
+            perm[c], perm[p] = perm[p], perm[c]
+        if abs(M[c, c]) < tiny:
+            M[c, c] = tiny
+        for r in range(c + 1, m):
+            f = M[r, c] / M[c, c]
+            M[r, c] = f
+            for j in range(c + 1, m):
+                M[r, j] -= f * M[c, j]
+
+
+@njit
+def _lu_apply(M, perm, b, t, m) -> None:  # pragma: no cover - numba
+    """``b ← (W − μ I)⁻¹ b`` with the factors of :func:`_lu_factor` (``t`` scratch)."""
+    for i in range(m):
+        t[i] = b[int(perm[i])]
+    for i in range(m):
+        s = t[i]
+        for j in range(i):
+            s -= M[i, j] * t[j]
+        t[i] = s
+    for i in range(m - 1, -1, -1):
+        s = t[i]
+        for j in range(i + 1, m):
+            s -= M[i, j] * t[j]
+        t[i] = s / M[i, i]
+    for i in range(m):
+        b[i] = t[i]
+
+
+@njit
+def _unit(u, m) -> bool:  # pragma: no cover - numba
+    """``u ← u / ‖u‖``; False when ``u`` is zero or not finite."""
+    s = 0.0
+    for i in range(m):
+        s += u[i] * u[i]
+    if not (s > 0.0 and s < _INF):
+        return False
+    s = 1.0 / math.sqrt(s)
+    for i in range(m):
+        u[i] *= s
+    return True
+
+
+@njit
+def _eigenvector(W, V, d, z, mu, top, u, y, M, m) -> bool:  # pragma: no cover - numba
+    """Unit eigenvector of ``W = G − J_i J_iᵀ`` for its extreme eigenvalue ``μ`` into ``u``.
+
+    Start ``u ∝ V (diag(d) − μ)⁻¹ z`` (``z = Vᵀ J_i``; each distance at least ``ε d_m``, the
+    eigenvector of ``d``'s end when nothing is left), then two steps of inverse iteration on
+    ``W − μ I`` (one factorisation): exact also where ``J_i`` is (nearly) zero and ``W = G``.
+    ``y`` holds ``2 m`` numbers.
+    """
+    tiny = _EPS * max(abs(d[m - 1]), 1e-300)
+    for k in range(m):
+        den = d[k] - mu
+        if abs(den) < tiny:
+            den = tiny if den >= 0.0 else -tiny
+        y[k] = z[k] / den
+    if not _unit(y, m):
+        for k in range(m):
+            y[k] = 0.0
+        y[m - 1 if top else 0] = 1.0
+    for r in range(m):
+        s = 0.0
+        for k in range(m):
+            s += V[r, k] * y[k]
+        u[r] = s
+    perm, t = y[0:m], y[m : 2 * m]
+    _lu_factor(W, mu, M, perm, m)
+    for _ in range(2):
+        _lu_apply(M, perm, u, t, m)
+        if not _unit(u, m):
+            return False
+    return True
+
+
+@njit
+def _derivative(Jf, rix, i, u, ut, w, S, D, n, m) -> None:  # pragma: no cover - numba
+    """``D_j = ũᵀ (∂J/∂q_j) v`` with ``v = J_Sᵀu / ‖J_Sᵀu‖`` (column ``i`` locked), all j."""
+    for r in range(6):
+        ut[r] = 0.0
+    for k in range(m):
+        ut[rix[k]] = u[k]
+    s = 0.0
+    for c in range(n):
+        t = 0.0
+        if c != i:
+            for k in range(m):
+                t += Jf[rix[k], c] * u[k]
+        w[c] = t
+        s += t * t
+    s = math.sqrt(s)
+    if s > 0.0:
+        for c in range(n):
+            w[c] /= s
+    hessian_contract(Jf, ut, w, S, D)
+
+
+@njit
+def rcn_gradient_kernel(Jf, J, G, cols, params, F, grad) -> int:  # pragma: no cover - numba
+    r"""``∇K``, ``K = Σ_S k_S²`` over the single-joint scenarios ``cols`` (eq. 15), into ``grad``.
+
+    ``J`` (m, n) the task rows of ``Jf``, ``G = J Jᵀ`` (lower triangle read). Per scenario
+    :math:`\partial(k^2)/\partial q_j = 2k(\sigma'_{max}\sigma_{min} -
+    \sigma_{max}\sigma'_{min})/\sigma_{min}^2` with ``σ_min`` floored at ``σ_max / RCN_MAX`` and
+    ``σ' = uᵀ(∂J_S/∂q_j)v``; singular reduced robots add nothing (eq. S1). ``F`` scratch of
+    :func:`gradient_scratch` numbers. Returns :data:`OK` or :data:`NO_EIGEN`.
+    """
+    m, n = J.shape
+    V, A = F[0 : m * m].reshape((m, m)), F[m * m : 2 * m * m].reshape((m, m))
+    M, W = F[2 * m * m : 3 * m * m].reshape((m, m)), F[3 * m * m : 4 * m * m].reshape((m, m))
+    o = 4 * m * m
+    d, z, u2, y = F[o : o + m], F[o + m : o + 2 * m], F[o + 2 * m : o + 3 * m], F[o + 3 * m : o + 5 * m]
+    umin, umax, ut = F[o + 5 * m : o + 6 * m], F[o + 6 * m : o + 7 * m], F[o + 7 * m : o + 7 * m + 6]
+    o += 7 * m + 6
+    work = F[o : o + 2 * m]
+    o += 2 * m
+    w, Dmax, Dmin = F[o : o + n], F[o + n : o + 2 * n], F[o + 2 * n : o + 3 * n]
+    o += 3 * n
+    S = F[o : o + 6 * n].reshape((n, 6))
+    rix = cols[cols.shape[0] - m :]  # the task rows, after the scenarios' columns
+    f = cols.shape[0] - m
+    for c in range(n):
+        grad[c] = 0.0
+    if m < 2:
+        return NO_EIGEN
+    for r in range(m):
+        for c in range(r + 1):
+            A[r, c] = G[r, c]
+    if not eigenpairs(A, m, V, d, work):
+        return NO_EIGEN
+    for s in range(f):
+        i = cols[s]
+        total = 0.0
+        for k in range(m):
+            t = 0.0
+            for r in range(m):
+                t += V[r, k] * J[r, i]
+            z[k] = t
+            u2[k] = t * t
+            total += u2[k]
+        lo, ok = lowest_root(d, u2, m, total)
+        if not ok:
+            return NO_EIGEN
+        hi, ok = highest_root(d, u2, m)
+        if not ok:
+            return NO_EIGEN
+        smax, sminr = math.sqrt(max(hi, 0.0)), math.sqrt(max(lo, 0.0))
+        if not sminr > smax / params[P_SINGULAR]:  # a singular reduced robot: no term (eq. S1)
+            continue
+        for r in range(m):
+            for c in range(m):
+                W[r, c] = (G[r, c] if c <= r else G[c, r]) - J[r, i] * J[c, i]
+        if not _eigenvector(W, V, d, z, hi, True, umax, y, M, m):
+            return NO_EIGEN
+        if not _eigenvector(W, V, d, z, lo, False, umin, y, M, m):
+            return NO_EIGEN
+        _derivative(Jf, rix, i, umax, ut, w, S, Dmax, n, m)
+        _derivative(Jf, rix, i, umin, ut, w, S, Dmin, n, m)
+        smin = max(sminr, smax / params[P_RCN_MAX])
+        k = smax / smin
+        cmax, cmin = 2.0 * k / smin, 2.0 * k * smax / (smin * smin)
+        for c in range(n):
+            grad[c] += cmax * Dmax[c] - cmin * Dmin[c]
+    return OK
+
+
+@njit
+def gradient_scratch(m, n):  # pragma: no cover - numba
+    """Length of the scratch ``F`` of :func:`rcn_gradient_kernel`."""
+    return 4 * m * m + 9 * m + 6 + 9 * n
+
+
+@njit
+def _task_gram(Jf, rix, J, G, L) -> None:  # pragma: no cover - numba
+    """``J = Jf[rix]`` and ``G = J Jᵀ`` into the lower triangles of ``G`` and ``L``."""
+    m, n = J.shape
+    for r in range(m):
+        for c in range(n):
+            J[r, c] = Jf[rix[r], c]
+    for r in range(m):
+        for c in range(r + 1):
+            s = 0.0
+            for k in range(n):
+                s += J[r, k] * J[c, k]
+            G[r, c] = s
+            L[r, c] = s
+
+
+@njit
+def gradient_kernel(Jf, F, Iw, m) -> int:  # pragma: no cover - numba
+    """``∇K`` alone (the simulated sample's MDA): into ``F``'s gradient view (:func:`gradient_view`)."""
+    n = Jf.shape[1]
+    f = Iw.shape[0] - m
+    if f < 1 or F.shape[0] != workspace_size(m, n) or Jf.shape[0] != 6:
+        return BAD_SIZE
+    o = N_PARAMS
+    J = F[o : o + m * n].reshape((m, n))
+    G = F[o + m * n : o + m * n + m * m].reshape((m, m))
+    L = F[o + m * n + m * m : o + m * n + 2 * m * m].reshape((m, m))
+    o += 2 * m * n + 2 * m * m + m
+    _task_gram(Jf, Iw[f:], J, G, L)
+    return rcn_gradient_kernel(Jf, J, G, Iw, F[0:N_PARAMS], F[o + n :], F[o : o + n])
+
+
+def gradient_view(F: np.ndarray, m: int, n: int) -> np.ndarray:
+    """The gradient ``∇K`` in the workspace ``F`` (written by both kernels), shape (n,)."""
+    o = N_PARAMS + 2 * m * n + 2 * m * m + m
+    return F[o : o + n]
+
+
+@njit
+def mda_kernel(Jf, xdot, out, F, Iw) -> int:  # pragma: no cover - numba
+    """MDA rates ``a − α N ∇K`` (the step capped at ``max_step``) into ``out``; a status.
+
+    ``Jf`` (6, n) the frame Jacobian (``LOCAL_WORLD_ALIGNED``); ``F`` the float workspace of
+    :func:`gradient_workspace` (parameters ``P_*``, then ``J``, ``G``, ``L``, ``Y``, ``a``-side
+    vectors and the gradient's scratch); ``Iw`` the scenarios' columns, then the task rows.
+    """
+    n = Jf.shape[1]
+    m = xdot.shape[0]
+    f = Iw.shape[0] - m
+    if out.shape[0] != n or f < 1 or F.shape[0] != workspace_size(m, n) or Jf.shape[0] != 6:
+        return BAD_SIZE
+    params = F[0:N_PARAMS]
+    o = N_PARAMS
+    J = F[o : o + m * n].reshape((m, n))
+    o += m * n
+    G = F[o : o + m * m].reshape((m, m))
+    L = F[o + m * m : o + 2 * m * m].reshape((m, m))
+    o += 2 * m * m
+    Y = F[o : o + m * n].reshape((m, n))
+    o += m * n
+    zm, grad = F[o : o + m], F[o + m : o + m + n]
+    o += m + n
+    scratch = F[o:]
+    _task_gram(Jf, Iw[f:], J, G, L)
+    if not cholesky(L, m):
+        return UNCERTIFIED
+    tr = trace_inverse(L, zm, m)
+    if not tr <= params[P_TRACE] or not rank_ok(J, tr, params[P_RANK]):
+        return UNCERTIFIED
+    least_norm(J, xdot, L, Y, zm, out)  # Y = L⁻¹J, a = Yᵀ(L⁻¹ẋ) in out
+    status = rcn_gradient_kernel(Jf, J, G, Iw, params, scratch, grad)
+    if status:
+        return status
+    null_apply(Y, grad, zm, n)  # ∇K ← N ∇K
+    size = 0.0
+    gain = params[P_GAIN]
+    for c in range(n):
+        grad[c] *= gain
+        size += grad[c] * grad[c]
+    size = math.sqrt(size)
+    scale = 1.0
+    if not size < _INF:  # ∇K overflowed: no usable direction (as mda.mda)
+        scale = 0.0
+    elif size > params[P_MAXSTEP]:
+        scale = params[P_MAXSTEP] / size
+    s2 = 0.0
+    for c in range(n):
+        if scale != 0.0:
+            out[c] -= grad[c] * scale
+        s2 += out[c] * out[c]
+    return OK if s2 < _INF else UNCERTIFIED
+
+
+@njit
+def workspace_size(m, n):  # pragma: no cover - numba
+    """Length of the float workspace of :func:`mda_kernel`."""
+    return N_PARAMS + 2 * m * n + 2 * m * m + m + n + gradient_scratch(m, n)
+
+
+def gradient_workspace(cw: ControllerWorkspace) -> tuple[np.ndarray, np.ndarray]:
+    """``(F, Iw)`` of :func:`mda_kernel` for the Controller workspace ``cw`` (single-joint scenarios)."""
+    m, n = cw.m, cw.n
+    F = np.zeros(getattr(workspace_size, "py_func", workspace_size)(m, n))
+    F[:N_PARAMS] = TRACE_MAX, cw.rank_coef, cw.gain, cw.max_step, RCN_MAX, RCN_SINGULAR
+    rows = np.arange(6)[cw.rows]
+    Iw = np.concatenate([np.asarray(cw.scenarios.columns, dtype=np.int64), rows.astype(np.int64)])
+    return F, np.ascontiguousarray(Iw)
+
+
+def compiled_mda_step(
+    cw: ControllerWorkspace, slow: Callable[..., np.ndarray]
+) -> Callable[..., np.ndarray]:
+    """The MDA step of ``cw``, numba-compiled; ``slow`` (the LAPACK/NumPy step) takes what it refuses.
+
+    Compiles :func:`mda_kernel` on first use (here, not in the loop), then freezes the dispatcher.
+    """
+    model, data, fid, n = cw.model, cw.data, cw.frame_id, cw.n
+    cfj, empty = pin.computeFrameJacobian, np.empty
+    F, Iw = gradient_workspace(cw)
+    fallback = partial(_fallback, cw)
+    rows = cw.rows
+    kernel = mda_kernel
+    J0 = cfj(model, data, pin.neutral(model), fid, _LWA)
+    kernel.disable_compile(False)
+    kernel(J0, np.zeros(cw.m), np.zeros(n), F, Iw)
+    kernel.disable_compile(True)
+
+    def mda(q: np.ndarray, xdot: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+        """MDA, maximum-dexterity rates ``q̇ = J⁺ẋ − α N ∇K``; compiled."""
+        if out is None:
+            out = empty(n)
+        try:
+            Jf = cfj(model, data, q, fid, _LWA)
+            status = kernel(Jf, xdot, out, F, Iw)
+        except FaultToleranceError:
+            raise
+        except _STEP_ERRORS:
+            return slow(q, xdot, out)  # types or layouts the kernel was not compiled for
+        if status == UNCERTIFIED:
+            return fallback("mda", Jf[rows], xdot, out, q)
+        if status:
+            return slow(q, xdot, out)
+        return out
+
+    return mda
