@@ -284,14 +284,14 @@ def test_mda_after_a_planner_fallback():
     arm = ft.load_arm("planar_3r")
     ctrl = Controller(arm, "all", method="mda", backend="numba")
     q = np.array([0.0, 1e-7, 1e-7])
-    for k, xd in enumerate((np.array([0.0, 1e-4]), np.array([0.0, 5.0])), start=1):
+    for k, xd in enumerate((np.array([0.0, 1e-4]), np.array([0.0, 10.0])), start=1):
         qd = ctrl.step(q, xd)
         J, dJ = arm.jacobian(q), arm.jacobian_derivatives(q)
         ref = ft.resolve_bounded("mda", J, xd, "all", bounds=arm.rate_bounds(q), dJ=dJ)
         assert np.allclose(qd, ref.qd, atol=1e-9)
         assert ctrl.last_scale == pytest.approx(ref.scale, rel=REL)
         assert ctrl.fallbacks == k and ctrl.bounded_steps == ctrl.bounded_reference_steps
-    assert ctrl.bounded_steps >= 1  # 5 m/s is far out of the box
+    assert ctrl.bounded_steps >= 1  # damped, 10 m/s needs 4.3 rad/s (the box: 3)
 
 
 def test_chain_14_full_active_set_compiled():

@@ -162,3 +162,18 @@ def test_simulate_follows_the_reference_near_a_reduced_singularity():
     ]
     np.testing.assert_allclose(runs[0].qd, runs[1].qd, rtol=0, atol=1e-9)
     np.testing.assert_allclose(runs[0].K, runs[1].K, rtol=1e-9)
+
+
+def test_the_posture_descent_escapes_a_singular_reduced_robot():
+    """singular="escape" keeps the capped term: at an exactly singular J_S a small step against
+    it lowers K (the skipped term would leave the descent stuck there). Unknown values raise."""
+    arm = ft.load_arm("planar_3r")
+    q = np.array([0.3, 1.0, 0.0])  # joint 1 locked: links 2-3 aligned, J_S singular
+    J, dJ = arm.jacobian(q), arm.jacobian_derivatives(q)
+    g = rcn_gradient(J, dJ, "all", singular="escape")
+    skipped = rcn_gradient(J, dJ, "all")
+    assert np.linalg.norm(g) > 1e6 * np.linalg.norm(skipped)
+    step = 1e-3 * g / np.linalg.norm(g)
+    assert ft.square_sum_rcn(arm.jacobian(q - step), "all") < ft.square_sum_rcn(J, "all")
+    with pytest.raises(ft.InvalidInput, match="allowed: skip, escape"):
+        rcn_gradient(J, dJ, "all", singular="ignore")

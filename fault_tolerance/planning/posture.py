@@ -312,7 +312,8 @@ def _posture_by_descent(arm, steps, sols, sc, iters: int = 300) -> Posture:
         alpha = 1e-3
         for _ in range(iters):
             J = steps.jacobian(q)
-            g = steps.null_projector(J) @ rcn_gradient(J, arm.jacobian_derivatives(q), sc)
+            dK = rcn_gradient(J, arm.jacobian_derivatives(q), sc, singular="escape")  # (S1)
+            g = steps.null_projector(J) @ dK
             if norm(g) < 1e-9:
                 break
             trial = _correct(steps, q - alpha * g / max(1.0, norm(g)))

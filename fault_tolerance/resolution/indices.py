@@ -27,6 +27,10 @@ RCN_THRESHOLD = 100.0
 RCN_SINGULAR = 1e6
 
 RESPONSES = ("least_norm", "continuation")
+#: What :func:`rcn_gradient` does with a singular reduced robot (eq. S1): ``"skip"`` leaves its term
+#: out (MDA's direction, one in every route); ``"escape"`` keeps the capped term, whose sign is the
+#: SVD's (either sign raises σ_min), for a descent on K that checks each step (the posture search).
+SINGULAR_TERMS = ("skip", "escape")
 
 
 def _scenarios(J: np.ndarray, lockable, weights=None, joint_names=()) -> Scenarios:
@@ -169,7 +173,12 @@ def square_sum_rcn(J: np.ndarray, lockable=None) -> float:
 
 
 def rcn_gradient(
-    J: np.ndarray, dJ: np.ndarray, lockable=None, *, joint_names: Sequence[str] = ()
+    J: np.ndarray,
+    dJ: np.ndarray,
+    lockable=None,
+    *,
+    joint_names: Sequence[str] = (),
+    singular: str = "skip",
 ) -> np.ndarray:
     r"""Gradient of ``K = Σ_S k_S²`` with respect to ``q``, shape (n,).
 
@@ -179,7 +188,11 @@ def rcn_gradient(
     ``dJ`` is ``Arm.jacobian_derivatives(q)``, shape (n, m, n). A singular reduced robot,
     ``σ_min(J_S) <= σ_max(J_S) / RCN_SINGULAR``, adds nothing (eq. S1 in docs/MATH.md): the one
     definition of MDA's direction there, which every route (Controller, simulate) follows.
+    ``singular="escape"`` keeps that term instead, capped at ``k_S = RCN_MAX``: a direction that
+    raises its ``σ_min`` (either sign does), for a descent on K that accepts only decreases.
     """
+    if singular not in SINGULAR_TERMS:
+        raise InvalidInput(f"unknown singular={singular!r}; allowed: {', '.join(SINGULAR_TERMS)}")
     J = finite(J, "J", ndim=2)
     m, n = J.shape
     dJ = finite(dJ, "dJ", (n, m, n))
@@ -188,7 +201,7 @@ def rcn_gradient(
     for S in sc.sets:
         keep = [j for j in range(n) if j not in S]
         U, s, Vt = np.linalg.svd(J[:, keep], full_matrices=False)
-        if not s[-1] > s[0] / RCN_SINGULAR:  # a singular reduced robot: no term (eq. S1)
+        if singular == "skip" and not s[-1] > s[0] / RCN_SINGULAR:  # no term (eq. S1)
             continue
         smax, smin = s[0], max(s[-1], s[0] / RCN_MAX)
         dS = dJ[:, :, keep]  # (n, m, n_keep)
