@@ -16,7 +16,9 @@ def main(stem: str = "docs/img/fig2_lnva_jvja") -> dict:
     arm = ft.load_arm(case.robot)
     path = case.path()
     q0 = ft.initial_posture(arm, path.x0, list(case.lockable)).q
-    runs = {a: ft.simulate(arm, path, a, q0=q0, lockable=list(case.lockable)) for a in ("lnva", "jvja")}
+    runs = {
+        a: ft.simulate(arm, path, a, q0=q0, lockable=list(case.lockable)) for a in ("lnva", "jvja")
+    }
     fig = plot_comparison(runs, title="planar 3R, Fig. 2 circle, every joint lockable")
     save_figure(fig, stem, formats=("png",))
     means = {a: r.summary()["jvj_mean"] for a, r in runs.items()}

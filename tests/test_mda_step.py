@@ -136,7 +136,9 @@ def test_every_route_takes_one_direction_at_an_exact_reduced_singularity(name, k
     assert np.linalg.norm(ref) > 1e-6  # the other reduced robots give a direction
     for name_, qd in routes.items():
         step = qd - a
-        np.testing.assert_allclose(step, ref, rtol=0, atol=1e-9 * np.linalg.norm(ref), err_msg=name_)
+        np.testing.assert_allclose(
+            step, ref, rtol=0, atol=1e-9 * np.linalg.norm(ref), err_msg=name_
+        )
     g = rcn_gradient(J, dJ, lockable if lockable != "all" else None)
     assert np.all(np.isfinite(g))
 

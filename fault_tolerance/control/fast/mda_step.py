@@ -233,8 +233,17 @@ def rcn_gradient_kernel(Jf, J, G, cols, params, F, grad) -> int:  # pragma: no c
     V, A = F[0 : m * m].reshape((m, m)), F[m * m : 2 * m * m].reshape((m, m))
     M, W = F[2 * m * m : 3 * m * m].reshape((m, m)), F[3 * m * m : 4 * m * m].reshape((m, m))
     o = 4 * m * m
-    d, z, u2, y = F[o : o + m], F[o + m : o + 2 * m], F[o + 2 * m : o + 3 * m], F[o + 3 * m : o + 5 * m]
-    umin, umax, ut = F[o + 5 * m : o + 6 * m], F[o + 6 * m : o + 7 * m], F[o + 7 * m : o + 7 * m + 6]
+    d, z, u2, y = (
+        F[o : o + m],
+        F[o + m : o + 2 * m],
+        F[o + 2 * m : o + 3 * m],
+        F[o + 3 * m : o + 5 * m],
+    )
+    umin, umax, ut = (
+        F[o + 5 * m : o + 6 * m],
+        F[o + 6 * m : o + 7 * m],
+        F[o + 7 * m : o + 7 * m + 6],
+    )
     o += 7 * m + 6
     work = F[o : o + 2 * m]
     o += 2 * m
