@@ -127,6 +127,10 @@ CASES = {
         ["--robot", "panda", "--joints", "panda_joint2,panda_joint4,panda_joint6,panda_joint7",
          "--task", "position"], "structurally", "--task x,z",
     ),
+    "tip on the wrist axis": (
+        ["--robot", "ur5", "--tip", "wrist_3_link", "--task", "position"], "structurally",
+        "--tip tool0",
+    ),
     "too fast": (["--robot", "planar_3r", "--radius", "1", "--omega", "2.5"], sc.TOO_FAST, None),
     "real arm too fast": (None, sc.TOO_FAST, None),
     "locks under limits": (

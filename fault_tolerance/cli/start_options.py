@@ -134,7 +134,8 @@ def fix_options(args, arm, reasons, lockable, extra=()) -> list[tuple[str, dict]
     Lockable joints that fail (structurally, under limits, nearly intolerable) are left out of
     ``--lockable``; a path too fast gets a slower ``--omega`` or a smaller ``--radius``; a path
     out of reach a smaller ``--radius`` or another plane (``--rows``); a singular arm the task
-    rows its Jacobian spans (``--task``) or another plane.
+    rows its Jacobian spans (``--task``) or another plane. A structurally intolerable joint may
+    also be made up for from another tip frame on the last link (``--tip``, farthest first).
     """
     from fault_tolerance.planning import start_checks as sc
 
@@ -143,6 +144,7 @@ def fix_options(args, arm, reasons, lockable, extra=()) -> list[tuple[str, dict]
     for category, _, joints in reasons:
         if category == sc.STRUCTURAL:
             out += _without(lockable, joints, extra) + _spanned_task(args, arm)
+            out += _other_tips(arm)
         elif category in (sc.UNDER_LIMITS, sc.NEARLY_INTOLERABLE):
             out += _without(lockable, joints, extra)
             out += [_set("omega", omega / 2), _set("radius", radius / 2)]
@@ -205,6 +207,22 @@ def _other_planes(args, arm) -> list[tuple[str, dict]]:
     ]
     pairs.sort(key=lambda p: sum(r.startswith("r") for r in p))
     return [(f"--rows {a},{b}", {"rows": f"{a},{b}"}) for a, b in pairs[:3]]
+
+
+def _other_tips(arm, count: int = 2) -> list[tuple[str, dict]]:
+    """``--tip`` with other body or fixed frames on the tip's link, farthest from its joint first."""
+    import pinocchio as pin
+
+    model = arm.model
+    joint = model.frames[arm.frame_id].parentJoint
+    kinds = (pin.FrameType.BODY, pin.FrameType.OP_FRAME)
+    found = {}
+    for f in model.frames:
+        if f.parentJoint == joint and f.type in kinds and f.name != arm.tip:
+            found.setdefault(f.name, float(np.linalg.norm(f.placement.translation)))
+    here = float(np.linalg.norm(model.frames[arm.frame_id].placement.translation))
+    far = sorted((d, n) for n, d in found.items() if abs(d - here) > 1e-6)[::-1]
+    return [(f"--tip {n}", {"tip": n}) for _, n in far[:count]]
 
 
 def _spanned_task(args, arm, samples: int = 20, seed: int = 0) -> list[tuple[str, dict]]:
