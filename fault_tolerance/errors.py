@@ -182,6 +182,25 @@ class InvalidInput(FaultToleranceError, ValueError):
     """
 
 
+class NoStartFound(InvalidInput):
+    """No candidate start passed the default start's checks; why, by category, and what works.
+
+    ``reasons``: ``(category, count, joints)`` of the dominant failure categories (see
+    ``fault_tolerance.planning.start_checks.CATEGORIES``); ``fixes``: option texts that were tried
+    and found a start (the command line adds them; empty when none was tried or none worked).
+    """
+
+    def __init__(
+        self,
+        message: str,
+        reasons: Sequence[tuple[str, int, tuple[str, ...]]] = (),
+        fixes: Sequence[str] = (),
+    ) -> None:
+        self.reasons = [(c, int(n), tuple(j)) for c, n, j in reasons]
+        self.fixes = list(fixes)
+        super().__init__(message)
+
+
 class DynamicsUnavailable(FaultToleranceError):
     """An arm's description cannot serve dynamics (no usable inertias), or a dynamics option is wrong."""
 

@@ -72,10 +72,12 @@ def test_given_x0_keeps_the_point():
 
 
 def test_no_start_is_a_clear_error():
-    """A point out of reach gives InvalidInput naming the arm and what to do."""
+    """A point out of reach gives InvalidInput naming the arm and the reason's category."""
     arm = ft.load_arm("planar_3r")
-    with pytest.raises(ft.InvalidInput, match="no start at x0 .* --q0 or --x0"):
+    with pytest.raises(ft.NoStartFound, match="no start at x0 .* 1 path out of reach") as err:
         ft.default_start(arm, x0=[3.0, 0.0])
+    assert isinstance(err.value, ft.InvalidInput)
+    assert err.value.reasons == [("path out of reach", 1, ())]
 
 
 def test_path_too_large_is_refused_with_reason():

@@ -17,7 +17,6 @@ from fault_tolerance.cli.common import (
     limits_line,
     load_robot,
     names,
-    report_warnings,
     resolver_options,
 )
 from fault_tolerance.cli.dynamics_options import (
@@ -224,11 +223,46 @@ def _run(args) -> int:
             f"orientation error peak after the lock {1e3 * run_.orientation_error[after].max():.3f} "
             f"mrad (whole run: {1e3 * s['orientation_error_max']:.3f} mrad)"
         )
-    found = report_warnings(NAME, args.algorithm, run_, arm)
+    setup = (q0, path, lockable, duration, feedback, gain, joint, t_lock)
+    found = _report(args, arm, run_, setup)
     print(limits_line(run_))
     if args.out:
         _write(run_, arm, joint, t_lock, Path(args.out), args.html, found, planned)
     return 0
+
+
+def _lag_free(args, arm, run_, setup):
+    """The lock run with perfect rate tracking (``tau = 0``): the same start, lock and samples."""
+    from fault_tolerance.simulation.setup import ServoModel
+    from fault_tolerance.simulation.simulate import simulate
+
+    q0, path, lockable, duration, feedback, gain, joint, t_lock = setup
+    return simulate(
+        arm, path, args.algorithm, q0=q0, lockable=lockable, dt=args.dt, duration=duration,
+        lock_joint=joint, lock_time=t_lock, servo=ServoModel(tau=0.0), feedback_gain=feedback,
+        response=args.response, limits=not args.no_limits, **gain,
+    )  # fmt: skip
+
+
+def _report(args, arm, run_, setup) -> list[dict]:
+    """The run's warnings on stderr, the servo's lag kept out of them and noted on stdout.
+
+    The tracking and lost-path checks judge the same run with perfect rate tracking (the
+    algorithm's and the reduced robot's error); the lag's part is one note
+    (:mod:`~fault_tolerance.simulation.diagnostics`, (E1), (E2)).
+    """
+    import sys
+
+    from fault_tolerance.simulation.diagnostics import check_run, servo_lag, warning_lines
+
+    lag_free = _lag_free(args, arm, run_, setup)
+    found = check_run(run_, arm, lag_free=lag_free)
+    for line in warning_lines(args.algorithm, found):
+        print(f"fault-tolerance {NAME}: {line}", file=sys.stderr)
+    note = servo_lag(run_, lag_free)
+    if note:
+        print(f"note: {note}")
+    return [w.as_dict() for w in found]
 
 
 def _write(run_, arm, joint: str, t_lock: float, out: Path, html: bool, found, planned) -> None:

@@ -9,10 +9,13 @@ start (docs/MATH.md, "The default start") and one line says which and why.
 
 from __future__ import annotations
 
+import copy
+import itertools
+
 import numpy as np
 
 from fault_tolerance.cli.common import floats, lockable_of, names
-from fault_tolerance.errors import InvalidInput
+from fault_tolerance.errors import InvalidInput, NoStartFound, StructurallyIntolerable
 
 
 def _none_ok(algorithms) -> bool:
@@ -20,14 +23,19 @@ def _none_ok(algorithms) -> bool:
     return all(a == "lnva" for a in algorithms)
 
 
-def choose_start(args, arm, algorithms=("jvja",), extra_lockable=(), **sim_options):
+def choose_start(
+    args, arm, algorithms=("jvja",), extra_lockable=(), *, fixes=True, max_seeds=None, **sim_options
+):
     """``(q0, path, lockable, choice)`` from the options.
 
     ``algorithms`` and ``sim_options`` (``dt``, ``feedback_gain``, ...) are those of the runs that
     follow: the default start is checked by running them, and ``choice.runs`` holds those runs
     (``choice`` is ``None`` for a given start). The command prints ``choice.reason()`` (one line)
     once its inputs are all checked, so bad input still gives nothing on stdout. ``extra_lockable``: joints that must be tolerable
-    at the start as well (``lock --joint``).
+    at the start as well (``lock --joint``). When no default start passes, the refusal
+    (:class:`~fault_tolerance.errors.NoStartFound`) says why by category and, with ``fixes``,
+    proposes the option changes whose own start search passed (:func:`refusal_with_fixes`);
+    ``max_seeds`` bounds the seeds of that search (default: the full budget).
     """
     from fault_tolerance.model.catalog import catalog
     from fault_tolerance.planning.default_start import check_start, default_start
@@ -70,8 +78,165 @@ def choose_start(args, arm, algorithms=("jvja",), extra_lockable=(), **sim_optio
     x0 = np.array(entry["x0"], dtype=float) if entry and "x0" in entry else None
     if arm.m >= 2:  # a run too long is refused before the search
         run_samples(args.dt, args.duration or circle(np.zeros(arm.m)).duration)
-    choice = default_start(arm, start_lockable, x0=x0, path=circle, **options)
+    if max_seeds is not None:
+        options["max_seeds"] = max_seeds
+    try:
+        choice = default_start(arm, start_lockable, x0=x0, path=circle, **options)
+    except (NoStartFound, StructurallyIntolerable) as err:
+        if not fixes:
+            raise
+        raise refusal_with_fixes(
+            args, arm, err, start_lockable, (algorithms, extra_lockable, sim_options)
+        ) from None
     return choice.q0, circle(choice.x0), lockable, choice
+
+
+def refusal_with_fixes(args, arm, err, lockable, rerun) -> NoStartFound:
+    """``err`` (no default start) with the fixes whose own start search found a start.
+
+    The candidate fixes follow the dominant failure reasons (:func:`fix_options`); each is tried
+    by re-running :func:`choose_start` with that option changed and a smaller seed budget
+    (:data:`~fault_tolerance.planning.default_start.FIX_SEEDS`), at most two that work, within
+    :data:`~fault_tolerance.planning.default_start.FIX_TIME_CAP` seconds.
+    ``rerun``: ``(algorithms, extra_lockable, sim_options)`` of the refused search.
+    """
+    from fault_tolerance.cli.common import load_robot
+    from fault_tolerance.planning.default_start import FIX_SEEDS, fixes_line, try_fixes
+    from fault_tolerance.planning.start_checks import STRUCTURAL
+
+    algorithms, extra, sim_options = rerun
+    if isinstance(err, StructurallyIntolerable):
+        reasons = [(STRUCTURAL, 1, tuple(err.joints))]
+    else:
+        reasons = err.reasons
+
+    def attempt(changes: dict):
+        def run():
+            fixed = copy.copy(args)
+            for k, v in changes.items():
+                setattr(fixed, k, v)
+            again = load_robot(fixed) if {"task", "tip"} & set(changes) else arm
+            choose_start(fixed, again, algorithms, extra, fixes=False, max_seeds=FIX_SEEDS,
+                         **sim_options)  # fmt: skip
+
+        return run
+
+    options = fix_options(args, arm, reasons, lockable, extra)
+    trials = try_fixes((text, attempt(changes)) for text, changes in options)
+    return NoStartFound(
+        f"{err}; {fixes_line(trials)}", reasons, [t.option for t in trials if t.works]
+    )
+
+
+def fix_options(args, arm, reasons, lockable, extra=()) -> list[tuple[str, dict]]:
+    """Candidate fixes ``(option text, changed args)`` for the failure ``reasons``, best first.
+
+    Lockable joints that fail (structurally, under limits, nearly intolerable) are left out of
+    ``--lockable``; a path too fast gets a slower ``--omega`` or a smaller ``--radius``; a path
+    out of reach a smaller ``--radius`` or another plane (``--rows``); a singular arm the task
+    rows its Jacobian spans (``--task``) or another plane. A structurally intolerable joint may
+    also be made up for from another tip frame on the last link (``--tip``, farthest first).
+    """
+    from fault_tolerance.planning import start_checks as sc
+
+    out: list[tuple[str, dict]] = []
+    radius, omega = _path_speed(args, arm)
+    for category, _, joints in reasons:
+        if category == sc.STRUCTURAL:
+            out += _without(lockable, joints, extra) + _spanned_task(args, arm)
+            out += _other_tips(arm)
+        elif category in (sc.UNDER_LIMITS, sc.NEARLY_INTOLERABLE):
+            out += _without(lockable, joints, extra)
+            out += [_set("omega", omega / 2), _set("radius", radius / 2)]
+            out += [_set("omega", omega / 5), _set("radius", radius / 5)]
+        elif category == sc.TOO_FAST:
+            out += [_set("omega", omega / 2), _set("radius", radius / 2)]
+            out += [_set("omega", omega / 5), _set("radius", radius / 5)]
+        elif category == sc.OUT_OF_REACH:
+            out += [
+                _set("radius", radius / 2),
+                *_other_planes(args, arm),
+                _set("radius", radius / 5),
+            ]
+        elif category in (sc.SINGULAR, sc.NEAR_LIMIT):
+            out += _spanned_task(args, arm) + _other_planes(args, arm)
+    return list({text: (text, changes) for text, changes in out}.values())
+
+
+def _set(option: str, value: float) -> tuple[str, dict]:
+    """``("--option VALUE", {option: VALUE})`` with VALUE to 4 significant digits."""
+    value = float(f"{value:.4g}")
+    return f"--{option} {value:g}", {option: value}
+
+
+def _path_speed(args, arm) -> tuple[float, float]:
+    """The circle's radius [m] and angular rate [rad/s] the refused search used."""
+    from fault_tolerance.model.catalog import catalog
+
+    entry = catalog().get(arm.name) if arm.source == arm.name else None
+    spec = (entry or {}).get("path", {})
+    radius = args.radius if args.radius is not None else spec.get("radius", 0.05)
+    omega = args.omega if args.omega is not None else spec.get("omega", 2 * np.pi)
+    return float(radius), float(omega)
+
+
+def _without(lockable, joints, extra) -> list[tuple[str, dict]]:
+    """``--lockable`` without the scenarios that name ``joints``, then without each one alone.
+
+    A ``lock --joint`` among ``joints`` cannot be left out; an empty ``--lockable`` is no fix.
+    """
+    extra = {e if isinstance(e, str) else e[0] for e in extra}
+    out = []
+    for drop in [set(joints), *({j} for j in joints[:2])] if len(joints) > 1 else [set(joints)]:
+        if drop & extra:
+            continue
+        keep = [i for i in lockable if not drop & set((i,) if isinstance(i, str) else i)]
+        keep = [i for i in keep if i not in extra]
+        if keep:
+            text = ",".join(i if isinstance(i, str) else "+".join(i) for i in keep)
+            out.append((f"--lockable {text}", {"lockable": text}))
+    return out
+
+
+def _other_planes(args, arm) -> list[tuple[str, dict]]:
+    """``--rows`` with the other pairs of task rows (translations first)."""
+    rows = list(arm.task)
+    now = tuple(names(args.rows) or rows[:2]) if args.rows else None
+    pairs = [
+        p for p in itertools.combinations(rows, 2) if p != now and (now or p != tuple(rows[:2]))
+    ]
+    pairs.sort(key=lambda p: sum(r.startswith("r") for r in p))
+    return [(f"--rows {a},{b}", {"rows": f"{a},{b}"}) for a, b in pairs[:3]]
+
+
+def _other_tips(arm, count: int = 2) -> list[tuple[str, dict]]:
+    """``--tip`` with other body or fixed frames on the tip's link, farthest from its joint first."""
+    import pinocchio as pin
+
+    model = arm.model
+    joint = model.frames[arm.frame_id].parentJoint
+    kinds = (pin.FrameType.BODY, pin.FrameType.OP_FRAME)
+    found = {}
+    for f in model.frames:
+        if f.parentJoint == joint and f.type in kinds and f.name != arm.tip:
+            found.setdefault(f.name, float(np.linalg.norm(f.placement.translation)))
+    here = float(np.linalg.norm(model.frames[arm.frame_id].placement.translation))
+    far = sorted((d, n) for n, d in found.items() if abs(d - here) > 1e-6)[::-1]
+    return [(f"--tip {n}", {"tip": n}) for _, n in far[:count]]
+
+
+def _spanned_task(args, arm, samples: int = 20, seed: int = 0) -> list[tuple[str, dict]]:
+    """``--task`` with the rows the Jacobian moves (rows zero at every sample left out)."""
+    rng = np.random.default_rng(seed)
+    J = np.array([arm.jacobian(arm.random_q(rng)) for _ in range(samples)])
+    moving = np.abs(J).max(axis=(0, 2)) > 1e-9
+    kept = [r for r, m in zip(arm.task, moving, strict=True) if m]
+    out = []
+    if 2 <= len(kept) < len(arm.task) and len(kept) < arm.n:
+        out.append((f"--task {','.join(kept)}", {"task": ",".join(kept), "rows": None}))
+    if len(arm.task) == 6 and arm.n > 3:
+        out.append(("--task position", {"task": "position", "rows": None}))
+    return out
 
 
 def start_and_path(args, arm):

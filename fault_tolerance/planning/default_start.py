@@ -31,7 +31,8 @@ start, and then proposes a start that works.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+import time
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -41,19 +42,27 @@ from fault_tolerance.errors import (
     InfeasibleBounds,
     IntolerableAtStart,
     IntolerableFailure,
+    IntolerableUnderLimits,
     InvalidInput,
+    NoStartFound,
     StructurallyIntolerable,
 )
 from fault_tolerance.model.arm import Arm
 from fault_tolerance.numerics.linalg import projection
 from fault_tolerance.planning.posture import initial_posture, joint_distance, lockable_scenarios
 from fault_tolerance.planning.start_checks import (
+    NEARLY_INTOLERABLE,
+    OUT_OF_REACH,
     STRUCTURAL_SAMPLES,
+    UNDER_LIMITS,
+    Failure,
+    FailureTally,
     intolerable_everywhere,
     limit_box,
     run_caveat,
-    run_problem,
-    start_problem,
+    run_failure,
+    start_failure,
+    too_fast_at_start,
     under_limits_at_start,
 )
 from fault_tolerance.resolution.indices import condition_numbers, reduced_singular_values
@@ -153,40 +162,52 @@ def default_path(arm: Arm, x0: np.ndarray, radius: float = DEFAULT_RADIUS):
     return CirclePath(np.asarray(x0, dtype=float), radius, 2 * np.pi, 1.0, rows=(0, 1))
 
 
-def _candidates(arm: Arm, x0: np.ndarray, sc: Scenarios, seed_q) -> list[tuple[float, np.ndarray]]:
+def _candidates(
+    arm: Arm, x0: np.ndarray, sc: Scenarios, seed_q, tally: FailureTally
+) -> list[tuple[float, np.ndarray]]:
     """Posture-search candidates at ``x0`` that are usable starts, best first (then the seed).
 
     With a seed, only the seed's own self-motion is searched (``r = 1``: its curve; ``r > 1``:
     descent from it); without one, the global search of :func:`~.posture.initial_posture`.
+    Those refused by :func:`~.start_checks.start_failure` are counted in ``tally``.
     """
     try:
         starts = None if seed_q is None else [seed_q]
         found = initial_posture(arm, x0, sc, starts=starts).candidates
-    except InvalidInput:
+    except InvalidInput as err:  # no configuration reaches x0
+        tally.add(Failure(OUT_OF_REACH, (), str(err)))
         found = []
     kept: list[tuple[float, np.ndarray]] = []
     for K, q in found:
         if len(kept) == MAX_CANDIDATES:
             break
-        if start_problem(arm, q, sc) is None and all(
-            joint_distance(arm, q, c) > 0.05 for _, c in kept
-        ):
+        if any(joint_distance(arm, q, c) <= 0.05 for _, c in kept):
+            continue
+        failure = start_failure(arm, q, sc)
+        if failure is None:
             kept.append((K, q))
+        else:
+            tally.add(failure)
     if seed_q is not None and all(joint_distance(arm, seed_q, c) > 0.05 for _, c in kept):
         k = condition_numbers(reduced_singular_values(arm.jacobian(seed_q), sc))
         kept.append((float(k @ k), np.asarray(seed_q, dtype=float)))
     return kept
 
 
-def _seeds(arm: Arm, sc: Scenarios, rng, max_seeds: int):
+def _seeds(arm: Arm, sc: Scenarios, rng, max_seeds: int, tally: FailureTally):
     """Regular seeds ``(q, origin)``: mid-range if regular, then the best conditioned near it.
 
     The others are the best conditioned (smallest largest ``k_S``) of :data:`SEED_SAMPLES`
-    configurations drawn from the central half of every joint's range.
+    configurations drawn from the central half of every joint's range; those that are not usable
+    starts are counted in ``tally`` (until the seeds are found).
     """
     lo, hi = limit_box(arm)
     mid = (lo + hi) / 2
-    if start_problem(arm, mid, sc) is None:
+    tally.drawn = SEED_SAMPLES
+    failure = start_failure(arm, mid, sc)
+    if failure is not None:
+        tally.add_seed(failure)
+    else:
         yield mid, "reached from the mid-range configuration"
         max_seeds -= 1
     draws = mid + rng.uniform(-1.0, 1.0, (SEED_SAMPLES, arm.n)) * (hi - lo) / 4
@@ -198,9 +219,11 @@ def _seeds(arm: Arm, sc: Scenarios, rng, max_seeds: int):
         if len(used) == max_seeds:
             return
         q = draws[i]
-        if start_problem(arm, q, sc) is not None or any(
-            joint_distance(arm, q, u) < 0.1 * np.linalg.norm(hi - lo) for u in used
-        ):
+        failure = start_failure(arm, q, sc)
+        if failure is not None:
+            tally.add_seed(failure)
+            continue
+        if any(joint_distance(arm, q, u) < 0.1 * np.linalg.norm(hi - lo) for u in used):
             continue
         used.append(q)
         yield (
@@ -238,15 +261,25 @@ def _check(arm, q0, path, algorithms, sc, sim_options):
         try:
             run = simulate(arm, path, alg, q0=q0, lockable=sc, **own)
         except CANDIDATE_REFUSALS as err:  # one refused candidate, not the end of the search
-            return f"{alg}: refused ({str(err).splitlines()[0][:200]})", None, worst, {}, False
-        problem = run_problem(arm, run)
+            return _refusal(alg, err), None, worst, {}, False
+        problem = run_failure(arm, run)
         if problem:
-            return f"{alg}: {problem}", None, worst, {}, False
+            return replace(problem, text=f"{alg}: {problem.text}"), None, worst, {}, False
         runs[alg] = run
         worst = max(worst, float(np.max(run.rcn)))
         caveat = caveat or (None if run_caveat(run) is None else f"{alg}: {run_caveat(run)}")
         flagged = flagged or bool(run.flags[0] & FLAG_INTOLERABLE_UNDER_LIMITS)
     return None, caveat, worst, runs, flagged
+
+
+def _refusal(alg: str, err: Exception) -> Failure:
+    """A run refused by ``err`` as a :class:`~.start_checks.Failure` of its category."""
+    text = f"{alg}: refused ({str(err).splitlines()[0][:200]})"
+    if isinstance(err, IntolerableUnderLimits):
+        return Failure(UNDER_LIMITS, tuple(err.joints), text)
+    if isinstance(err, IntolerableFailure):
+        return Failure(NEARLY_INTOLERABLE, tuple(err.joints), text)
+    return Failure(OUT_OF_REACH, (), text)  # InfeasibleBounds: no rates reach the task
 
 
 def default_start(
@@ -281,7 +314,9 @@ def default_start(
 
     Raises:
         StructurallyIntolerable: a lockable scenario loses the task at every configuration.
-        InvalidInput: no start passed the checks (the message gives the last reason).
+        NoStartFound: no start passed the checks (an :class:`~.errors.InvalidInput`); the
+            message counts the candidates by why they failed and names the joints of the
+            dominant reasons (``err.reasons``).
 
     Example:
         >>> import fault_tolerance as ft
@@ -294,65 +329,72 @@ def default_start(
     sc = lockable_scenarios(arm, lockable)
     _refuse_structural(arm, sc, seed)  # no start can help such a scenario: say so, not search
     make, x0 = _task_maker(arm, path, x0)
-    sources = _start_points(arm, sc, x0, seed, max_seeds)
-    found, last, held = _search(arm, sc, sources, make, tuple(algorithms), sim_options, horizon)
+    tally = FailureTally()
+    sources = _start_points(arm, sc, x0, seed, max_seeds, tally)
+    found = _search(arm, sc, sources, make, tuple(algorithms), sim_options, horizon, tally)
     if found is not None:
         return found
     where = f"at x0 = {np.round(x0, 4).tolist()}" if x0 is not None else "from mid-range seeds"
-    aside = (
-        f"; {held} candidates were not tolerable under the joint limits at t = 0 either"
-        if held
-        else ""
-    )
-    raise InvalidInput(
-        f"no start {where} for {arm.name} passed the checks ({last}{aside}); give --q0 or --x0, a "
-        "smaller path (--radius) or fewer lockable joints"
+    raise NoStartFound(
+        f"no start {where} for {arm.name} passed the checks ({tally.summary()})",
+        tally.dominant(),
     )
 
 
-def _search(arm, sc, sources, make, algorithms, sim_options, horizon):
-    """``(choice or None, last reason, candidates set aside)``: steps 3-5 of the module doc."""
-    last, tried, fallback, aside = (
-        "no regular configuration found within the joint limits",
-        0,
-        None,
-        [],
-    )
+def _search(arm, sc, sources, make, algorithms, sim_options, horizon, tally):
+    """The choice or ``None`` (then ``tally`` says why): steps 3-5 of the module doc."""
+    tried, fallback, aside = 0, None, []
     for seed_q, point, origin in sources:
         task = make(point)
         options, checked = _horizon(task, sim_options, horizon)
-        for _, q in _candidates(arm, point, sc, seed_q):
+        for _, q in _candidates(arm, point, sc, seed_q, tally):
             bad = under_limits_at_start(arm, q, task, sc, options)
             if bad:  # intolerable under limits at t = 0: tried only if no other start passes
                 aside.append((len(bad), len(aside), q, point, origin, task, options, checked, bad))
                 continue
             tried += 1
-            choice, caveat, last = _try(arm, sc, (q, point, origin, task), algorithms, options,
-                                        checked, tried, bad, last)  # fmt: skip
+            choice, caveat = _try(arm, sc, (q, point, origin, task), algorithms, options,
+                                  checked, tried, bad, tally)  # fmt: skip
             if choice is not None and caveat is None:
-                return choice, last, 0
+                return choice
             if choice is not None and (
                 fallback is None or choice.run_rcn_max < fallback.run_rcn_max
             ):
                 fallback = replace(choice, note=f"the best start found has a caveat: {caveat}")
         if fallback is not None:  # this seed gave a usable start: do not search further
-            return replace(fallback, tried=tried), last, 0
+            return replace(fallback, tried=tried)
     every = tuple(dict.fromkeys(name for a in aside for name in a[-1]))  # bad at some start tried
     for _, _, q, point, origin, task, options, checked, bad in sorted(aside, key=lambda a: a[:2]):
         tried += 1
-        choice, caveat, last = _try(arm, sc, (q, point, origin, task), algorithms, options,
-                                    checked, tried, bad, last, every)  # fmt: skip
+        choice, caveat = _try(arm, sc, (q, point, origin, task), algorithms, options,
+                              checked, tried, bad, None, every)  # fmt: skip
         if choice is not None:
             note = f"the best start found has a caveat: {caveat}" if caveat else ""
-            return replace(choice, note=note), last, 0
-    return None, last, len(aside)
+            return replace(choice, note=note)
+        tally.add(_aside_failure(arm, q, task, options, bad))
+    return None
 
 
-def _try(arm, sc, where, algorithms, options, checked, tried, bad, last, drop=()):
-    """Simulate one candidate: ``(choice or None, caveat, last reason)``.
+def _aside_failure(arm, q, task, options, bad) -> Failure:
+    """Why a candidate set aside (intolerable under limits at t = 0) failed: too fast, or that."""
+    fast = too_fast_at_start(arm, q, task, options)  # the whole arm is too slow for the task
+    if fast is not None:
+        return replace(fast, text=f"the start {np.round(q, 3).tolist()}: {fast.text}")
+    joints = tuple(n for name in bad for n in name.split("+"))
+    return Failure(
+        UNDER_LIMITS,
+        joints,
+        f"the start {np.round(q, 3).tolist()}: a lock of {', '.join(bad)} cannot keep the task's "
+        "first velocity inside the rate box (L1) at t = 0",
+    )
+
+
+def _try(arm, sc, where, algorithms, options, checked, tried, bad, tally, drop=()):
+    """Simulate one candidate: ``(choice or None, caveat)``; a refusal is counted in ``tally``.
 
     ``bad``: its scenarios intolerable under limits at t = 0; ``drop``: those of every candidate
-    set aside, which the offered ``--lockable`` leaves out.
+    set aside, which the offered ``--lockable`` leaves out. ``tally`` ``None``: not counted (the
+    caller counts it).
     """
     q, point, origin, task = where
     problem, caveat, worst, runs, flagged = (
@@ -361,9 +403,14 @@ def _try(arm, sc, where, algorithms, options, checked, tried, bad, last, drop=()
         else _check(arm, q, task, algorithms, sc, options)
     )
     if not problem and flagged and not bad:  # the run is the judge of what it finds at t = 0
-        problem = "is intolerable under the joint limits at t = 0 in its run"
+        problem = Failure(
+            UNDER_LIMITS, (), "is intolerable under the joint limits at t = 0 in its run"
+        )
     if problem:
-        return None, None, f"the start {np.round(q, 3).tolist()} {problem}"
+        if tally is not None:
+            text = f"the start {np.round(q, 3).tolist()} {problem.text}"
+            tally.add(replace(problem, text=text))
+        return None, None
     choice = _choice(arm, q, point, sc, worst, origin, task, algorithms, tried, runs)
     if checked is not None:  # only the first seconds ran: nothing to reuse
         choice = replace(choice, runs={}, checked=checked)
@@ -371,7 +418,7 @@ def _try(arm, sc, where, algorithms, options, checked, tried, bad, last, drop=()
         locked = {n for name in (*bad, *drop) for n in name.split("+")}
         without = tuple(dict.fromkeys(n for S in sc.sets for n in sc.name(S) if n not in locked))
         choice = replace(choice, under_limits=tuple(bad), lockable_without=without)
-    return choice, caveat, last
+    return choice, caveat
 
 
 def _task_maker(arm: Arm, path, x0):
@@ -382,7 +429,7 @@ def _task_maker(arm: Arm, path, x0):
     return (path if path is not None else (lambda p: default_path(arm, p))), x0
 
 
-def _start_points(arm: Arm, sc: Scenarios, x0, seed: int, max_seeds: int):
+def _start_points(arm: Arm, sc: Scenarios, x0, seed: int, max_seeds: int, tally: FailureTally):
     """``(seed q or None, start point, origin)``: the given x0, or points of regular seeds."""
     if x0 is not None:
         x0 = np.asarray(x0, dtype=float)
@@ -390,7 +437,7 @@ def _start_points(arm: Arm, sc: Scenarios, x0, seed: int, max_seeds: int):
             raise InvalidInput(f"x0 must be {arm.m} numbers for task {'/'.join(arm.task)}")
         return [(None, x0, "given x0")]
     rng = np.random.default_rng(seed)
-    return ((q, arm.fk(q), why) for q, why in _seeds(arm, sc, rng, max_seeds))
+    return ((q, arm.fk(q), why) for q, why in _seeds(arm, sc, rng, max_seeds, tally))
 
 
 def _refuse_structural(arm: Arm, sc: Scenarios, seed: int) -> None:
@@ -427,6 +474,71 @@ def _choice(arm, q, point, sc, worst, origin, task, algorithms, tried, runs) -> 
         algorithms=tuple(algorithms) if task is not None else (),
         tried=tried,
         runs=runs,
+    )
+
+
+#: Fixes of a refused start that are tried at most, proposed at most, and their time cap [s].
+MAX_FIX_TRIALS = 8
+MAX_FIXES = 2
+FIX_TIME_CAP = 120.0
+#: Seeds each fix's start search tries (fewer than :data:`MAX_SEEDS`: a cheaper search).
+FIX_SEEDS = 2
+
+
+@dataclass(frozen=True)
+class FixTrial:
+    """One fix tried by :func:`try_fixes`: its option text, whether a start passed, its cost [s]."""
+
+    option: str
+    works: bool
+    seconds: float
+    detail: str = ""
+
+
+def try_fixes(
+    fixes: Iterable[tuple[str, Callable[[], object]]],
+    *,
+    max_fixes: int = MAX_FIXES,
+    max_trials: int = MAX_FIX_TRIALS,
+    time_cap: float = FIX_TIME_CAP,
+) -> list[FixTrial]:
+    """Try each fix ``(option text, attempt)`` in order; the trials, those that work marked.
+
+    ``attempt()`` re-runs the start search with the fix applied and raises a
+    :class:`~.errors.FaultToleranceError` when no start passes. The trials stop after
+    ``max_fixes`` fixes that work, ``max_trials`` fixes, or once ``time_cap`` seconds have passed
+    (a trial under way is finished). Only fixes whose trial passed are to be proposed.
+    """
+    trials: list[FixTrial] = []
+    t0 = time.monotonic()
+    for option, attempt in fixes:
+        if len(trials) == max_trials or sum(t.works for t in trials) == max_fixes:
+            break
+        if time.monotonic() - t0 > time_cap:
+            break
+        start = time.monotonic()
+        try:
+            attempt()
+        except FaultToleranceError as err:
+            detail = str(err).split("(", 1)[-1][:160]
+            trials.append(FixTrial(option, False, time.monotonic() - start, detail))
+        else:
+            trials.append(FixTrial(option, True, time.monotonic() - start))
+    return trials
+
+
+def fixes_line(trials: Sequence[FixTrial]) -> str:
+    """What the trials found, one line: the fixes that work (exact option text) and the cost."""
+    if not trials:
+        return "no fix was tried"
+    cost = sum(t.seconds for t in trials)
+    works = [t.option for t in trials if t.works]
+    tried = f"{len(trials)} fix{'es' if len(trials) > 1 else ''} tried in {cost:.0f} s"
+    if not works:
+        return f"none of the {tried} finds a start ({'; '.join(t.option for t in trials)})"
+    return (
+        f"a start passes with {' or with '.join(works)} (that option set so, the others as given; "
+        f"{tried}, each a start search)"
     )
 
 

@@ -5,6 +5,8 @@ Used by :func:`fault_tolerance.planning.default_start.default_start` (docs/MATH.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from fault_tolerance.model.arm import Arm
@@ -47,21 +49,76 @@ def inside_limits(arm: Arm, q: np.ndarray, margin: float = 0.0) -> np.ndarray:
     return np.all((q >= lo + pad - 1e-12) & (q <= hi - pad + 1e-12), axis=-1)
 
 
-def start_problem(arm: Arm, q: np.ndarray, sc: Scenarios) -> str | None:
+#: Why a candidate start failed, by category (docs/cli.md, "When no start passes").
+STRUCTURAL = "structurally intolerable for this tip and task"
+UNDER_LIMITS = "intolerable under the joint limits"
+NEARLY_INTOLERABLE = "nearly intolerable at the start"
+SINGULAR = "singular"
+NEAR_LIMIT = "at a joint limit"
+OUT_OF_REACH = "path out of reach"
+TOO_FAST = "too fast for the velocity limits"
+#: Every category, in the order a refusal lists equal counts.
+CATEGORIES = (
+    STRUCTURAL, UNDER_LIMITS, NEARLY_INTOLERABLE, SINGULAR, OUT_OF_REACH, TOO_FAST, NEAR_LIMIT
+)  # fmt: skip
+
+
+@dataclass(frozen=True)
+class Failure:
+    """Why one candidate start failed: a category of :data:`CATEGORIES`, the joints, the detail.
+
+    Attributes:
+        category: One of :data:`CATEGORIES`.
+        joints: The joints concerned (the lockable joints that fail, the joints at their velocity
+            or position limit); empty when the failure concerns no joint in particular.
+        text: The detail, one line (e.g. ``"near-singular (σ_min(J) = 0 < 0.01)"``).
+    """
+
+    category: str
+    joints: tuple[str, ...]
+    text: str
+
+    def __post_init__(self) -> None:
+        if self.category not in CATEGORIES:
+            raise ValueError(f"category {self.category!r}: choose among {list(CATEGORIES)}")
+
+    def __str__(self) -> str:
+        return self.text
+
+
+def start_failure(arm: Arm, q: np.ndarray, sc: Scenarios) -> Failure | None:
     """Why ``q`` is not a usable start (limits, singular J, intolerable scenario), or ``None``."""
     if not inside_limits(arm, q, LIMIT_MARGIN):
-        return f"within {100 * LIMIT_MARGIN:g} % of a joint limit"
+        lo, hi = limit_box(arm)
+        pad = LIMIT_MARGIN * (hi - lo)
+        near = np.flatnonzero((q < lo + pad - 1e-12) | (q > hi - pad + 1e-12))
+        return Failure(
+            NEAR_LIMIT,
+            tuple(arm.joint_names[j] for j in near),
+            f"within {100 * LIMIT_MARGIN:g} % of a joint limit",
+        )
     proj = projection(arm.jacobian(q))
     if proj.sigma_min < SIGMA_REGULAR:
-        return f"near-singular (σ_min(J) = {proj.sigma_min:.2g} < {SIGMA_REGULAR:g})"
+        return Failure(
+            SINGULAR, (), f"near-singular (σ_min(J) = {proj.sigma_min:.2g} < {SIGMA_REGULAR:g})"
+        )
     pivots = sc.pivots(proj.N)
     k = int(np.argmin(pivots))
     if pivots[k] < PIVOT_MARGIN:
-        return (
-            f"locking {', '.join(sc.name(sc.sets[k]))} nearly loses the task there "
-            f"(pivot {pivots[k]:.2g} < {PIVOT_MARGIN:g})"
+        names = tuple(sc.name(sc.sets[k]))
+        return Failure(
+            NEARLY_INTOLERABLE,
+            names,
+            f"locking {', '.join(names)} nearly loses the task there "
+            f"(pivot {pivots[k]:.2g} < {PIVOT_MARGIN:g})",
         )
     return None
+
+
+def start_problem(arm: Arm, q: np.ndarray, sc: Scenarios) -> str | None:
+    """:func:`start_failure` as text, or ``None``."""
+    found = start_failure(arm, q, sc)
+    return None if found is None else found.text
 
 
 def under_limits_at_start(arm: Arm, q: np.ndarray, task, sc: Scenarios, sim_options: dict):
@@ -88,22 +145,93 @@ def under_limits_at_start(arm: Arm, q: np.ndarray, task, sc: Scenarios, sim_opti
     )
 
 
-def run_problem(arm: Arm, run) -> str | None:
-    """Why a checked run disqualifies its start (limits, singular J, task error), or ``None``."""
+def too_fast_at_start(arm: Arm, q: np.ndarray, task, sim_options: dict) -> Failure | None:
+    """:data:`TOO_FAST` when even the whole arm needs a task scaling ``s < 1`` at ``t = 0`` (L3).
+
+    The box is the run's (as in :func:`under_limits_at_start`); the joints named are those whose
+    rate box binds at the velocity limit there. ``None`` without limits, without a task, or when
+    the whole arm keeps the task's first velocity.
+    """
+    from fault_tolerance.model.joint_limits import RATE_HORIZON, arm_rate_box, velocity_limits
+    from fault_tolerance.resolution.bounded import SCALE_TOL, bounded_least_norm
+
+    if task is None or not sim_options.get("limits", True):
+        return None
+    h = sim_options.get("horizon") or RATE_HORIZON
+    lo, hi = arm_rate_box(arm, q, max(float(h), float(sim_options.get("dt", 0.0) or 0.0)))
+    xd = np.asarray(task.xdot(0.0), dtype=float)
+    sol = bounded_least_norm(arm.jacobian(q), xd, lo, hi)
+    if sol.scale >= 1.0 - SCALE_TOL:
+        return None
+    v = velocity_limits(arm)
+    at = sol.active & (np.abs(sol.qd) >= (1 - 1e-6) * v)
+    return Failure(
+        TOO_FAST,
+        tuple(n for n, a in zip(arm.joint_names, at, strict=True) if a),
+        f"the task's first velocity {np.linalg.norm(xd):.3g} needs a scaling s = {sol.scale:.3g} "
+        "< 1 of the whole arm inside its velocity limits at t = 0",
+    )
+
+
+def run_failure(arm: Arm, run) -> Failure | None:
+    """Why a checked run disqualifies its start (limits, singular J, task error), or ``None``.
+
+    A task error with samples where the rate box scaled the task (L3) and a joint at its velocity
+    limit is :data:`TOO_FAST`; a run that leaves the joint limits, or whose error grows without
+    that, is :data:`OUT_OF_REACH` (the joints named are those at a position limit, if any).
+    """
     from fault_tolerance.simulation.run import FLAG_NEAR_SINGULAR
 
     out = ~inside_limits(arm, run.q)
     if out.any():
         k = int(np.argmax(out))
-        return f"leaves the joint limits at t = {run.t[k]:.3f} s"
+        lo, hi = limit_box(arm)
+        joints = np.flatnonzero((run.q[k] < lo - 1e-12) | (run.q[k] > hi + 1e-12))
+        return Failure(
+            OUT_OF_REACH,
+            tuple(arm.joint_names[j] for j in joints),
+            f"leaves the joint limits at t = {run.t[k]:.3f} s",
+        )
     if np.any(run.flags & FLAG_NEAR_SINGULAR):
-        return "passes near a singularity of J"
-    if run.error.max() > ERROR_TOL:
-        return f"position error reaches {1e3 * run.error.max():.3g} mm"
+        return Failure(SINGULAR, (), "passes near a singularity of J")
     ori = run.orientation_error
-    if ori is not None and ori.max() > ERROR_TOL:
-        return f"orientation error reaches {ori.max():.3g} rad"
-    return None
+    if run.error.max() > ERROR_TOL:
+        text = f"position error reaches {1e3 * run.error.max():.3g} mm"
+    elif ori is not None and ori.max() > ERROR_TOL:
+        text = f"orientation error reaches {ori.max():.3g} rad"
+    else:
+        return None
+    fast = at_velocity_limit(arm, run)
+    if fast:
+        return Failure(TOO_FAST, fast, f"{text} (the task is scaled to the velocity limits)")
+    return Failure(OUT_OF_REACH, at_position_limit(arm, run), text)
+
+
+def at_velocity_limit(arm: Arm, run, slack: float = 1e-3) -> tuple[str, ...]:
+    """Joints at their velocity limit at samples where the rate box scaled the task (L3)."""
+    from fault_tolerance.simulation.run import FLAG_TASK_SCALED
+
+    scaled = (run.flags & FLAG_TASK_SCALED) != 0
+    if not scaled.any():
+        return ()
+    v = np.asarray(arm.velocity_limit, dtype=float)
+    qd = run.qd if run.qd_cmd is None else run.qd_cmd
+    at = np.any(np.abs(qd[scaled]) >= (1 - slack) * v, axis=0)
+    return tuple(n for n, a in zip(arm.joint_names, at, strict=True) if a)
+
+
+def at_position_limit(arm: Arm, run, margin: float = 1e-3) -> tuple[str, ...]:
+    """Joints that come within ``margin`` × range of a position limit during ``run``."""
+    lo, hi = limit_box(arm)
+    pad = margin * (hi - lo)
+    near = np.any((run.q <= lo + pad) | (run.q >= hi - pad), axis=0)
+    return tuple(n for n, a in zip(arm.joint_names, near, strict=True) if a)
+
+
+def run_problem(arm: Arm, run) -> str | None:
+    """:func:`run_failure` as text, or ``None``."""
+    found = run_failure(arm, run)
+    return None if found is None else found.text
 
 
 def run_caveat(run) -> str | None:
@@ -157,3 +285,70 @@ def intolerable_everywhere(
         if seen == samples or not always:
             break
     return [tuple(sc.name(sc.sets[k])) for k in sorted(always)]
+
+
+class FailureTally:
+    """Candidate starts counted by why they failed (:class:`Failure`), and the joints concerned.
+
+    The start search adds one :class:`Failure` per candidate it refuses (``add``) and one per
+    configuration drawn for a seed that was not regular (``add_seed``); ``dominant`` and
+    ``summary`` then say which check failed for which joints, most frequent first.
+    """
+
+    def __init__(self) -> None:
+        self.candidates: dict[str, list[Failure]] = {}
+        self.seeds: dict[str, list[Failure]] = {}
+        self.drawn = 0
+
+    def add(self, failure: Failure) -> None:
+        """Count one refused candidate start."""
+        self.candidates.setdefault(failure.category, []).append(failure)
+
+    def add_seed(self, failure: Failure) -> None:
+        """Count one configuration drawn for a seed that is not a usable start."""
+        self.seeds.setdefault(failure.category, []).append(failure)
+
+    @property
+    def total(self) -> int:
+        """Candidates refused."""
+        return sum(len(v) for v in self.candidates.values())
+
+    def _pool(self) -> dict[str, list[Failure]]:
+        return self.candidates if self.candidates else self.seeds
+
+    def dominant(self) -> list[tuple[str, int, tuple[str, ...]]]:
+        """``(category, count, joints)`` of the categories with at least half the top count."""
+        pool = self._pool()
+        if not pool:
+            return []
+        ranked = sorted(pool, key=lambda c: (-len(pool[c]), CATEGORIES.index(c)))
+        top = len(pool[ranked[0]])
+        return [(c, len(pool[c]), joints_of(pool[c])) for c in ranked if 2 * len(pool[c]) >= top]
+
+    def summary(self) -> str:
+        """One line: the counts by category, the dominant ones with their joints and an example."""
+        pool = self._pool()
+        if not pool:
+            return "no candidate start was found to check"
+        what = (
+            f"{self.total} candidate start{'s' if self.total > 1 else ''} refused"
+            if self.candidates
+            else f"no regular seed among the {self.drawn} configurations drawn near mid-range"
+        )
+        ranked = sorted(pool, key=lambda c: (-len(pool[c]), CATEGORIES.index(c)))
+        parts = []
+        for c in ranked:
+            joints = joints_of(pool[c])
+            who = f" ({', '.join(joints)})" if joints else ""
+            parts.append(f"{len(pool[c])} {c}{who}")
+        first = pool[ranked[0]][0].text
+        return f"{what}: {'; '.join(parts)}; e.g. {first}"
+
+
+def joints_of(failures) -> tuple[str, ...]:
+    """The joints of ``failures``, most often named first."""
+    count: dict[str, int] = {}
+    for f in failures:
+        for j in f.joints:
+            count[j] = count.get(j, 0) + 1
+    return tuple(sorted(count, key=lambda j: -count[j]))

@@ -14,10 +14,14 @@ Tolerances (documented here and in the README):
   locked (1 mm).
 * :data:`LOST_PATH_TOLERANCE` — how much the task error may grow after a lock above its largest
   value before the lock (1 cm): beyond it the lock "loses the path".
-* :data:`~fault_tolerance.planning.posture.RCN_THRESHOLD` — the largest reduced condition number ``k_S``
-  accepted along a run (the planning loop's threshold, Sec. III.D step iii).
-* the velocity limits of the URDF (``<limit velocity=...>``), with :data:`SPEED_SLACK` relative
-  slack for rounding.
+
+A lock run models the joint servos (a first-order lag on the commanded rates), and on a fast path
+the lag alone puts the tool millimetres behind it. That part is the servo model's, not the
+algorithm's. Given the lag-free reference (the same run, lock included, with perfect rate
+tracking) :func:`tracking_error` and :func:`lock_loses_path` judge the reference's error, the
+algorithm's and the reduced robot's, and :func:`servo_lag` says how much the lag adds before and
+after the lock (a note, not a warning; after the lock it is the paper's path error, Sec. V),
+docs/MATH.md (E1), (E2).
 
 Example:
     >>> from fault_tolerance.simulation.diagnostics import check_run
@@ -191,47 +195,113 @@ def _locked(run: Run) -> np.ndarray:
     return (run.flags & FLAG_LOCKED) != 0
 
 
-def tracking_error(run: Run, tolerance: float = TRACKING_TOLERANCE) -> RunWarning | None:
-    """The task error while no joint is locked exceeds ``tolerance`` [m]."""
+def _checked_reference(run: Run, lag_free: Run) -> Run:
+    """``lag_free`` once it has the run's samples and lock (else a ``ValueError`` saying so)."""
+    if lag_free.t.shape != run.t.shape or not np.allclose(lag_free.t, run.t, atol=1e-9):
+        raise ValueError(
+            f"the lag-free run has {len(lag_free.t)} samples to {lag_free.t[-1]:.3g} s; it must "
+            f"have the run's {len(run.t)} samples to {run.t[-1]:.3g} s"
+        )
+    mine, theirs = (
+        {k: v for k, v in (r.meta.get("lock") or {}).items() if k in ("joint", "time")}
+        for r in (run, lag_free)
+    )
+    if mine != theirs:
+        raise ValueError(f"the lag-free run locks {theirs or 'nothing'}; it must lock as the run "
+                         f"does, {mine or 'nothing'}")  # fmt: skip
+    return lag_free
+
+
+def tracking_error(
+    run: Run, tolerance: float = TRACKING_TOLERANCE, lag_free: Run | None = None
+) -> RunWarning | None:
+    """The algorithm's task error while no joint is locked exceeds ``tolerance`` [m].
+
+    Without ``lag_free`` that is the run's own error. With it (the same run with perfect rate
+    tracking, same samples and lock) it is the lag-free run's, (E2); the servo's lag is left to
+    :func:`servo_lag`.
+    """
     free = ~_locked(run)
     if not free.any():
         return None
-    err = np.where(free, run.error, 0.0)
+    source = run if lag_free is None else _checked_reference(run, lag_free)
+    err = np.where(free, source.error, 0.0)
     k = int(np.argmax(err))
     if err[k] <= tolerance:
         return None
+    whose = "" if lag_free is None else " with perfect rate tracking (the algorithm's)"
     return RunWarning(
         "tracking",
-        f"tracking error {1e3 * err[k]:.3g} mm at t = {run.t[k]:.3g} s is above the "
+        f"tracking error{whose} {1e3 * err[k]:.3g} mm at t = {run.t[k]:.3g} s is above the "
         f"tolerance {1e3 * tolerance:g} mm",
     )
 
 
-def lock_loses_path(run: Run, tolerance: float = LOST_PATH_TOLERANCE) -> RunWarning | None:
+# Eqn. (E1): the servo's lag, e_lag(t) = e(t) − e_ref(t) (the same run, perfect rate tracking).
+def lag_excess(run: Run, lag_free: Run) -> np.ndarray:
+    """The run's task error over the lag-free run's [m], per sample, shape (K,)."""
+    return run.error - _checked_reference(run, lag_free).error
+
+
+def servo_lag(run: Run, lag_free: Run, tolerance: float = TRACKING_TOLERANCE) -> str | None:
+    """A note on the error the servo's lag adds (E1), before and after the lock, or ``None``.
+
+    Given when the run's error exceeds ``tolerance`` [m] somewhere: how much of it the lag-free
+    run has (the algorithm's and, after the lock, the reduced robot's) and how much the lag adds
+    (the servo model's).
+    """
+    if run.error.max() <= tolerance:
+        return None
+    excess = lag_excess(run, lag_free)
+    locked = _locked(run)
+    parts = []
+    for label, mask in (("before the lock", ~locked), ("after it", locked)):
+        if mask.any():
+            parts.append(
+                f"{1e3 * run.error[mask].max():.3g} mm {label} "
+                f"({1e3 * lag_free.error[mask].max():.3g} mm with perfect rate tracking; the lag "
+                f"adds up to {1e3 * excess[mask].max():.3g} mm)"
+            )
+    return f"servo lag: task error with the servo model {', '.join(parts)}"
+
+
+# Eqn. (E2): the verdicts read e_ref, the same run with perfect rate tracking.
+def lock_loses_path(
+    run: Run, tolerance: float = LOST_PATH_TOLERANCE, lag_free: Run | None = None
+) -> RunWarning | None:
     """After the lock the task error grows more than ``tolerance`` [m] above its level before.
 
     The error the run already had before the lock (e.g. the servos' lag, reported by
-    :func:`tracking_error`) is not counted against the lock.
+    :func:`tracking_error`) is not counted against the lock. With ``lag_free`` (the same run with
+    perfect rate tracking) the error judged is the lag-free run's (E2): whether the reduced robot
+    follows the path, not how far the lagging servos fall behind at the jump.
     """
     lock = run.meta.get("lock")
     after = _locked(run)
     if not lock or not after.any():
         return None
-    before = float(run.error[~after].max()) if (~after).any() else 0.0
-    err = np.where(after, run.error, 0.0)
+    error = run.error if lag_free is None else _checked_reference(run, lag_free).error
+    before = float(error[~after].max()) if (~after).any() else 0.0
+    err = np.where(after, error, 0.0)
     k = int(np.argmax(err))
     if err[k] - before <= tolerance:
         return None
+    whose = "" if lag_free is None else " with perfect rate tracking"
     return RunWarning(
         "lost_path",
-        f"the lock of {lock['joint']} at t = {lock['time']:.3g} s loses the path: error "
+        f"the lock of {lock['joint']} at t = {lock['time']:.3g} s loses the path: error{whose} "
         f"{1e3 * err[k]:.3g} mm at t = {run.t[k]:.3g} s, {1e3 * before:.3g} mm before the lock "
-        f"(tolerance {1e3 * tolerance:g} mm more; {1e3 * run.error[-1]:.3g} mm at the end)",
+        f"(tolerance {1e3 * tolerance:g} mm more; {1e3 * error[-1]:.3g} mm at the end)",
     )
 
 
-def check_run(run: Run, arm=None) -> list[RunWarning]:
-    """Every check on ``run``; ``arm`` (optional) gives the velocity limits for the rate check."""
+def check_run(run: Run, arm=None, *, lag_free: Run | None = None) -> list[RunWarning]:
+    """Every check on ``run``; ``arm`` (optional) gives the velocity limits for the rate check.
+
+    ``lag_free`` (optional, same samples and lock): the run with perfect rate tracking; with it
+    the tracking and lost-path checks leave the servo's lag out (:func:`tracking_error`,
+    :func:`lock_loses_path`, (E2)).
+    """
     vmax = None if arm is None else arm.velocity_limit
     found = [
         over_speed(run, vmax),
@@ -239,8 +309,8 @@ def check_run(run: Run, arm=None) -> list[RunWarning]:
         near_singular(run),
         near_intolerable(run),
         task_scaled(run),
-        tracking_error(run),
-        lock_loses_path(run),
+        tracking_error(run, lag_free=lag_free),
+        lock_loses_path(run, lag_free=lag_free),
     ]
     return [w for w in found if w is not None]
 
