@@ -192,8 +192,10 @@ def arm_from_record(record: dict, package_dirs: Sequence[str | Path] = (), where
     """
     from fault_tolerance.model.arm import Arm
     from fault_tolerance.model.chains import reduce_model
+    from fault_tolerance.model.formats.packages import forget_package_search
     from fault_tolerance.model.formats.registry import format_named
 
+    forget_package_search()
     record = check_record(record, where)
     fmt = format_named(_record_format(record, where))
     label = Path(f"{where} ({fmt.label} of {record['name']})")

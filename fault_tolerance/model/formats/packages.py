@@ -106,6 +106,12 @@ def packages_below(folder: str) -> Workspace:
     return Workspace({k: tuple(v) for k, v in found.items()}, cut)
 
 
+def forget_package_search() -> None:
+    """Forget the packages found so far (each load starts from what is on disk now)."""
+    packages_below.cache_clear()
+    _package_name.cache_clear()
+
+
 def _subfolder(entry: os.DirEntry, top: Path, seen: set[Path]) -> Path | None:
     """The real path of a folder to search: not hidden, not seen, inside ``top`` after links."""
     if entry.name.startswith("."):
