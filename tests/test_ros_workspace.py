@@ -382,3 +382,24 @@ def test_a_relative_name_in_a_run_is_tried_against_each_folder(meshes):
     )
     with pytest.raises(MeshRefused):
         locate_mesh("../../secret.stl", [pkg])
+
+
+def test_a_package_added_after_a_load_is_found_by_the_next_load(tmp_path):
+    """Each load searches the workspace afresh: a package added after a failed load is found."""
+    ws = tmp_path / "ws"
+    top = ws / "src" / "top"
+    (top / "urdf").mkdir(parents=True)
+    (top / "package.xml").write_text(_package_xml("top"))
+    (top / "urdf" / "r.urdf.xacro").write_text(
+        '<robot name="r" xmlns:xacro="http://www.ros.org/wiki/xacro">'
+        '<xacro:include filename="$(find late_pkg)/arm.xacro"/></robot>'
+    )
+    with pytest.raises(PackageNotFound, match="late_pkg"):
+        ft.load_arm(top / "urdf" / "r.urdf.xacro", package_dirs=[ws], tip="tool")
+    late = ws / "src" / "later" / "late_pkg"
+    late.mkdir(parents=True)
+    (late / "package.xml").write_text(_package_xml("late_pkg"))
+    (late / "arm.xacro").write_text("<robot>" + _one_mesh_urdf("x.stl")[len('<robot name="one">') :])
+    with pytest.warns(UserWarning, match="x.stl"):  # the mesh itself is missing
+        arm = ft.load_arm(top / "urdf" / "r.urdf.xacro", package_dirs=[ws], tip="tool")
+    assert arm.joint_names == ["j1"]
