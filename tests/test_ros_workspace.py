@@ -399,7 +399,9 @@ def test_a_package_added_after_a_load_is_found_by_the_next_load(tmp_path):
     late = ws / "src" / "later" / "late_pkg"
     late.mkdir(parents=True)
     (late / "package.xml").write_text(_package_xml("late_pkg"))
-    (late / "arm.xacro").write_text("<robot>" + _one_mesh_urdf("x.stl")[len('<robot name="one">') :])
+    (late / "arm.xacro").write_text(
+        "<robot>" + _one_mesh_urdf("x.stl")[len('<robot name="one">') :]
+    )
     with pytest.warns(UserWarning, match="x.stl"):  # the mesh itself is missing
         arm = ft.load_arm(top / "urdf" / "r.urdf.xacro", package_dirs=[ws], tip="tool")
     assert arm.joint_names == ["j1"]
