@@ -19,7 +19,7 @@ DATA = Path(__file__).resolve().parent / "data" / "robots"
 CHROMIUM = Path("/usr/bin/chromium")
 CHROMIUM_ARGS = ["--no-sandbox", "--disable-gpu", "--enable-unsafe-swiftshader"]
 
-#: The five packages of the mobile manipulator and where they sit below ``ws/`` (depths 2 to 4).
+#: The five packages of the mobile manipulator and where they sit below ``ws/`` (depths 2 to 5).
 PACKAGES = {
     "mobile_manipulator_description": "src/mobile_manipulator_description",
     "mobile_base_description": "src/bases/mobile_base_description",
