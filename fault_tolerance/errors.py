@@ -91,13 +91,16 @@ class UnknownFormat(DescriptionError):
 class PackageNotFound(URDFError):
     """A ``package://pkg`` or ``$(find pkg)`` names a package none of the package folders holds."""
 
-    def __init__(self, package: str, package_dirs: Sequence[str], where: str = "") -> None:
+    def __init__(
+        self, package: str, package_dirs: Sequence[str], where: str = "", note: str = ""
+    ) -> None:
         self.package = package
         dirs = [str(d) for d in package_dirs]
-        looked = f"looked in {dirs}" if dirs else "no package folder was given"
+        looked = f"looked in {dirs} and below" if dirs else "no package folder was given"
         super().__init__(
-            f"{where + ': ' if where else ''}package '{package}' not found ({looked}); pass the "
-            f"folder that holds '{package}/' or whose package.xml names it with package_dirs=[...] "
+            f"{where + ': ' if where else ''}package '{package}' not found ({looked}"
+            f"{'; ' + note if note else ''}); pass the folder that holds '{package}/', whose "
+            "package.xml names it, or a workspace with it below, with package_dirs=[...] "
             "(--package-dir DIR, repeatable)"
         )
 
@@ -110,6 +113,22 @@ class UnsafeDescription(URDFError):
     :mod:`fault_tolerance.xacro_eval`. The message names the file, the line where it can be had
     and the expression or file refused.
     """
+
+
+class MeshNotFound(URDFError):
+    """A mesh file a description names is not where its name leads, inside the allowed folders."""
+
+    def __init__(self, uri: str, reason: str) -> None:
+        self.uri = uri
+        super().__init__(f"mesh {uri[:120]!r}: {reason}")
+
+
+class MeshRefused(UnsafeDescription):
+    """A mesh name leads outside the folders a description may read (``..``, a link, a path)."""
+
+    def __init__(self, uri: str, reason: str) -> None:
+        self.uri = uri
+        super().__init__(f"mesh {uri[:120]!r}: {reason}")
 
 
 class InvalidTask(FaultToleranceError):

@@ -12,7 +12,8 @@ import pytest
 
 import fault_tolerance as ft
 from fault_tolerance.errors import PackageNotFound
-from fault_tolerance.model.formats.xacro import find_package, parse_xacro_args
+from fault_tolerance.model.formats.packages import find_package
+from fault_tolerance.model.formats.xacro import parse_xacro_args
 
 LIMIT = '<limit lower="-2" upper="2" effort="1" velocity="1"/>'
 STL = (

@@ -13,7 +13,8 @@ import pytest
 from real_arms import ARMS, package_dirs, source
 
 from fault_tolerance.model.formats import xacro_eval
-from fault_tolerance.model.formats.xacro import _XACRO_LOCK, expand_xacro, find_package
+from fault_tolerance.model.formats.packages import find_package
+from fault_tolerance.model.formats.xacro import _XACRO_LOCK, expand_xacro
 
 XACRO_ARMS = [name for name in ARMS if ARMS[name]["source"].endswith(".xacro")]
 #: Further argument sets that switch on other branches of the same descriptions.

@@ -103,8 +103,8 @@ def add_source_options(g) -> None:
         "--package-dir",
         action="append",
         default=[],
-        help="folder of a ROS package named by package://pkg or $(find pkg): DIR/pkg, or DIR "
-        "whose package.xml names pkg (repeatable)",
+        help="folder of the ROS packages named by package://pkg or $(find pkg): DIR/pkg, a DIR "
+        "whose package.xml names pkg, or a workspace with pkg below it (repeatable)",
     )
     g.add_argument(
         "--xacro-arg",

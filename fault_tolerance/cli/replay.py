@@ -26,7 +26,7 @@ def add_parser(sub) -> argparse.ArgumentParser:
         "--package-dir",
         action="append",
         default=[],
-        help="folder where package:// meshes of the run's arm may be read (repeatable); no other "
+        help="folder (or workspace) where meshes of the run's arm may be read (repeatable); no other "
         "file is opened: the arm is rebuilt from the URDF text the run carries",
     )
     s.set_defaults(func=run)

@@ -10,12 +10,16 @@ file someone handed us. No path written in the run is ever opened:
 
 * the description is the stored text, never a file named in the run (an MJCF text may include
   no file);
-* a mesh is opened only if it is a ``package://`` name that resolves, after following links, to a
-  file *inside* one of the package folders the caller names (``--package-dir``), or inside the
-  installed robot data of a named robot (our ``robots/`` for shipped arms, example-robot-data's
-  models for its arms). ``..`` components, absolute paths, ``file://`` names and relative names are
-  refused; such a visual is dropped with one warning and the arm is drawn without it. An MJCF
-  mesh is opened only as a relative name (no ``..``) inside one of those folders.
+* a mesh is opened only if its name resolves, after following links, to a file *inside* one of
+  the package folders the caller names (``--package-dir``, workspaces searched as the loader
+  searches them), or inside the installed robot data of a named robot (our ``robots/`` for
+  shipped arms, example-robot-data's models for its arms). Names are read exactly as the loader
+  reads them, by the same function (:func:`~.formats.packages.locate_mesh`): ``package://``
+  (no ``..`` after the package), ``file://`` and absolute paths, relative names (tried against
+  each of those folders, since a run carries no folder of its own); a name leading elsewhere is
+  :class:`~fault_tolerance.errors.MeshRefused`, its visual is dropped with one warning and the
+  arm is drawn without it. An MJCF mesh is opened only as a relative name (no ``..``) inside one
+  of those folders.
 
 Example:
     >>> import fault_tolerance as ft
@@ -188,8 +192,10 @@ def arm_from_record(record: dict, package_dirs: Sequence[str | Path] = (), where
     """
     from fault_tolerance.model.arm import Arm
     from fault_tolerance.model.chains import reduce_model
+    from fault_tolerance.model.formats.packages import forget_package_search
     from fault_tolerance.model.formats.registry import format_named
 
+    forget_package_search()
     record = check_record(record, where)
     fmt = format_named(_record_format(record, where))
     label = Path(f"{where} ({fmt.label} of {record['name']})")
@@ -201,9 +207,9 @@ def arm_from_record(record: dict, package_dirs: Sequence[str | Path] = (), where
     visual, dropped = fmt.confined_visuals(model, desc, roots)
     if dropped:
         warnings.warn(
-            f"{where}: {len(dropped)} mesh(es) not opened ({dropped[0]}); only package:// meshes "
-            "(URDF) or relative mesh names (MJCF) inside the folders named with --package-dir "
-            "are read",
+            f"{where}: {len(dropped)} mesh(es) not opened ({dropped[0]}); meshes are read only "
+            "inside the folders named with --package-dir and installed robot data (URDF: "
+            "package://, file://, absolute or relative names; MJCF: relative names)",
             stacklevel=2,
         )
     q_full = record.get("q_full")

@@ -2,7 +2,9 @@
 
 An arm moves the joints of one serial chain (or any chosen set of joints); every other joint is
 fixed with ``pin.buildReducedModel``. Real descriptions name a link and a fixed joint alike, so
-a frame name may appear twice; :func:`frame_id` accepts that when both frames are at one place.
+a frame name may appear twice; :func:`frame_id` accepts that when both frames are at one place,
+and :func:`reduce_model` makes the names unique while Pinocchio reduces the model (its lookups
+by name take no frame type), then gives them back.
 """
 
 from __future__ import annotations
@@ -112,9 +114,11 @@ def reduce_model(
     if not lock:
         return model, visual_model
     q_ref = pin.neutral(model) if q_reference is None else np.asarray(q_reference, dtype=float)
-    # buildReducedModel looks each locked joint's frame up by name: a link of the same name
-    # would make that lookup ambiguous (a raw ValueError), so such frames are renamed meanwhile
-    renamed = _rename_frames_named_like_joints(model, [model.names[j] for j in lock])
+    # buildReducedModel looks frames up by name without a FrameType (a locked joint's frame, a
+    # frame's parent, a geometry's frame): any name two frames share (a link and a joint of one
+    # name, as in Baxter's `left_hand`) makes that lookup ambiguous, a raw ValueError. So every
+    # frame name is made unique meanwhile, and restored in both models afterwards.
+    unique_frame_names(model)
     try:
         if visual_model is None:
             reduced, geom = pin.buildReducedModel(model, lock, q_ref), None
@@ -126,32 +130,47 @@ def reduce_model(
             f"{label or model.name}: Pinocchio could not fix the joints outside the arm: {err}"
         ) from err
     finally:
-        _restore_frame_names(model, renamed)
-    _restore_frame_names(reduced, renamed)
+        restore_frame_names(model)
+    restore_frame_names(reduced)
     return reduced, geom
 
 
-_RENAMED = "\x00frame"  # suffix no URDF name carries
+_RENAMED = "\x00frame"  # marks a temporary frame name; no URDF, MJCF or xacro name holds a NUL
+
+#: Which frame of a shared name keeps it while the names are made unique (lower first): a
+#: joint's frame, so that Pinocchio's lookups of the joints it fixes find it.
+_KEEPS_NAME = {pin.FrameType.JOINT: 0, pin.FrameType.FIXED_JOINT: 1, pin.FrameType.BODY: 2}
 
 
-def _rename_frames_named_like_joints(model: pin.Model, joints: Sequence[str]) -> list[str]:
-    """Give the non-joint frames that share a name with one of ``joints`` a temporary name."""
-    clash = set(joints)
-    renamed = []
+def unique_frame_names(model: pin.Model) -> int:
+    """Give every frame whose name another frame also carries a temporary unique name.
+
+    Of the frames sharing a name, the joint's frame keeps it (then a fixed joint's, then a
+    link's, then the first); the others get ``name`` plus a NUL-marked suffix and a counter.
+    Undone by :func:`restore_frame_names` (on the model and on what was built from it). Returns
+    how many frames were renamed.
+    """
+    by_name: dict[str, list[int]] = {}
     for i, f in enumerate(model.frames):
-        if f.name in clash and f.type not in (pin.FrameType.JOINT, pin.FrameType.FIXED_JOINT):
-            renamed.append(f.name)
-            f.name += _RENAMED
+        by_name.setdefault(f.name, []).append(i)
+    renamed = 0
+    for ids in by_name.values():
+        if len(ids) < 2:
+            continue
+        keep = min(ids, key=lambda i: (_KEEPS_NAME.get(model.frames[i].type, 3), i))
+        for k, i in enumerate(i for i in ids if i != keep):
+            f = model.frames[i]
+            f.name = f"{f.name}{_RENAMED}{k}"
             model.frames[i] = f
+            renamed += 1
     return renamed
 
 
-def _restore_frame_names(model: pin.Model, renamed: Sequence[str]) -> None:
-    if not renamed:
-        return
+def restore_frame_names(model: pin.Model) -> None:
+    """Undo :func:`unique_frame_names`: strip the temporary suffix from every frame name."""
     for i, f in enumerate(model.frames):
-        if f.name.endswith(_RENAMED):
-            f.name = f.name[: -len(_RENAMED)]
+        if _RENAMED in f.name:
+            f.name = f.name[: f.name.index(_RENAMED)]
             model.frames[i] = f
 
 

@@ -19,6 +19,7 @@ from fault_tolerance.model.catalog import (
     robot_path,
 )
 from fault_tolerance.model.chains import active_q, reduce_model
+from fault_tolerance.model.formats.packages import forget_package_search
 from fault_tolerance.model.formats.registry import (
     DescriptionFormat,
     is_description_path,
@@ -58,6 +59,7 @@ def load_arm(
         >>> arm.joint_names
         ['joint1', 'joint2', 'joint3']
     """
+    forget_package_search()  # packages added or moved since the last load are seen
     name = str(robot)
     shipped = catalog()
     path = Path(name).expanduser()

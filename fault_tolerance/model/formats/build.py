@@ -7,7 +7,6 @@ turned into :class:`~.errors.URDFError` here, at the boundary.
 
 from __future__ import annotations
 
-import os
 import warnings
 from collections.abc import Mapping, Sequence
 from pathlib import Path
@@ -16,14 +15,15 @@ import numpy as np
 import pinocchio as pin
 from lxml import etree
 
-from fault_tolerance.errors import PackageNotFound, URDFError
+from fault_tolerance.errors import MeshRefused, URDFError
+from fault_tolerance.model.formats.packages import locate_mesh
 from fault_tolerance.model.formats.urdf import (
     URDFDescription,
     native_reason,
     native_stderr,
     read_urdf,
 )
-from fault_tolerance.model.formats.xacro import expand_xacro, is_xacro, resolve_uri
+from fault_tolerance.model.formats.xacro import expand_xacro, is_xacro
 from fault_tolerance.model.formats.xml_safety import _parse_safely, prefix_notice
 
 
@@ -122,10 +122,47 @@ def build_visuals(
 ) -> pin.GeometryModel | None:
     """Visual geometry of a description; visuals whose mesh is missing or unreadable are left out.
 
-    One warning lists the meshes left out (the model may then hold no geometry at all).
+    Meshes are opened only inside the description's folder and ``package_dirs``
+    (:func:`~.packages.locate_mesh`). One warning lists the meshes left out as missing or
+    unreadable, another those refused (outside the folders); the model may then hold no geometry.
     """
     root = _parse_safely(desc.path, desc.xml.encode("utf-8"))
-    dropped = _resolve_meshes(root, package_dirs, Path(desc.path).parent)
+    base = Path(desc.path).parent
+    missing, refused = _resolve_meshes(root, [base, *(package_dirs or [])], base)
+    visual, unreadable = _geometry(model, root)
+    dropped = missing + unreadable
+    if dropped:
+        warnings.warn(
+            f"{desc.path}: {_count(dropped)} mesh file(s) not found or unreadable, their visuals "
+            f"are left out (the kinematics does not need them): {_shown(dropped)}; pass "
+            "--package-dir (package_dirs=[...]) where package:// meshes live",
+            stacklevel=4,
+        )
+    if refused:
+        warnings.warn(
+            f"{desc.path}: {_count(refused)} mesh(es) not opened, their visuals are left out: "
+            f"{_shown(refused)}",
+            stacklevel=4,
+        )
+    return visual
+
+
+def _count(names: Sequence[str]) -> int:
+    return len(set(names))
+
+
+def _shown(names: Sequence[str]) -> str:
+    names = sorted(set(names))
+    return ", ".join(names[:5]) + (f" and {len(names) - 5} more" if len(names) > 5 else "")
+
+
+def _geometry(model: pin.Model, root) -> tuple[pin.GeometryModel | None, list[str]]:
+    """Pinocchio's visual geometry of a URDF tree whose mesh names are resolved paths.
+
+    A mesh that coal/assimp cannot read drops its visuals and the build is tried again; returns
+    the geometry and the mesh names so dropped.
+    """
+    dropped: list[str] = []
     for _ in range(len(root.findall("link/visual")) + 1):
         failure = None
         with native_stderr() as log, warnings.catch_warnings():
@@ -137,24 +174,13 @@ def build_visuals(
             except Exception as err:  # coal/assimp raise ValueError with C++ messages
                 failure = err
         if failure is None:
-            break
+            return visual, dropped
         bad = _unreadable_mesh(root, f"{failure} {native_reason(log)}")
         if bad is None:
             dropped += _drop(root, lambda el: el.find("geometry/mesh") is not None)
             continue
         dropped += _drop(root, lambda el, bad=bad: _mesh_of(el) == bad)
-    else:  # pragma: no cover - every mesh visual dropped and still failing
-        visual = None
-    if dropped:
-        names = sorted(set(dropped))
-        shown = ", ".join(names[:5]) + (f" and {len(names) - 5} more" if len(names) > 5 else "")
-        warnings.warn(
-            f"{desc.path}: {len(names)} mesh file(s) not found or unreadable, their visuals are "
-            f"left out (the kinematics does not need them): {shown}; pass --package-dir "
-            "(package_dirs=[...]) where package:// meshes live",
-            stacklevel=4,
-        )
-    return visual
+    return None, dropped  # pragma: no cover - every mesh visual dropped and still failing
 
 
 def _mesh_of(visual) -> str | None:
@@ -162,24 +188,28 @@ def _mesh_of(visual) -> str | None:
     return None if mesh is None else mesh.get("filename")
 
 
-def _resolve_meshes(root, package_dirs: Sequence[str] | None, base: Path) -> list[str]:
-    """Rewrite mesh filenames as absolute paths; drop the visuals whose mesh does not exist."""
+def _resolve_meshes(root, roots: Sequence[str | Path], base: Path | None) -> tuple[list, list]:
+    """Rewrite each mesh name as its file (:func:`~.packages.locate_mesh`) or drop its visual.
+
+    Returns the names dropped as missing (no such file or package) and those refused (outside
+    ``roots``), the latter with the reason.
+    """
     missing: list[str] = []
+    refused: list[str] = []
     for visual in root.findall("link/visual"):
         mesh = visual.find("geometry/mesh")
         if mesh is None:
             continue
         uri = mesh.get("filename") or ""
         try:
-            path = resolve_uri(uri, package_dirs, base)
-        except PackageNotFound:
-            path = None
-        if path is None or not path.is_file():
+            mesh.set("filename", str(locate_mesh(uri, roots, base)))
+        except MeshRefused as err:
+            refused.append(str(err))
+            visual.getparent().remove(visual)
+        except URDFError:  # MeshNotFound, PackageNotFound
             missing.append(uri or "(no filename)")
             visual.getparent().remove(visual)
-        else:
-            mesh.set("filename", str(path.resolve()))
-    return missing
+    return missing, refused
 
 
 def _unreadable_mesh(root, message: str) -> str | None:
@@ -208,50 +238,24 @@ def confined_visuals(
     Returns the geometry and the refused mesh names with the reason (:func:`confine_meshes`).
     """
     xml, dropped = confine_meshes(desc.xml, roots)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")  # a mesh that fails to load: drawn without visuals
-        visual = build_visuals(model, desc._replace(xml=xml), [])
-    return visual, dropped
+    visual, _ = _geometry(model, _parse_safely(desc.path, xml.encode("utf-8")))
+    return visual, dropped  # a mesh that fails to load: drawn without it
 
 
 def confine_meshes(xml: str, roots: Sequence[Path]) -> tuple[str, list[str]]:
     """``xml`` with each mesh name resolved inside ``roots``, or its ``<visual>`` dropped.
 
-    A ``<mesh filename="package://PKG/REST">`` is replaced by the real path of ``ROOT/PKG/REST``
-    (or of ``ROOT/REST`` when ``ROOT`` is the package folder ``PKG`` itself) for the first root where
-    that is a file inside ``ROOT`` after links are followed. Returns the new XML and a list saying
-    which names were refused and why. ``<collision>`` elements are removed (never drawn).
+    The names are read as the loader reads them (:func:`~.packages.locate_mesh`: ``package://``,
+    ``file://``, absolute and relative names, normalised), except that a run carries no folder of
+    its description: a relative name is tried against each root. Returns the new XML and the
+    names refused or not found, each with the reason. ``<collision>`` elements are removed
+    (never drawn).
     """
     root = _parse_safely(Path("carried URDF"), xml.encode("utf-8"))
-    real_roots = [Path(os.path.realpath(r)) for r in roots if Path(r).is_dir()]
-    dropped: list[str] = []
     for link in root.findall("link"):
         for col in link.findall("collision"):
             link.remove(col)
-        for vis in link.findall("visual"):
-            for mesh in vis.iter("mesh"):
-                name = mesh.get("filename") or ""
-                found, why = _resolve_mesh(name, real_roots)
-                if found is None:
-                    dropped.append(f"{name[:80]!r}: {why}")
-                    link.remove(vis)
-                    break
-                mesh.set("filename", str(found))
-    return etree.tostring(root, encoding="unicode"), dropped
-
-
-def _resolve_mesh(name: str, roots: Sequence[Path]) -> tuple[Path | None, str]:
-    prefix = "package://"
-    if not name.startswith(prefix):
-        return None, "not a package:// name"
-    rel = name[len(prefix) :]
-    parts = rel.split("/")
-    if not rel or "\\" in rel or "\x00" in rel or any(p in ("", ".", "..") for p in parts):
-        return None, "'..', '.', empty or backslash components are not allowed"
-    for real in roots:
-        tails = [parts] + ([parts[1:]] if real.name == parts[0] and len(parts) > 1 else [])
-        for tail in tails:
-            candidate = Path(os.path.realpath(real.joinpath(*tail)))
-            if candidate.is_file() and candidate.is_relative_to(real):
-                return candidate, ""
-    return None, "not found inside the package folders given"
+    missing, refused = _resolve_meshes(root, [Path(r) for r in roots], None)
+    return etree.tostring(root, encoding="unicode"), refused + [
+        f"{m[:80]!r}: not found inside the package folders given" for m in missing
+    ]

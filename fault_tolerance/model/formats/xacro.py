@@ -1,9 +1,10 @@
 """Where a description comes from: URDF and xacro files, and the ROS package folders they name.
 
 Real descriptions live in ROS packages: meshes are ``package://pkg/meshes/...`` and xacro files
-include ``$(find pkg)/urdf/...``. Both resolve here through the package folders the user passes
-(``package_dirs`` / ``--package-dir DIR``, repeatable), without ROS: a folder ``DIR`` serves
-package ``pkg`` if ``DIR/pkg`` is a folder or if ``DIR/package.xml`` names ``pkg``.
+include ``$(find pkg)/urdf/...``. Both resolve through the package folders the user passes
+(``package_dirs`` / ``--package-dir DIR``, repeatable), without ROS, by
+:func:`~.packages.find_package`: ``DIR/pkg``, a ``DIR`` whose ``package.xml`` names ``pkg``, or
+a package anywhere below ``DIR`` (a workspace).
 
 xacro files (``.xacro``, ``.urdf.xacro``) are expanded with the ``xacro`` package from PyPI,
 imported only for them, patched by :mod:`.xacro_eval` for the expansion: ``${...}`` goes through
@@ -25,23 +26,18 @@ from __future__ import annotations
 
 import contextlib
 import io
-import os
 import re
 import threading
 from collections.abc import Iterator, Mapping, Sequence
-from functools import lru_cache
 from pathlib import Path
 
 from fault_tolerance.errors import (
     FaultToleranceError,
     InvalidInput,
-    PackageNotFound,
     UnsafeDescription,
     URDFError,
 )
-
-#: What ``package_dirs`` may be: one folder or several.
-PackageDirs = Sequence[str | os.PathLike] | None
+from fault_tolerance.model.formats.packages import PackageDirs, find_package
 
 _XACRO_LOCK = threading.Lock()  # xacro keeps its state in module globals
 
@@ -60,42 +56,6 @@ def parse_xacro_args(items: Sequence[str] | None) -> dict[str, str]:
             raise InvalidInput(f"xacro argument {item!r} is not name:=value (e.g. prefix:=left_)")
         out[name.strip()] = value
     return out
-
-
-@lru_cache(maxsize=256)
-def _package_name(folder: str) -> str | None:
-    """The ``<name>`` in ``folder/package.xml``, or None."""
-    xml = Path(folder) / "package.xml"
-    if not xml.is_file():
-        return None
-    match = re.search(rb"<name>\s*([^<\s]+)\s*</name>", xml.read_bytes()[:100_000])
-    return match.group(1).decode("utf-8", "replace") if match else None
-
-
-def find_package(package: str, package_dirs: PackageDirs, where: str = "") -> Path:
-    """The folder of ROS package ``package``: ``DIR/package`` or a ``DIR`` whose package.xml names it.
-
-    Raises:
-        PackageNotFound: naming the package and the folders searched.
-    """
-    dirs = [Path(d).expanduser().absolute() for d in (package_dirs or [])]
-    for d in dirs:
-        if _package_name(str(d)) == package:
-            return d
-        if (d / package).is_dir():
-            return d / package
-    raise PackageNotFound(package, [str(d) for d in dirs], where)
-
-
-def resolve_uri(uri: str, package_dirs: PackageDirs, base: Path) -> Path:
-    """File path of a mesh ``filename``: ``package://pkg/...``, ``file://...``, absolute or relative."""
-    if uri.startswith("package://"):
-        package, _, rest = uri[len("package://") :].partition("/")
-        return find_package(package, package_dirs) / rest
-    if uri.startswith("file://"):
-        return Path(uri[len("file://") :])
-    path = Path(uri)
-    return path if path.is_absolute() else base / path
 
 
 # -- xacro ------------------------------------------------------------------------------------
