@@ -11,7 +11,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from fault_tolerance.cli.common import floats, lockable_of, names
+from fault_tolerance.cli.common import (
+    joint_values,
+    lockable_of,
+    names,
+    start_line,
+    task_values,
+)
 from fault_tolerance.errors import InvalidInput
 
 
@@ -43,18 +49,18 @@ def choose_start(args, arm, algorithms=("jvja",), extra_lockable=(), **sim_optio
     lockable = lockable_of(args, arm, none_ok=bool(extra_lockable) and _none_ok(algorithms))
     lockable = lockable or list(extra_lockable)  # none: only the extra joints are measured
     start_lockable = _with_joints(arm, lockable, extra_lockable)
-    q0 = None if args.q0 is None else arm.check_q(floats(args.q0, "--q0"))
+    q0 = None if args.q0 is None else given_start(args, arm)
     circle = _circle_maker(args, arm, entry)
     options = {"algorithms": tuple(algorithms), "dt": args.dt, **sim_options}
     if args.csv or args.x0 is not None or q0 is not None:
         if args.csv:
             path = load_csv(args.csv, rows=list(arm.task) if len(arm.task) else None)
         else:
-            x0 = floats(args.x0, "--x0") if args.x0 is not None else arm.fk(q0)
-            if len(x0) != arm.m:
-                raise InvalidInput(
-                    f"--x0 has {len(x0)} numbers; task {'/'.join(arm.task)} needs {arm.m}"
-                )
+            x0 = (
+                task_values(args.x0, "--x0", arm, getattr(args, "deg", False))
+                if args.x0 is not None
+                else arm.fk(q0)
+            )
             path = circle(x0)
         if q0 is None:
             q0 = initial_posture(arm, path.x0, start_lockable).q
@@ -72,6 +78,35 @@ def choose_start(args, arm, algorithms=("jvja",), extra_lockable=(), **sim_optio
         run_samples(args.dt, args.duration or circle(np.zeros(arm.m)).duration)
     choice = default_start(arm, start_lockable, x0=x0, path=circle, **options)
     return choice.q0, circle(choice.x0), lockable, choice
+
+
+def given_start(args, arm) -> np.ndarray:
+    """``--q0`` [rad; ``--deg``: degrees on angular joints] checked as a start (docs/units.md).
+
+    Refused (exit 2) outside the joint limits (with limits on), and beyond a turn on a revolute
+    joint (also with ``--no-limits``), with a hint when the value looks like degrees.
+    """
+    from fault_tolerance.model.joint_limits import check_start
+
+    q0 = joint_values(args.q0, "--q0", arm, getattr(args, "deg", False))
+    return check_start(arm, q0, limits=not getattr(args, "no_limits", False))
+
+
+def start_origin(args, choice) -> str:
+    """Where the start came from, for :func:`print_start`."""
+    if args.q0 is not None:
+        return "given by --q0" + (", in degrees" if getattr(args, "deg", False) else "")
+    if choice is not None:
+        return "the default start, chosen: see the next line"
+    where = "the first point of --csv" if args.csv else "--x0"
+    return f"the minimum-RCN posture at {where}"
+
+
+def print_start(args, arm, q0, choice) -> None:
+    """The start line (every command that takes or picks a start), then the choice's reason."""
+    print(start_line(arm, q0, start_origin(args, choice), getattr(args, "deg", False)))
+    if choice is not None:
+        print(choice.reason())
 
 
 def start_and_path(args, arm):
