@@ -235,7 +235,7 @@ def test_angular_columns_and_conversion_of_a_mixed_arm(slide):
     np.testing.assert_allclose(lim[0], [-0.2, 0.4])
     np.testing.assert_allclose(lim[1:], np.deg2rad([[-90, 90], [-60, 60], [-180, 180]]))
     np.testing.assert_allclose(joint_values("0.1,1,2,3", "--q0", arm), [0.1, 1, 2, 3])
-    with pytest.raises(ft.InvalidInput, match="--q0 has 3 numbers; slide has 4 joints"):
+    with pytest.raises(ft.InvalidInput, match=r"--q0 has shape \(3,\); slide needs shape \(4,\)"):
         joint_values("1,2,3", "--q0", arm, deg=True)
 
 

@@ -197,11 +197,7 @@ def joint_values(text: str, what: str, arm, deg: bool = False) -> np.ndarray:
     """One number per joint of option ``what`` [rad or m]; ``deg``: angular joints' in degrees."""
     from fault_tolerance.model.joint_limits import degrees_to_radians
 
-    v = floats(text, what)
-    if len(v) != arm.n:
-        raise InvalidInput(
-            f"{what} has {len(v)} numbers; {arm.name} has {arm.n} joints {arm.joint_names}"
-        )
+    v = arm.check_q(floats(text, what), what)  # one per joint, or the error names the joints
     return degrees_to_radians(arm, v) if deg else v
 
 

@@ -115,10 +115,12 @@ def angular_columns(arm) -> np.ndarray:
     return np.array(cols, dtype=bool)
 
 
+# Eqn. (U1)
 def degrees_to_radians(arm, values) -> np.ndarray:
-    """``values`` (n,) or (n, k) per joint with the angular joints' rows converted from degrees.
+    """``values`` (n,) or (n, k) per joint with the angular joints' rows converted from degrees (U1).
 
-    Rows of prismatic joints [m] are returned unchanged.
+    ``q_j = π/180 · q_j,deg`` for revolute and continuous joints; rows of
+    prismatic joints [m] are returned unchanged.
 
     Example:
         >>> from fault_tolerance import load_arm
@@ -157,6 +159,7 @@ def _describe(arm, q, i: int) -> str:
     return f"{arm.joint_names[i]} = {q[i]:.6g} {unit} (limits {lim})"
 
 
+# Eqn. (U2)
 def start_problems(arm, q0, limits: bool = True) -> tuple[list[int], list[int]]:
     """Joints of a start ``q0`` that are refused: ``(beyond_a_turn, outside_limits)``.
 
