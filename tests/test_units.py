@@ -321,7 +321,12 @@ def test_reproduce_prints_each_case_start(monkeypatch, tmp_path, capsys):
 
 def test_help_says_what_deg_converts(capsys):
     """Every command with angle options documents --deg: which options, and prismatic in metres."""
-    for command, options in (("simulate", "--q0"), ("lock", "--q0"), ("workspace", "--limits")):
+    for command, options in (
+        ("simulate", "--q0"),
+        ("lock", "--q0"),
+        ("workspace", "--limits"),
+        ("design", "the angles of --params"),
+    ):
         with pytest.raises(SystemExit):
             main([command, "--help"])
         text = " ".join(capsys.readouterr().out.split())
@@ -399,3 +404,57 @@ def test_ur5e_start_in_degrees_refused_and_deg_runs_it(capsys):
     q = np.array(json.loads(line.split("q0 = ")[1].split(" rad")[0]))
     np.testing.assert_allclose(q, np.round(q_rad, 4), atol=1e-4)
     assert load("ur5e").n == len(q)
+
+
+# -- design --vary dh: the angles of --params ----------------------------------------------------
+
+
+def test_dh_params_in_degrees_convert_angles_not_lengths_nor_prismatic_limits():
+    """theta, alpha and a revolute joint's limits are converted; a, d and a slider's limits not."""
+    from fault_tolerance.analysis.design.dh import parse_params
+    from fault_tolerance.cli.common import dh_params_from_degrees
+    from fault_tolerance.model.dh import DHJoint, DHTable
+
+    table = DHTable(
+        joints=(
+            DHJoint(a=0.0, alpha=0.0, d=0.2, kind="prismatic", lower=0.0, upper=0.5),
+            DHJoint(a=0.3, alpha=0.0, d=0.0),
+        )
+    )
+    text = "upper1:0.3:0.5,d1:0.1:0.2,alpha2:{0|90|-90},theta2:-45:45,upper2:30:170,a2:0.2:0.4"
+    got = {p.name: p for p in dh_params_from_degrees(parse_params(text), table, text)}
+    assert (got["upper1"].lo, got["upper1"].hi) == (0.3, 0.5)  # the slider's limit [m]
+    assert (got["d1"].lo, got["a2"].hi) == (0.1, 0.4)  # lengths [m]
+    np.testing.assert_allclose(got["alpha2"].choices, [0.0, np.pi / 2, -np.pi / 2])
+    np.testing.assert_allclose([got["theta2"].lo, got["theta2"].hi], [-np.pi / 4, np.pi / 4])
+    np.testing.assert_allclose([got["upper2"].lo, got["upper2"].hi], np.deg2rad([30, 170]))
+    with pytest.raises(ft.InvalidInput, match="not as multiples of pi"):
+        dh_params_from_degrees(parse_params("alpha2:{0|pi/2}"), table, "alpha2:{0|pi/2}")
+
+
+def test_design_dh_with_deg_is_the_radian_design(tmp_path, capsys):
+    """`design --vary dh --params alpha2:{0|90} --deg` gives the design of alpha2:{0|π/2}."""
+    common = ["design", "--vary", "dh", "--popsize", "4", "--generations", "0", "--rounds", "0",
+              "--workers", "0", "--no-progress"]  # fmt: skip
+    deg = [*common, "--params", "d3:0.2:0.6,alpha2:{0|90}", "--deg", "--out", str(tmp_path / "d")]
+    rad = [
+        *common,
+        "--params",
+        f"d3:0.2:0.6,alpha2:{{0|{np.pi / 2!r}}}",
+        "--out",
+        str(tmp_path / "r"),
+    ]
+    assert run_cli(deg, capsys)[0] == 0
+    assert run_cli(rad, capsys)[0] == 0
+    d = json.loads((tmp_path / "d" / "design.json").read_text())
+    r = json.loads((tmp_path / "r" / "design.json").read_text())
+    assert d["parameters"] == pytest.approx(r["parameters"], abs=1e-12)
+    assert d["mean_jvj"] == pytest.approx(r["mean_jvj"], rel=1e-12)
+
+
+def test_a_planar_design_refuses_deg(tmp_path, capsys):
+    """design --vary limits takes no angle: --deg is refused, not ignored."""
+    code, _, err = run_cli(
+        ["design", "--robot", "planar_3r", "--deg", "--out", str(tmp_path / "p")], capsys
+    )
+    assert code == 2 and "--deg: options of --vary dh" in err

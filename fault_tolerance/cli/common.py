@@ -231,6 +231,34 @@ def task_values(text: str, what: str, arm, deg: bool = False) -> np.ndarray:
     return v
 
 
+def dh_params_from_degrees(params, table, text: str) -> tuple:
+    """``--deg`` of ``design --vary dh``: the angles of ``--params`` (``text``) from degrees.
+
+    ``theta`` and ``alpha`` are angles; ``lower`` and ``upper`` are angles of revolute joints and
+    metres of prismatic ones (not converted), ``a`` and ``d`` metres. Multiples of ``pi`` are
+    refused with ``--deg`` (they are radians).
+    """
+    from dataclasses import replace
+
+    if "pi" in text.lower():
+        raise InvalidInput(
+            f"--params {text!r} with --deg: write its angles in degrees (alpha2:{{0|90|-90}}), "
+            "not as multiples of pi (radians)"
+        )
+    out = []
+    for p in params:
+        kind = table.joints[p.joint - 1].kind if p.joint <= table.n else "prismatic"
+        if p.field in ("theta", "alpha") or (p.field in ("lower", "upper") and kind == "revolute"):
+            p = replace(
+                p,
+                lo=float(np.deg2rad(p.lo)),
+                hi=float(np.deg2rad(p.hi)),
+                choices=tuple(float(np.deg2rad(c)) for c in p.choices),
+            )
+        out.append(p)
+    return tuple(out)
+
+
 def start_line(arm, q0, origin: str, deg: bool = False) -> str:
     """``start: q0 = [...] rad (origin)``, and the same in degrees with ``deg``.
 
