@@ -458,3 +458,19 @@ def test_a_planar_design_refuses_deg(tmp_path, capsys):
         ["design", "--robot", "planar_3r", "--deg", "--out", str(tmp_path / "p")], capsys
     )
     assert code == 2 and "--deg: options of --vary dh" in err
+
+
+def test_a_start_read_modulo_a_turn_is_printed_where_the_run_starts(capsys):
+    """5.5 rad on a full-turn joint (limits ±π) runs from 5.5 − 2π; the start line says so."""
+    code, out, err = run_cli(
+        ["simulate", "--robot", "planar_3r", "--q0=0.3,1.2,5.5", "--algorithms", "jvja", *SHORT],
+        capsys,
+    )
+    assert code == 0, err
+    (line,) = start_lines(out)
+    wrapped = round(5.5 - 2 * np.pi, 4)
+    assert line == (
+        f"start: q0 = [0.3, 1.2, {wrapped}] rad (given by --q0; joint3 read modulo 2π into the "
+        "limits)"
+    )
+    assert f"start: every method from the same q0 = [0.3, 1.2, {wrapped}] rad" in out

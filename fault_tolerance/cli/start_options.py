@@ -86,10 +86,12 @@ def given_start(args, arm) -> np.ndarray:
     Refused (exit 2) outside the joint limits (with limits on), and beyond a turn on a revolute
     joint (also with ``--no-limits``), with a hint when the value looks like degrees.
     """
-    from fault_tolerance.model.joint_limits import check_start
+    from fault_tolerance.model.joint_limits import check_start, wrap_into_limits
 
     q0 = joint_values(args.q0, "--q0", arm, getattr(args, "deg", False))
-    return check_start(arm, q0, limits=not getattr(args, "no_limits", False))
+    limits = not getattr(args, "no_limits", False)
+    q0 = check_start(arm, q0, limits=limits)
+    return wrap_into_limits(arm, q0) if limits else q0  # where the run starts (simulate wraps)
 
 
 def start_origin(args, choice) -> str:
@@ -104,7 +106,12 @@ def start_origin(args, choice) -> str:
 
 def print_start(args, arm, q0, choice) -> None:
     """The start line (every command that takes or picks a start), then the choice's reason."""
-    print(start_line(arm, q0, start_origin(args, choice), getattr(args, "deg", False)))
+    origin = start_origin(args, choice)
+    if args.q0 is not None:  # full-turn joints read modulo 2π into their limits: say which
+        given = joint_values(args.q0, "--q0", arm, getattr(args, "deg", False))
+        moved = [arm.joint_names[i] for i in np.flatnonzero(np.abs(given - q0) > 1e-12)]
+        origin += f"; {', '.join(moved)} read modulo 2π into the limits" if moved else ""
+    print(start_line(arm, q0, origin, getattr(args, "deg", False)))
     if choice is not None:
         print(choice.reason())
 
