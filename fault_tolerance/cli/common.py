@@ -178,9 +178,9 @@ def lockable_of(args, arm, none_ok: bool = False):
 
 #: What ``--deg`` converts, and what not (every command's ``--help`` says it).
 DEG_NOTE = (
-    "entries of revolute and continuous joints (and orientation rows rx,ry,rz) are read in "
-    "degrees and converted to radians; entries of prismatic joints are metres and are not "
-    "converted. Not converted: rates [rad/s] (--omega), gains, times"
+    "angles of revolute and continuous joints are read in degrees and converted to radians; "
+    "entries of prismatic joints are metres and are not converted. Never converted: rates "
+    "[rad/s] (--omega), lengths, gains, times (docs/units.md)"
 )
 
 
@@ -297,8 +297,9 @@ def add_path_options(p: argparse.ArgumentParser) -> None:
         "--q0",
         default=None,
         help="start configuration, one number per joint [rad; m for prismatic joints; degrees "
-        "with --deg], used as given; it must be inside the joint limits (any value beyond a "
-        "turn, 2π·1.01, is refused even with --no-limits: it looks like degrees)",
+        "with --deg], used as given (a full-turn joint modulo 2π into its limits) and printed; "
+        "it must be inside the joint limits (any angle beyond a turn, 2π·1.01, is refused even "
+        "with --no-limits: it looks like degrees)",
     )
     add_deg_option(g, "--q0 and the orientation rows of --x0")
     g.add_argument(
