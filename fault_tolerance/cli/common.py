@@ -174,6 +174,110 @@ def lockable_of(args, arm, none_ok: bool = False):
     return items
 
 
+# -- units: --deg --------------------------------------------------------------------------
+
+#: What ``--deg`` converts, and what not (every command's ``--help`` says it).
+DEG_NOTE = (
+    "angles of revolute and continuous joints are read in degrees and converted to radians; "
+    "entries of prismatic joints are metres and are not converted. Never converted: rates "
+    "[rad/s] (--omega), lengths, gains, times (docs/units.md)"
+)
+
+
+def add_deg_option(g, converts: str) -> None:
+    """``--deg``: the angle options ``converts`` (named in its help) are read in degrees."""
+    g.add_argument(
+        "--deg",
+        action="store_true",
+        help=f"read {converts} in degrees (default: radians): {DEG_NOTE}",
+    )
+
+
+def joint_values(text: str, what: str, arm, deg: bool = False) -> np.ndarray:
+    """One number per joint of option ``what`` [rad or m]; ``deg``: angular joints' in degrees."""
+    from fault_tolerance.model.joint_limits import degrees_to_radians
+
+    v = arm.check_q(floats(text, what), what)  # one per joint, or the error names the joints
+    return degrees_to_radians(arm, v) if deg else v
+
+
+def joint_ranges(text: str, what: str, arm, deg: bool = False) -> np.ndarray:
+    """``lo:hi`` per joint of option ``what``, (n, 2) [rad or m]; ``deg`` as :func:`joint_values`."""
+    from fault_tolerance.model.joint_limits import degrees_to_radians
+
+    try:
+        lim = np.array(
+            [[float(v) for v in p.split(":")] for p in text.replace(" ", "").split(",") if p]
+        )
+    except ValueError:
+        lim = np.zeros((0, 0))
+    if lim.ndim != 2 or lim.shape[1] != 2 or not np.all(np.isfinite(lim)):
+        raise InvalidInput(f"{what} must be finite lo:hi pairs, comma-separated, got '{text}'")
+    if len(lim) != arm.n:
+        raise InvalidInput(
+            f"{what} has {len(lim)} lo:hi pairs; {arm.name} has {arm.n} joints {arm.joint_names}"
+        )
+    return degrees_to_radians(arm, lim) if deg else lim
+
+
+def task_values(text: str, what: str, arm, deg: bool = False) -> np.ndarray:
+    """Task coordinates of option ``what`` [m, rad]; ``deg``: the rows rx, ry, rz in degrees."""
+    v = floats(text, what)
+    if len(v) != arm.m:
+        raise InvalidInput(f"{what} has {len(v)} numbers; task {'/'.join(arm.task)} needs {arm.m}")
+    if deg:
+        ang = np.array([r.startswith("r") for r in arm.task], dtype=bool)
+        v[ang] = np.deg2rad(v[ang])
+    return v
+
+
+def dh_params_from_degrees(params, table, text: str) -> tuple:
+    """``--deg`` of ``design --vary dh``: the angles of ``--params`` (``text``) from degrees.
+
+    ``theta`` and ``alpha`` are angles; ``lower`` and ``upper`` are angles of revolute joints and
+    metres of prismatic ones (not converted), ``a`` and ``d`` metres. Multiples of ``pi`` are
+    refused with ``--deg`` (they are radians).
+    """
+    from dataclasses import replace
+
+    if "pi" in text.lower():
+        raise InvalidInput(
+            f"--params {text!r} with --deg: write its angles in degrees (alpha2:{{0|90|-90}}), "
+            "not as multiples of pi (radians)"
+        )
+    out = []
+    for p in params:
+        kind = table.joints[p.joint - 1].kind if p.joint <= table.n else "prismatic"
+        if p.field in ("theta", "alpha") or (p.field in ("lower", "upper") and kind == "revolute"):
+            p = replace(
+                p,
+                lo=float(np.deg2rad(p.lo)),
+                hi=float(np.deg2rad(p.hi)),
+                choices=tuple(float(np.deg2rad(c)) for c in p.choices),
+            )
+        out.append(p)
+    return tuple(out)
+
+
+def start_line(arm, q0, origin: str, deg: bool = False) -> str:
+    """``start: q0 = [...] rad (origin)``, and the same in degrees with ``deg``.
+
+    In the degrees list, prismatic joints' entries stay metres (named at the end).
+    """
+    from fault_tolerance.model.joint_limits import angular_columns
+
+    q0 = np.asarray(q0, dtype=float)
+    line = f"start: q0 = {np.round(q0, 4).tolist()} rad"
+    if deg:
+        ang = angular_columns(arm)
+        shown = np.where(ang, np.rad2deg(q0), q0)
+        linear = [arm.joint_names[i] for i in np.flatnonzero(~ang)]
+        line += f" = {np.round(shown, 3).tolist()} deg" + (
+            f" ({', '.join(linear)} in m)" if linear else ""
+        )
+    return f"{line} ({origin})"
+
+
 # -- start, path ----------------------------------------------------------------------------
 
 
@@ -183,12 +287,21 @@ def add_path_options(p: argparse.ArgumentParser) -> None:
     g.add_argument(
         "--x0",
         default=None,
-        help="start point (task coordinates); the start posture is the minimum-RCN one. Without "
+        help="start point (task coordinates [m; rad for rx,ry,rz, degrees with --deg]); the "
+        "start posture is the minimum-RCN one. Without "
         "--x0 and --q0 a start is chosen that is inside the limits, regular, with every lockable "
         "joint tolerable, and runs the task cleanly (docs/MATH.md, 'The default start'); it is "
         "printed",
     )
-    g.add_argument("--q0", default=None, help="start configuration (rad), used as given")
+    g.add_argument(
+        "--q0",
+        default=None,
+        help="start configuration, one number per joint [rad; m for prismatic joints; degrees "
+        "with --deg], used as given (a full-turn joint modulo 2π into its limits) and printed; "
+        "it must be inside the joint limits (any angle beyond a turn, 2π·1.01, is refused even "
+        "with --no-limits: it looks like degrees)",
+    )
+    add_deg_option(g, "--q0 and the orientation rows of --x0")
     g.add_argument(
         "--csv", default=None, help="task path from a CSV file with header t,x,y[,z...] [,vx,vy...]"
     )
@@ -199,7 +312,11 @@ def add_path_options(p: argparse.ArgumentParser) -> None:
         help="circle radius [m] (default: the paper's for shipped arms, else 0.05)",
     )
     g.add_argument(
-        "--omega", type=float, default=None, help="circle angular rate [rad/s] (default 2π)"
+        "--omega",
+        type=float,
+        default=None,
+        help="circle angular rate [rad/s] (default 2π; --deg does not "
+        "convert it: the rate of the circle's parameter, not a joint or orientation angle)",
     )
     g.add_argument(
         "--rows",
@@ -239,8 +356,9 @@ def add_path_options(p: argparse.ArgumentParser) -> None:
     g.add_argument(
         "--no-limits",
         action="store_true",
-        help="ignore the joint position and velocity limits (the paper's formulation); by "
-        "default every step stays inside them (docs/MATH.md, Joint limits)",
+        help="ignore the joint position and velocity limits (the paper's formulation): a --q0 "
+        "outside them is then allowed, but not beyond a turn (docs/units.md); by default every "
+        "step stays inside them (docs/MATH.md, Joint limits)",
     )
 
 

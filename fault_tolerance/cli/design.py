@@ -123,6 +123,7 @@ def _run(args) -> int:
     if args.vary not in VARY:
         raise InvalidInput(f"--vary '{args.vary}' is not one of {[*VARY, 'dh', 'dh,limits']}")
     dh_only = [o for o, v in DH_ONLY.items() if getattr(args, v) is not None]
+    dh_only += ["--deg"] if args.deg else []  # a planar design takes no angle (docs/units.md)
     if dh_only:
         raise InvalidInput(f"{', '.join(dh_only)}: options of --vary dh, not of --vary {args.vary}")
     args.objective = args.objective or "ftw-area"

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
-from fault_tolerance.cli.common import floats
+from fault_tolerance.cli.common import add_deg_option, dh_params_from_degrees, floats
 from fault_tolerance.errors import InvalidInput
 
 #: The parameters varied by default on the paper's 4R: upper arm and forearm, total length fixed.
@@ -37,6 +37,7 @@ def add_arguments(s: argparse.ArgumentParser) -> None:
         "lower upper, e.g. d3:0.2:0.6,a4:0.1:0.5,alpha2:{0|pi/2|-pi/2} "
         "(default for spatial_4r: d3:0.2:0.6,a4:0.1:0.5)",
     )
+    add_deg_option(g, "the angles of --params (theta, alpha; lower, upper of revolute joints)")
     g.add_argument(
         "--total-length",
         default=None,
@@ -118,14 +119,18 @@ def run_dh(args) -> int:
     text = args.params or DEFAULT_PARAMS.get(template)
     if text is None:
         raise InvalidInput("--vary dh with a DH file needs --params (e.g. d3:0.2:0.6,a4:0.1:0.5)")
+    given = len(parse_params(text))  # the user's parameters come first (--deg converts them)
     if args.vary == "dh,limits":  # every joint's limits join the varied parameters
         text += "," + ",".join(
             f"lower{i}:-3.1416:-0.5,upper{i}:0.5:3.1416" for i in range(1, table.n + 1)
         )
+    params = parse_params(text)
+    if args.deg:
+        params = dh_params_from_degrees(params[:given], table, args.params or "") + params[given:]
     objective = args.objective or "mean-jvj"
     lockable = _lockable(args, table)
     spec = design_spec(
-        table, parse_params(text), _task(args, template), lockable, objective=objective,
+        table, params, _task(args, template), lockable, objective=objective,
         rcn_max=RCN_THRESHOLD if args.rcn_max is None else args.rcn_max,
         total_length=_total(args.total_length, table), search_dt=args.search_dt,
     )  # fmt: skip

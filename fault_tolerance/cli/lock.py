@@ -26,7 +26,7 @@ from fault_tolerance.cli.dynamics_options import (
     print_torque_table,
 )
 from fault_tolerance.cli.simulate import announce_first_run, first_run_engine
-from fault_tolerance.cli.start_options import choose_start
+from fault_tolerance.cli.start_options import choose_start, print_start
 from fault_tolerance.errors import InvalidInput
 
 NAME = "lock"
@@ -186,8 +186,7 @@ def _run(args) -> int:
         t_at = float(floats(args.at, "--at")[0])
         if not 0 <= t_at <= duration:
             raise InvalidInput(f"lock time must be within [0, {duration}] s, got {t_at}")
-    if choice is not None:
-        print(choice.reason())
+    print_start(args, arm, q0, choice)
     announce_first_run(gain["engine"])
     t_lock, planned = _lock_time(args, arm, path, q0, joint, duration, gain, lockable, feedback)
     progress = bar(int(round(duration / args.dt)) + 1, not args.no_progress, "lock")
@@ -312,8 +311,7 @@ def _run_dynamics(args) -> int:
     q0, path, lockable, choice = choose_start(
         args, arm, stepwise, extra_lockable=[joint], **common, **gain
     )
-    if choice is not None:
-        print(choice.reason())
+    print_start(args, arm, q0, choice)
     duration = args.duration or path.duration
     t_lock, _ = _lock_time(args, arm, path, q0, joint, duration, gain, lockable, feedback)
     brake = _brake_torque(args, arm, joint)

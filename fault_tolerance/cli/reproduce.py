@@ -6,7 +6,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from fault_tolerance.cli.common import EXIT_INTERRUPTED, FORMATTER, epilog, names
+from fault_tolerance.cli.common import EXIT_INTERRUPTED, FORMATTER, epilog, names, start_line
 from fault_tolerance.errors import InvalidInput
 
 NAME = "reproduce"
@@ -69,6 +69,9 @@ def run(args) -> int:
             file=sys.stderr,
         )
         return EXIT_INTERRUPTED
+    for case, c in summary.get("cases", {}).items():  # every case's start, as simulate prints it
+        if c.get("q0") is not None:
+            print(start_line(None, c["q0"], f"{case}, {c.get('robot', '?')}"))
     for w in summary.get("warnings", []):
         print(f"fault-tolerance reproduce: warning: {w['run']}: {w['message']}", file=sys.stderr)
     print(

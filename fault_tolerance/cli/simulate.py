@@ -24,7 +24,7 @@ from fault_tolerance.cli.dynamics_options import (
     check_dynamics_args,
     dynamics_model,
 )
-from fault_tolerance.cli.start_options import choose_start
+from fault_tolerance.cli.start_options import choose_start, print_start
 from fault_tolerance.errors import InvalidInput
 from fault_tolerance.simulation.compare import compare_runs
 from fault_tolerance.storage.atomic import to_json, write_atomic
@@ -232,8 +232,7 @@ def _run(args, out: Path | None) -> int:
     duration = args.duration or path.duration
     f = scenarios(lockable, arm.n, r=arm.redundancy, joint_names=arm.joint_names).f
     steps = check_run(args.dt, duration, arm.n, arm.m, f, runs=len(algs))  # all kept in memory
-    if choice is not None:
-        print(choice.reason())
+    print_start(args, arm, q0, choice)
     announce_first_run(options["engine"])
     progress = bar(steps * len(algs), not args.no_progress, "simulate")
     runs, saved, found = {}, [], {}

@@ -14,7 +14,13 @@ import itertools
 
 import numpy as np
 
-from fault_tolerance.cli.common import floats, lockable_of, names
+from fault_tolerance.cli.common import (
+    joint_values,
+    lockable_of,
+    names,
+    start_line,
+    task_values,
+)
 from fault_tolerance.errors import InvalidInput, NoStartFound, StructurallyIntolerable
 
 
@@ -51,18 +57,18 @@ def choose_start(
     lockable = lockable_of(args, arm, none_ok=bool(extra_lockable) and _none_ok(algorithms))
     lockable = lockable or list(extra_lockable)  # none: only the extra joints are measured
     start_lockable = _with_joints(arm, lockable, extra_lockable)
-    q0 = None if args.q0 is None else arm.check_q(floats(args.q0, "--q0"))
+    q0 = None if args.q0 is None else given_start(args, arm)
     circle = _circle_maker(args, arm, entry)
     options = {"algorithms": tuple(algorithms), "dt": args.dt, **sim_options}
     if args.csv or args.x0 is not None or q0 is not None:
         if args.csv:
             path = load_csv(args.csv, rows=list(arm.task) if len(arm.task) else None)
         else:
-            x0 = floats(args.x0, "--x0") if args.x0 is not None else arm.fk(q0)
-            if len(x0) != arm.m:
-                raise InvalidInput(
-                    f"--x0 has {len(x0)} numbers; task {'/'.join(arm.task)} needs {arm.m}"
-                )
+            x0 = (
+                task_values(args.x0, "--x0", arm, getattr(args, "deg", False))
+                if args.x0 is not None
+                else arm.fk(q0)
+            )
             path = circle(x0)
         if q0 is None:
             q0 = initial_posture(arm, path.x0, start_lockable).q
@@ -237,6 +243,41 @@ def _spanned_task(args, arm, samples: int = 20, seed: int = 0) -> list[tuple[str
     if len(arm.task) == 6 and arm.n > 3:
         out.append(("--task position", {"task": "position", "rows": None}))
     return out
+
+def given_start(args, arm) -> np.ndarray:
+    """``--q0`` [rad; ``--deg``: degrees on angular joints] checked as a start (docs/units.md).
+
+    Refused (exit 2) outside the joint limits (with limits on), and beyond a turn on a revolute
+    joint (also with ``--no-limits``), with a hint when the value looks like degrees.
+    """
+    from fault_tolerance.model.joint_limits import check_start, wrap_into_limits
+
+    q0 = joint_values(args.q0, "--q0", arm, getattr(args, "deg", False))
+    limits = not getattr(args, "no_limits", False)
+    q0 = check_start(arm, q0, limits=limits)
+    return wrap_into_limits(arm, q0) if limits else q0  # where the run starts (simulate wraps)
+
+
+def start_origin(args, choice) -> str:
+    """Where the start came from, for :func:`print_start`."""
+    if args.q0 is not None:
+        return "given by --q0" + (", in degrees" if getattr(args, "deg", False) else "")
+    if choice is not None:
+        return "the default start, chosen: see the next line"
+    where = "the first point of --csv" if args.csv else "--x0"
+    return f"the minimum-RCN posture at {where}"
+
+
+def print_start(args, arm, q0, choice) -> None:
+    """The start line (every command that takes or picks a start), then the choice's reason."""
+    origin = start_origin(args, choice)
+    if args.q0 is not None:  # full-turn joints read modulo 2π into their limits: say which
+        given = joint_values(args.q0, "--q0", arm, getattr(args, "deg", False))
+        moved = [arm.joint_names[i] for i in np.flatnonzero(np.abs(given - q0) > 1e-12)]
+        origin += f"; {', '.join(moved)} read modulo 2π into the limits" if moved else ""
+    print(start_line(arm, q0, origin, getattr(args, "deg", False)))
+    if choice is not None:
+        print(choice.reason())
 
 
 def start_and_path(args, arm):

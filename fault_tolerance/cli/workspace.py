@@ -9,7 +9,15 @@ import time
 from collections.abc import Iterator
 from pathlib import Path
 
-from fault_tolerance.cli.common import FORMATTER, add_robot_options, epilog, load_robot, lockable_of
+from fault_tolerance.cli.common import (
+    FORMATTER,
+    add_deg_option,
+    add_robot_options,
+    epilog,
+    joint_ranges,
+    load_robot,
+    lockable_of,
+)
 from fault_tolerance.errors import InvalidInput
 
 NAME = "workspace"
@@ -92,9 +100,10 @@ def add_parser(sub) -> argparse.ArgumentParser:
     s.add_argument(
         "--limits",
         default=None,
-        help="artificial limits lo:hi per joint, written --limits=-1:1,... (default: URDF)",
+        help="artificial limits lo:hi per joint [rad; m for prismatic joints; degrees with "
+        "--deg], written --limits=-1:1,... (default: URDF)",
     )
-    s.add_argument("--deg", action="store_true", help="--limits in degrees")
+    add_deg_option(s, "--limits")
     s.add_argument(
         "--grid",
         type=int,
@@ -143,11 +152,11 @@ def _run(args) -> int:
     keys = ("grid", "samples", "theta_samples", "chunks")
     opts = {k: getattr(args, k) for k in keys if getattr(args, k) is not None}
     t0 = time.perf_counter()
+    limits = None if args.limits is None else joint_ranges(args.limits, "--limits", arm, args.deg)
     ws = failure_tolerant_workspace(
         arm,
-        args.limits,
+        limits,
         singletons(lockable_of(args, arm)),
-        deg=args.deg,
         workers=args.workers or 0,
         scheduler=args.scheduler,
         folder=args.out,

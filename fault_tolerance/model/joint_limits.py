@@ -85,3 +85,123 @@ def outside_limits(arm, q, tol: float = 1e-9) -> np.ndarray:
     lo = np.where(np.abs(arm.lower) < NO_LIMIT, arm.lower, -np.inf)
     hi = np.where(np.abs(arm.upper) < NO_LIMIT, arm.upper, np.inf)
     return (q < lo - tol) | (q > hi + tol)
+
+
+# -- units of a start: radians on turning joints, metres on sliding ones ------------------------
+
+#: A turning joint's start beyond this magnitude [rad] (a turn and 1 %) and outside its limits is
+#: refused: no start needs it, and it is what degrees read as radians look like (docs/units.md).
+TURN_LIMIT = 2 * np.pi * 1.01
+#: The hint of a start that looks like degrees (CLI and Python).
+DEGREES_HINT = "looks like degrees: pass --deg (in Python, np.deg2rad(q0))"
+
+
+def _linear(joint) -> bool:
+    """True for a joint whose coordinates are lengths [m] (prismatic, translation)."""
+    return _prismatic(joint) or joint.shortname() == "JointModelTranslation"
+
+
+def angular_columns(arm) -> np.ndarray:
+    """Which entries of ``q`` (columns of J) are angles [rad]: revolute, continuous, bool (n,).
+
+    The others are lengths [m] (prismatic joints); ``--deg`` converts only the angles.
+    """
+    model = arm.model
+    cols = [
+        not _linear(model.joints[j])
+        for j in range(1, model.njoints)
+        for _ in range(model.joints[j].nv)
+    ]
+    return np.array(cols, dtype=bool)
+
+
+# Eqn. (U1)
+def degrees_to_radians(arm, values) -> np.ndarray:
+    """``values`` (n,) or (n, k) per joint with the angular joints' rows converted from degrees (U1).
+
+    ``q_j = π/180 · q_j,deg`` for revolute and continuous joints; rows of
+    prismatic joints [m] are returned unchanged.
+
+    Example:
+        >>> from fault_tolerance import load_arm
+        >>> degrees_to_radians(load_arm("planar_3r"), [0.0, 90.0, 45.0]).round(4).tolist()
+        [0.0, 1.5708, 0.7854]
+    """
+    v = np.array(values, dtype=float)
+    ang = angular_columns(arm)
+    if v.shape[:1] != ang.shape:
+        raise InvalidInput(
+            f"{v.shape[0] if v.ndim else 1} values for {arm.n} joints {arm.joint_names}; give "
+            "one per joint"
+        )
+    v[ang] = np.deg2rad(v[ang])
+    return v
+
+
+def _limited(bound: np.ndarray) -> np.ndarray:
+    return np.abs(bound) < NO_LIMIT
+
+
+def _looks_like_degrees(arm, q, i: int) -> bool:
+    """Joint ``i`` of ``q``: beyond a turn, or outside its limits while its degrees are inside."""
+    lo, hi = arm.lower[i], arm.upper[i]
+    if abs(q[i]) > TURN_LIMIT:
+        return True
+    r = np.deg2rad(q[i])
+    return bool((not _limited(lo) or r >= lo) and (not _limited(hi) or r <= hi))
+
+
+def _describe(arm, q, i: int) -> str:
+    """``joint2 = 90 rad (limits [-3.142, 3.142] rad)``; ``(no limits)`` where it has none."""
+    unit = "rad" if angular_columns(arm)[i] else "m"
+    lo, hi = arm.lower[i], arm.upper[i]
+    lim = f"[{lo:.4g}, {hi:.4g}] {unit}" if _limited(lo) and _limited(hi) else "none"
+    return f"{arm.joint_names[i]} = {q[i]:.6g} {unit} (limits {lim})"
+
+
+# Eqn. (U2)
+def start_problems(arm, q0, limits: bool = True) -> tuple[list[int], list[int]]:
+    """Joints of a start ``q0`` that are refused: ``(beyond_a_turn, outside_limits)``.
+
+    * beyond a turn: an angular joint with ``|q| > TURN_LIMIT`` that its limits (if any) do not
+      allow — always refused, limits on or off;
+    * outside limits: any joint outside its position limits (full-turn joints wrapped first,
+      :func:`wrap_into_limits`) — refused only with ``limits`` on.
+    """
+    q = arm.check_q(q0, "q0")
+    ang = angular_columns(arm)
+    outside = outside_limits(arm, wrap_into_limits(arm, q))
+    allowed = ~outside_limits(arm, q) & _limited(arm.lower) & _limited(arm.upper)
+    turn = [i for i in range(arm.n) if ang[i] and abs(q[i]) > TURN_LIMIT and not allowed[i]]
+    out = [i for i in np.flatnonzero(outside) if i not in turn] if limits else []
+    return turn, [int(i) for i in out]
+
+
+def check_start(arm, q0, limits: bool = True) -> np.ndarray:
+    """``q0`` checked as a start: right size, finite, in radians, inside the limits (if on).
+
+    Refused (:class:`InvalidInput`, naming each joint, its value and its limits): an angle beyond
+    a turn outside its limits (with limits on or off), and with ``limits`` on any joint outside
+    its position limits. When a refused value looks like degrees (beyond a turn, or inside the
+    limits once converted from degrees) the message says so (:data:`DEGREES_HINT`).
+    """
+    q = arm.check_q(q0, "q0")
+    turn, out = start_problems(arm, q, limits)
+    if not turn and not out:
+        return q
+    ang = angular_columns(arm)
+    hint = any(ang[i] and _looks_like_degrees(arm, q, i) for i in turn + out)
+    parts = []
+    if turn:
+        parts.append(
+            f"q0 is beyond a turn (|q| > 2π·1.01 = {TURN_LIMIT:.4g} rad) at "
+            + ", ".join(_describe(arm, q, i) for i in turn)
+        )
+    if out:
+        parts.append(
+            "q0 is outside the joint limits at " + ", ".join(_describe(arm, q, i) for i in out)
+        )
+    advice = "start inside them, or run without limits (limits=False, --no-limits)"
+    if not out:
+        advice = "angles are in radians"
+    raise InvalidInput("; ".join(parts) + (f"; {DEGREES_HINT}" if hint else "") + f"; {advice}")

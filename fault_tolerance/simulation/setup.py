@@ -180,20 +180,17 @@ def _widths(n: int, m: int, f: int) -> dict[str, int]:
 
 
 def _check_limits(arm, q0, limits, horizon, dt) -> float:
-    """The rate box's horizon (at least ``dt``); with limits on, ``q0`` must be inside them."""
-    from fault_tolerance.model.joint_limits import RATE_HORIZON, outside_limits, wrap_into_limits
+    """The rate box's horizon (at least ``dt``), after ``q0`` is checked as a start.
+
+    ``q0`` in radians, inside the limits when they are on
+    (:func:`~fault_tolerance.model.joint_limits.check_start`).
+    """
+    from fault_tolerance.model.joint_limits import RATE_HORIZON, check_start
 
     h = RATE_HORIZON if horizon is None else float(horizon)
     if not (np.isfinite(h) and h > 0):
         raise InvalidInput(f"horizon must be finite and > 0 [s], got {horizon}")
-    out = np.flatnonzero(outside_limits(arm, wrap_into_limits(arm, arm.check_q(q0))))
-    if limits and len(out):
-        names = [arm.joint_names[i] for i in out]
-        raise InvalidInput(
-            f"q0 is outside the joint limits at {names} (limits "
-            f"{[(float(arm.lower[i]), float(arm.upper[i])) for i in out]}); start inside them, "
-            "or run without limits (limits=False, --no-limits)"
-        )
+    check_start(arm, q0, limits)
     return max(h, dt)
 
 

@@ -72,8 +72,10 @@ def parse_limits(arm, limits, deg: bool = False) -> np.ndarray:
         raise InvalidInput(
             f"limits need one lo:hi pair per joint ({arm.n}: {arm.joint_names}), got {lim.shape}"
         )
-    if deg:
-        lim = np.deg2rad(lim)
+    if deg:  # angular joints only: prismatic joints' limits are metres
+        from fault_tolerance.model.joint_limits import degrees_to_radians
+
+        lim = degrees_to_radians(arm, lim)
     bad = ~np.isfinite(lim).all(1) | (lim[:, 0] > lim[:, 1])
     out = (lim[:, 0] < phys[:, 0] - 1e-9) | (lim[:, 1] > phys[:, 1] + 1e-9)
     if bad.any() or out.any():
