@@ -237,7 +237,7 @@ def test_spatial_slices_pass_through_the_ftw_and_say_where():
     assert ws.ftw[z.select()].sum() == 16 and ws.ftw[y.select()].any() and ws.ftw[x.select()].any()
     fig = workspace_figure(ws)
     title = fig.axes[0].get_title()
-    assert f"z = {ws.axes[2][8]:.3f} m" in title and "FTW 0.16 m²" in title, title
+    assert f"z = {ws.axes[2][8]:.3f} m" in title and "FTW 0.16 m² (dark)" in title, title
 
 
 def test_the_spatial_4r_is_sliced_through_its_ftw(spatial_ws):
@@ -261,3 +261,17 @@ def test_a_workspace_without_ftw_says_so():
 def test_joint_palette_never_meets_a_method_colour():
     """The joint palette and every registered method's colour are disjoint sets of colours."""
     assert not set(colors.JOINT_COLOURS) & set(colors.method_colours().values())
+
+
+def test_plane_areas_add_up_to_the_volume(spatial_ws):
+    """(FW1): the plane areas of an axis times its grid step sum to the FTW and W(A) volumes."""
+    from fault_tolerance.figures.workspace import slice_areas
+
+    for axis in range(3):
+        step = float(spatial_ws.axes[axis][1] - spatial_ws.axes[axis][0])
+        for mask, size in (
+            (spatial_ws.ftw, spatial_ws.size_ftw),
+            (spatial_ws.pre, spatial_ws.size_pre),
+        ):
+            areas = slice_areas(mask, axis, spatial_ws.cell, step)
+            np.testing.assert_allclose(areas.sum() * step, size, rtol=1e-12, atol=1e-15)

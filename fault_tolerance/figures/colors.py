@@ -21,16 +21,16 @@ from __future__ import annotations
 
 #: Colours of the joints (rates, torques, the parts of λ): none is a method's colour.
 JOINT_COLOURS = (
-    "#17becf",  # cyan
     "#bcbd22",  # olive
-    "#e377c2",  # pink
     "#8c564b",  # brown
-    "#7f7f7f",  # grey
     "#393b79",  # indigo
+    "#7f7f7f",  # grey
+    "#e377c2",  # pink, not early: the lock is marked magenta
     "#637939",  # moss
     "#843c39",  # rust
     "#8c6d31",  # ochre
     "#7b4173",  # plum
+    "#17becf",  # cyan, last: the replay page's tool trace is teal
 )
 #: Colours for methods whose registered colour is taken (by a method or a joint) or unknown.
 SPARE_METHOD_COLOURS = (

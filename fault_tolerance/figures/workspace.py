@@ -76,15 +76,25 @@ def _mask_image(ws, sl):
 def _rows(ws) -> list[tuple]:
     """``(index tuple, (i, j) plotted axes, plane text, mask title)`` per row of the figure."""
     if not ws.spatial:
-        text = f"W(A) {ws.size_pre:.3g} m² (light), FTW {ws.size_ftw:.3g} m² (dark)"
+        text = f"W(A) {ws.size_pre:.3g} m² (light + dark), FTW {ws.size_ftw:.3g} m² (dark)"
         return [((slice(None), slice(None)), (0, 1), "", text)]
     rows = []
     for s in ftw_slices(ws):
         i, j = (k for k in range(3) if k != s.axis)
         what = "largest FTW" if s.area_ftw > 0 else "no FTW on any plane; largest W(A)"
-        text = f"{s.name} ({what}):\nFTW {s.area_ftw:.3g} m², W(A) {s.area_pre:.3g} m²"
+        text = (f"{s.name} ({what}):\nFTW {s.area_ftw:.3g} m² (dark), "
+                f"W(A) {s.area_pre:.3g} m² (light + dark)")  # fmt: skip
         rows.append((s.select(), (i, j), s.name, text))
     return rows
+
+
+def _limits(mask: np.ndarray, x: np.ndarray, y: np.ndarray) -> tuple | None:
+    """``(x0, x1, y0, y1)`` [m] around the cells of ``mask`` (axes i, j), one cell of margin."""
+    ii, jj = np.nonzero(mask)
+    if ii.size == 0:
+        return None
+    dx, dy = _spacing(x), _spacing(y)
+    return (x[ii.min()] - dx, x[ii.max()] + dx, y[jj.min()] - dy, y[jj.max()] + dy)
 
 
 def _heatmap(fig, ax, data: np.ndarray, ext, title: str, label: str) -> None:
@@ -102,7 +112,6 @@ def workspace_figure(ws):
     """The figure of ``ws``: per row a plane, its W(A)/FTW mask, smallest JVJA jump, smallest K."""
     from matplotlib.colors import ListedColormap
     from matplotlib.figure import Figure
-    from matplotlib.patches import Patch
 
     rows = _rows(ws)
     fig = Figure(figsize=(14, 4.3 * len(rows) + 0.6), layout="constrained")
@@ -114,15 +123,16 @@ def workspace_figure(ws):
         a = axs[r, 0]
         a.imshow(_mask_image(ws, sl), origin="lower", extent=ext, cmap=cmap, vmin=0, vmax=2)
         a.set_title(text, fontsize=10)
-        a.legend(handles=[Patch(color=MASK_COLOURS[1], label="W(A) only"),
-                          Patch(color=MASK_COLOURS[2], label="FTW")],
-                 fontsize=7, loc="upper right")  # fmt: skip
         at = f", {plane}" if plane else ""
         _heatmap(fig, axs[r, 1], ws.jump[sl].T, ext, f"smallest mean JVJA jump{at}",
                  "jump per unit task speed [(rad/s)²/(m/s)²]")  # fmt: skip
         _heatmap(fig, axs[r, 2], ws.rcn[sl].T, ext, f"smallest square-sum RCN K{at}",
                  "K = Σ k_S² [1]")  # fmt: skip
+        box = _limits(ws.pre[sl], x, y)  # zoom on W(A): the empty rest of the grid says nothing
         for ax in axs[r]:
+            if box is not None:
+                ax.set_xlim(box[0], box[1])
+                ax.set_ylim(box[2], box[3])
             ax.set_xlabel(f"{'xyz'[i]} [m]")
             ax.set_ylabel(f"{'xyz'[j]} [m]")
             ax.set_aspect("equal")
