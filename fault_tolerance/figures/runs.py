@@ -20,28 +20,52 @@ from pathlib import Path
 
 import numpy as np
 
-from fault_tolerance.figures.text import plain
+from fault_tolerance.figures.colors import DASHES, joint_colour, run_styles
+from fault_tolerance.figures.text import plain, wrapped
 from fault_tolerance.simulation.run import Run
 from fault_tolerance.storage.atomic import write_atomic
 
 
 def style(name: str) -> dict:
-    """Colour and label of the curve of algorithm ``name``: its registry entry's (else matplotlib's).
+    """Colour and label of the curve of algorithm ``name``: one colour in every figure and page.
+
+    The colour is :func:`~fault_tolerance.figures.colors.method_colour`'s, the label the registry's.
 
     The label is drawn as written (:func:`~fault_tolerance.figures.text.plain`: no mathtext).
     """
     from fault_tolerance.simulation.simulate import algorithm_style
 
     known = algorithm_style(name)
-    color, label = (None, name) if known is None else known
+    label = name if known is None else known[1]
+    ((color, _),) = run_styles([name])
     return {"color": color, "label": plain(label)}
+
+
+def _algorithm(label: str, run: Run) -> str:
+    """The method of a run: its recorded algorithm, else the label it is drawn under."""
+    return str(run.meta.get("algorithm") or label)
+
+
+def _run_lines(runs: Mapping[str, Run]) -> list[dict]:
+    """Colour and line style per run: its method's colour, dashed for a method's later runs."""
+    algorithms = [_algorithm(k, r) for k, r in runs.items()]
+    styles = run_styles(algorithms)
+    return [
+        {"color": c, "ls": DASHES[d][0], "gid": f"method:{a.lower()}"}
+        for a, (c, d) in zip(algorithms, styles, strict=True)
+    ]
+
+
+def _suptitle(fig, text: str, fontsize: float = 11) -> None:
+    """The figure's title, wrapped to the figure's width (never clipped)."""
+    fig.suptitle(wrapped(text, fig.get_figwidth(), fontsize), fontsize=fontsize)
 
 
 def _subplots(nrows: int, ncols: int, figsize, **kw):
     """A figure outside pyplot's global state: works headless and never changes a notebook's backend."""
     from matplotlib.figure import Figure
 
-    fig = Figure(figsize=figsize)
+    fig = Figure(figsize=figsize, layout="constrained")
     axes = fig.subplots(nrows, ncols, **kw)
     return fig, axes
 
@@ -78,21 +102,22 @@ def plot_comparison(runs: Mapping[str, Run], title: str = ""):
     titled with the robot and the algorithms.
     """
     fig, (ax1, ax2) = _subplots(2, 1, (7.0, 6.2), sharex=True)
-    for name, run in runs.items():
-        curve = {**style(name), "lw": 1.6}
+    for (name, run), line in zip(runs.items(), _run_lines(runs), strict=True):
+        curve = {**style(_algorithm(name, run)), **line, "lw": 1.6}
+        if _algorithm(name, run) != name:
+            curve["label"] = plain(name)
         ax1.plot(run.t, run.jvj, **curve)
         ax2.plot(run.t, run.K, **curve)
     ax1.set_ylabel(r"square-sum jump $\lambda$ [(rad/s)$^2$]")
     ax1.set_title("(a) joint velocity jump", loc="left", fontsize=10)
-    ax2.set_ylabel(r"square-sum RCN $K=\sum_S k_S^2$")
+    ax2.set_ylabel(r"square-sum RCN $K=\sum_S k_S^2$ [1]")
     ax2.set_title("(b) reduced condition number", loc="left", fontsize=10)
-    ax2.set_xlabel("time t [s]")
     for ax in (ax1, ax2):
+        ax.set_xlabel("time t [s]")
         ax.grid(alpha=0.3)
     ax1.legend(fontsize=8, loc="best")
     _log_when_decades(ax2, [r.K for r in runs.values()])
-    fig.suptitle(title or f"{_robot(runs)}: λ(t) and K(t), {plain(', '.join(runs))}", fontsize=11)
-    fig.tight_layout()
+    _suptitle(fig, title or f"{_robot(runs)}: λ(t) and K(t), {plain(', '.join(runs))}")
     return fig
 
 
@@ -117,32 +142,35 @@ def plot_lock(runs: Mapping[str, Run], title: str = "", planned: Run | None = No
     """
     angular = any(_orientation(r) is not None for r in runs.values())
     ncols = 2 + int(angular) + int(planned is not None)
-    fig, axes = _subplots(1, ncols, (5.5 * ncols, 4.6))
+    fig, axes = _subplots(1, ncols, (4.6 * ncols, 4.6))
     ax1, ax2 = axes[0], axes[1]
     first = next(iter(runs.values()))
-    ax1.plot(first.x_des[:, 0], first.x_des[:, 1], "k--", lw=1.2, label="desired path")
-    colors = ["#d62728", "#1f77b4", "#2ca02c", "#9467bd"]
-    for (label, run), c in zip(runs.items(), colors, strict=False):
+    ax1.plot(first.x_des[:, 0], first.x_des[:, 1], color="0.35", ls=(0, (1, 1.5)), lw=1.4,
+             label="desired path")  # fmt: skip
+    lines = _run_lines(runs)
+    for (label, run), line in zip(runs.items(), lines, strict=True):
         lock = run.meta.get("lock") or {}
-        ax1.plot(run.x[:, 0], run.x[:, 1], color=c, lw=1.4, label=f"actual, {plain(label)}")
-        ax2.plot(run.t, 1e3 * run.error, color=c, lw=1.4, label=plain(label))
+        c = line["color"]
+        ax1.plot(run.x[:, 0], run.x[:, 1], **line, lw=1.4, label=f"actual, {plain(label)}")
+        ax2.plot(run.t, 1e3 * run.error, **line, lw=1.4, label=plain(label))
         if angular and _orientation(run) is not None:
-            axes[2].plot(run.t, 1e3 * _orientation(run), color=c, lw=1.4, label=plain(label))
+            axes[2].plot(run.t, 1e3 * _orientation(run), **line, lw=1.4, label=plain(label))
         if lock:
             k = int(np.searchsorted(run.t, lock["time"] - 1e-12))
             ax1.plot(*run.x[k, :2], "o", color=c, ms=7, mfc="none", mew=2)
             for ax in axes[1:]:
                 ax.axvline(lock["time"], color=c, ls=":", lw=1.2)
+    colors = [line["color"] for line in lines]
     _lock_zooms(ax1, runs, colors)
     if planned is not None:
         _planned_panel(axes[-1], planned, runs, colors, "abcd"[ncols - 1])
     ax1.set_aspect("equal", adjustable="datalim")
     ax1.set_xlabel("x [m]")
     ax1.set_ylabel("y [m]")
-    ax1.set_title("(a) end-effector path (circles: lock moments)", loc="left", fontsize=10)
+    ax1.set_title("(a) tool path\n(circles: lock moments)", loc="left", fontsize=10)
     ax1.legend(fontsize=8)
     ax2.set_ylabel("position error |p - p_des| [mm]")
-    ax2.set_title("(b) path error (dotted: lock moments)", loc="left", fontsize=10)
+    ax2.set_title("(b) path error\n(dotted: lock moments)", loc="left", fontsize=10)
     if angular:
         axes[2].set_ylabel("orientation error (angle) [mrad]")
         axes[2].set_title("(c) orientation error", loc="left", fontsize=10)
@@ -156,15 +184,15 @@ def plot_lock(runs: Mapping[str, Run], title: str = "", planned: Run | None = No
         ", ".join(f"{plain(lk['joint'])} locks at {lk['time']:.3g} s" for lk in locks)
         or "lock runs"
     )
-    fig.suptitle(title or default, fontsize=11)
-    fig.tight_layout()
+    _suptitle(fig, title or default)
     return fig
 
 
 def _lock_zooms(ax, runs: Mapping[str, Run], colors) -> None:
     """Insets of panel (a) zoomed on each lock moment: desired and actual path around it."""
     spots = [(r, c) for r, c in zip(runs.values(), colors, strict=False) if r.meta.get("lock")]
-    corners = [[0.02, 0.02, 0.34, 0.34], [0.64, 0.02, 0.34, 0.34], [0.02, 0.64, 0.34, 0.34]]
+    # inside the axes by more than the insets' tick labels: they never cover the main ticks
+    corners = [[0.12, 0.08, 0.3, 0.3], [0.66, 0.08, 0.3, 0.3], [0.12, 0.6, 0.3, 0.3]]
     for (run, c), box in zip(spots[: len(corners)], corners, strict=False):
         t_lock = run.meta["lock"]["time"]
         k = int(np.searchsorted(run.t, t_lock - 1e-12))
@@ -174,7 +202,7 @@ def _lock_zooms(ax, runs: Mapping[str, Run], colors) -> None:
         half = min(max(3.0 * peak, 0.04 * span), 0.15 * span)  # [m], the zoom's half width
         near = np.linalg.norm(run.x[:, :2] - run.x[k, :2], axis=1) <= 1.5 * half
         inset = ax.inset_axes(box)
-        inset.plot(run.x_des[near, 0], run.x_des[near, 1], "k--", lw=1.0)
+        inset.plot(run.x_des[near, 0], run.x_des[near, 1], color="0.35", ls=(0, (1, 1.5)), lw=1.2)
         inset.plot(run.x[near, 0], run.x[near, 1], color=c, lw=1.3)
         inset.plot(*run.x[k, :2], "o", color=c, ms=6, mfc="none", mew=1.8)
         inset.set_xlim(run.x[k, 0] - half, run.x[k, 0] + half)
@@ -186,15 +214,20 @@ def _lock_zooms(ax, runs: Mapping[str, Run], colors) -> None:
 
 def _planned_panel(ax, planned: Run, runs: Mapping[str, Run], colors, letter: str) -> None:
     """λ(t) of the planned run and its value at each lock moment (the printed numbers)."""
-    ax.plot(planned.t, planned.jvj, color="k", lw=1.3, label="planned run (no lock)")
-    for (label, run), c in zip(runs.items(), colors, strict=False):
+    (line,) = _run_lines({"planned": planned})
+    ax.plot(planned.t, planned.jvj, **line, lw=1.3, label="planned run (no lock)")
+    for (label, run), c, mark in zip(runs.items(), colors, "os^v", strict=False):
         lock = run.meta.get("lock")
         if not lock:
             continue
         lam = planned_jump(planned, lock["time"])
-        ax.plot([lock["time"]], [lam], "o", color=c, ms=7, label=f"{plain(label)}: λ = {lam:.4g}")
+        ax.plot([lock["time"]], [lam], mark, color=c, mec="k", ms=7,
+                label=f"{plain(label)}: λ = {lam:.4g}")  # fmt: skip
     ax.set_ylabel(r"square-sum jump $\lambda$ [(rad/s)$^2$]")
-    ax.set_title(f"({letter}) λ(t) of the planned run at the lock moments", loc="left", fontsize=10)
+    ax.set_xlabel("time t [s]")
+    ax.set_title(
+        f"({letter}) λ(t) of the planned run\nat the lock moments", loc="left", fontsize=10
+    )
 
 
 def plot_run(run: Run, title: str = ""):
@@ -202,20 +235,24 @@ def plot_run(run: Run, title: str = ""):
     fig, axes = _subplots(2, 2, (10.0, 6.4), sharex=True)
     names = run.meta.get("joint_names") or [f"q{i}" for i in range(run.q.shape[1])]
     for j, name in enumerate(names):
-        axes[0, 0].plot(run.t, run.qd[:, j], lw=1.2, label=plain(name))
+        axes[0, 0].plot(run.t, run.qd[:, j], lw=1.2, color=joint_colour(j), label=plain(name),
+                        gid=f"joint:{name}")  # fmt: skip
     axes[0, 0].set_ylabel("joint rates [rad/s]")
     axes[0, 0].legend(fontsize=7, ncol=2)
-    axes[0, 1].plot(run.t, run.jvj, color="#d62728")
+    alg = str(run.meta.get("algorithm") or "")
+    method = {**style(alg), "gid": f"method:{alg.lower()}"}
+    axes[0, 1].plot(run.t, run.jvj, **method)
     axes[0, 1].set_ylabel(r"square-sum jump $\lambda$ [(rad/s)$^2$]")
-    axes[1, 0].plot(run.t, run.K, color="#2ca02c")
-    axes[1, 0].set_ylabel(r"square-sum RCN $K$")
+    axes[0, 1].legend(fontsize=7)
+    axes[1, 0].plot(run.t, run.K, **method)
+    axes[1, 0].set_ylabel(r"square-sum RCN $K$ [1]")
     _log_when_decades(axes[1, 0], [run.K])
     axes[1, 1].plot(run.t, 1e3 * run.error, color="k", label="position")
     axes[1, 1].set_ylabel("position error [mm]")
     if _orientation(run) is not None:  # a second axis: mm and mrad are not one quantity
         twin = axes[1, 1].twinx()
-        twin.plot(run.t, 1e3 * _orientation(run), color="#9467bd", label="orientation")
-        twin.set_ylabel("orientation error [mrad]", color="#9467bd")
+        twin.plot(run.t, 1e3 * _orientation(run), color="0.45", ls="--", label="orientation")
+        twin.set_ylabel("orientation error (dashed) [mrad]")
         axes[1, 1].legend(
             handles=axes[1, 1].get_lines() + twin.get_lines(), fontsize=7, loc="upper left"
         )
@@ -224,11 +261,9 @@ def plot_run(run: Run, title: str = ""):
         ax.grid(alpha=0.3)
         if lock:
             ax.axvline(lock["time"], color="0.4", ls=":", lw=1.2)
-    for ax in axes[1]:
+    for ax in axes.flat:
         ax.set_xlabel("time t [s]")
-    fig.suptitle(
-        title or f"{plain(run.meta.get('robot', ''))} — {plain(run.meta.get('algorithm', ''))}",
-        fontsize=11,
+    _suptitle(
+        fig, title or f"{plain(run.meta.get('robot', ''))} — {plain(run.meta.get('algorithm', ''))}"
     )
-    fig.tight_layout()
     return fig

@@ -24,6 +24,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from fault_tolerance.figures.colors import DASHES, JOINT_COLOURS, run_styles
 from fault_tolerance.viz.svg import (
     BOTTOM,
     HEIGHT,
@@ -40,32 +41,8 @@ from fault_tolerance.viz.svg import (
 
 #: Time buckets of the decimation: each keeps the smallest and largest sample of every curve.
 BUCKETS = 300
-#: Colours for runs whose algorithm's registered colour is taken or unknown.
-PALETTE = (
-    "#1f77b4",
-    "#d62728",
-    "#2ca02c",
-    "#9467bd",
-    "#8c564b",
-    "#e377c2",
-    "#7f7f7f",
-    "#bcbd22",
-    "#17becf",
-    "#ff7f0e",
-)
-#: Colours of the joints (rates, λ parts), apart from the runs' blue, red and green.
-JOINT_COLORS = (
-    "#ff7f0e",
-    "#9467bd",
-    "#17becf",
-    "#8c564b",
-    "#bcbd22",
-    "#e377c2",
-    "#7f7f7f",
-    "#393b79",
-    "#637939",
-    "#843c39",
-)
+#: Colours of the joints (rates, λ parts, torques): the figures' palette, none a method's.
+JOINT_COLORS = JOINT_COLOURS
 LOCK_CSS = "#db1adb"  # viz.geometry.LOCK_COLOR as CSS
 
 
@@ -86,6 +63,8 @@ class ChartRun:
     lock: dict | None  # {"joint", "time"}
     tau: np.ndarray | None = None  # applied torques of a dynamics run [N·m], shape (P, n)
     effort: list[float | None] | None = None  # effort limit per joint [N·m], None: none given
+    dash: str = ""  # SVG stroke-dasharray of λ and K: a method's later runs are dashed
+    method: str = ""  # the run's algorithm (its colour is the method's)
 
 
 def _keep(t: np.ndarray, curves: list[np.ndarray], must: list[int]) -> np.ndarray:
@@ -152,22 +131,17 @@ def chart_data(run, label: str, color: str, velocity_limit, joint_names) -> Char
     )
 
 
-def run_color(algorithm: str | None, index: int, taken: set[str]) -> str:
-    """The colour of a run: its algorithm's if still free, else the next free palette colour.
+def run_strokes(algorithms) -> list[tuple[str, str]]:
+    """``(colour, SVG dasharray)`` per run: its method's colour, dashed for the method's later runs.
 
-    An algorithm's colour is its registry entry's (``ResolverEntry.colour``; a path planner's from
-    ``PATH_PLANNER_STYLES``), as in the figures of :mod:`fault_tolerance.figures.runs`.
+    The colours are :func:`fault_tolerance.figures.colors.run_styles`', as in the figures.
     """
-    from fault_tolerance.simulation.simulate import algorithm_style
+    return [(c, DASHES[d][1]) for c, d in run_styles(algorithms)]
 
-    known = algorithm_style(algorithm)
-    c = known[0] if known else None
-    if c and c not in taken:
-        return c
-    for c in PALETTE[index:] + PALETTE[:index]:
-        if c not in taken:
-            return c
-    return PALETTE[index % len(PALETTE)]
+
+def _stroke(r: ChartRun) -> str:
+    dash = f' stroke-dasharray="{r.dash}"' if r.dash else ""
+    return f'stroke="{r.color}" stroke-width="1.7"{dash}'
 
 
 def _locks(ax: _Axes, runs: list[ChartRun]) -> str:
@@ -220,9 +194,7 @@ def jump_panel(runs: list[ChartRun]) -> str:
         if r.jvj is None:
             continue
         body.append(
-            f'<g class="ft-run" data-run="{i}">'
-            + _polyline(ax, r.t, r.jvj, f'stroke="{r.color}" stroke-width="1.7"')
-            + "</g>"
+            f'<g class="ft-run" data-run="{i}">' + _polyline(ax, r.t, r.jvj, _stroke(r)) + "</g>"
         )
     head, close = _frame(ax, "(a) jump λ(t), dashed: its parts", "(rad/s)²", "jump")
     return head + "".join(body) + _locks(ax, runs) + close
@@ -235,9 +207,7 @@ def rcn_panel(runs: list[ChartRun]) -> str:
     log = use_log(np.concatenate(vals))
     ax = _Axes(t0, t1, *_range(vals, log, False), log=log)
     body = [
-        f'<g class="ft-run" data-run="{i}">'
-        + _polyline(ax, r.t, r.K, f'stroke="{r.color}" stroke-width="1.7"')
-        + "</g>"
+        f'<g class="ft-run" data-run="{i}">' + _polyline(ax, r.t, r.K, _stroke(r)) + "</g>"
         for i, r in enumerate(runs)
         if r.K is not None
     ]
@@ -322,15 +292,19 @@ def _legend(runs: list[ChartRun]) -> str:
     items = []
     if len(runs) > 1:
         for i, r in enumerate(runs):
+            look = (f"background:repeating-linear-gradient(90deg,{r.color} 0 5px,transparent 5px 8px)"
+                    if r.dash else f"background:{r.color}")  # fmt: skip
             items.append(
-                f'<span class="ft-key" data-run="{i}"><span class="ft-swatch" '
-                f'style="background:{r.color}"></span>{esc(r.label)}</span>'
+                f'<span class="ft-key" data-run="{i}" data-method="{esc(r.method)}" '
+                f'data-color="{r.color}"><span class="ft-swatch" '
+                f'style="{look}"></span>{esc(r.label)}</span>'
             )
     first = runs[0]
     for j, name in enumerate(first.joint_names):
+        c = JOINT_COLORS[j % len(JOINT_COLORS)]
         items.append(
-            f'<span class="ft-key"><span class="ft-swatch ft-thin" '
-            f'style="background:{JOINT_COLORS[j % len(JOINT_COLORS)]}"></span>{esc(name)}</span>'
+            f'<span class="ft-key" data-joint="{esc(name)}" data-color="{c}"><span '
+            f'class="ft-swatch ft-thin" style="background:{c}"></span>{esc(name)}</span>'
         )
     return '<div class="ft-keys">' + "".join(items) + "</div>"
 

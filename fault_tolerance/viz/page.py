@@ -17,7 +17,7 @@ from pathlib import Path
 from fault_tolerance.errors import FaultToleranceError
 from fault_tolerance.model.arm import Arm
 from fault_tolerance.storage.atomic import write_atomic
-from fault_tolerance.viz.charts import chart_data, plots_html, run_color
+from fault_tolerance.viz.charts import chart_data, plots_html, run_strokes
 from fault_tolerance.viz.collect import collect_runs
 from fault_tolerance.viz.geometry import LOCK_COLOR, PATH_COLOR, TRACE_COLOR
 from fault_tolerance.viz.scene import _build_scene, _require_meshcat, _Scene
@@ -120,18 +120,18 @@ def _build_page(
     """Scenes and plots of ``run`` (one run, or the runs of a folder / list / dict)."""
     items = collect_runs(run)
     scenes, charts, warnings = [], [], []
-    taken: set[str] = set()
-    for i, (label, item) in enumerate(items):
-        scene = _build_scene(
-            item, arm, speed=speed, fps=fps, meshes=meshes, dt=dt, package_dirs=package_dirs
+    for _, item in items:
+        scenes.append(
+            _build_scene(
+                item, arm, speed=speed, fps=fps, meshes=meshes, dt=dt, package_dirs=package_dirs
+            )
         )
-        scenes.append(scene)
-        color = run_color(scene.info.get("algorithm"), i, taken)
-        taken.add(color)
+    strokes = run_strokes([scene.info.get("algorithm") for scene in scenes])
+    for (label, item), scene, (color, dash) in zip(items, scenes, strokes, strict=True):
         data = item if hasattr(item, "jvj") else (scene.motion.t, scene.motion.q)
-        charts.append(
-            chart_data(data, label, color, scene.arm.velocity_limit, scene.arm.joint_names)
-        )
+        chart = chart_data(data, label, color, scene.arm.velocity_limit, scene.arm.joint_names)
+        chart.dash, chart.method = dash, str(scene.info.get("algorithm") or "")
+        charts.append(chart)
         warnings.append(_warnings_of(item, scene.arm))
     plots = _comparison_html(items) + plots_html(charts, warnings)
     return _Page(scenes, [c.label for c in charts], plots)

@@ -143,4 +143,4 @@ def _run_summary(plan, runs: dict, choice: str) -> dict:
 
 
 PATH_PLANNERS[GLOBAL] = simulate_global
-PATH_PLANNER_STYLES[GLOBAL] = ("#9467bd", "global (whole-path plan)")
+PATH_PLANNER_STYLES[GLOBAL] = ("#ff7f0e", "global (whole-path plan)")
