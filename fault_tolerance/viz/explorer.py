@@ -7,10 +7,10 @@ of them and re-runs only what depends on them:
   :func:`~fault_tolerance.planning.default_start.default_start`'s (as ``fault-tolerance lock``
   chooses it), the path the arm's catalog circle (a 5 cm circle of 1 s for other arms);
 * the lock run once per lock joint and lock sample. With perfect rate tracking (``tau = 0``, the
-  default) a run is a function of ``q`` and ``t`` alone, so the lock run *is* the planned run up to
-  the lock and only the rest is simulated: from the planned run's configuration at the lock
-  sample, along the path shifted by the lock time, with the joint locking at once
-  (:func:`replay_from_lock`). With a servo lag (``tau > 0``) the servo's state is not a run's
+  default) a run is a function of ``q`` and ``t`` alone (docs/MATH.md (R1)), so the lock run *is*
+  the planned run up to the lock and only the rest is simulated: from the planned run's
+  configuration at the lock sample, along the path shifted by the lock time, with the joint
+  locking at once (:func:`replay_from_lock`). With a servo lag (``tau > 0``) the servo's state is not a run's
   start, and the whole lock run is simulated.
 
 The jump at the lock is the run's ``summary()["jump_at_lock"]``, the number ``fault-tolerance
@@ -98,6 +98,7 @@ def lock_sample(t: np.ndarray, lock_time: float) -> int:
     return int(np.argmax(t >= lock_time - 1e-12)) if t[-1] >= lock_time - 1e-12 else len(t) - 1
 
 
+# Eqn. (R1)
 def replay_from_lock(arm: Arm, path: TaskPath, planned: Run, joint: str, lock_time: float,
                      **sim) -> Run:  # fmt: skip
     """The lock run of ``planned`` (perfect rate tracking) with only the part after the lock run.
