@@ -258,7 +258,11 @@ class Explorer:
 
         if isinstance(arm, Arm):
             label = arm.name
-            self._arms.setdefault(label, arm)
+            if self._arms.get(label, arm) is not arm:  # another arm of that name: its runs go
+                for cache in (self._starts, self._planned, self._locks):
+                    for key in [k for k in cache if k[0] == label]:
+                        del cache[key]
+            self._arms[label] = arm
         else:
             label = str(arm)
             if label not in self._arms:
@@ -294,13 +298,18 @@ class Explorer:
         return self.lock_run
 
     def _check_arm(self, arm) -> str:
-        if isinstance(arm, Arm) or str(arm) in self._arms or Path(str(arm)).exists():
-            return self._add_arm(arm)
-        if str(arm) not in self.arms:
+        """The label of ``arm`` (loaded once): one of :attr:`arms`, or a name or path to load."""
+        from fault_tolerance.errors import RobotNotFound
+
+        try:
+            label = self._add_arm(arm)
+        except RobotNotFound as e:
             raise InvalidInput(
-                f"arm {arm!r} is not one of {list(self.arms)} (or a description path)"
-            )
-        return self._add_arm(arm)
+                f"arm {arm!r}: choose one of {list(self.arms)}, an example-robot-data name or a "
+                f"description path ({e})"
+            ) from e
+        self.arms = tuple(dict.fromkeys([*self.arms, label]))  # the arm control offers it now
+        return label
 
     def _apply(self, s: Setting, changes: dict) -> Setting:
         """``s`` with the lockable joints, algorithm, lock joint and time of ``changes``, checked."""
@@ -542,6 +551,7 @@ class Explorer:
         c, s = self.widget_controls, self.setting
         self._syncing = True
         try:
+            c["arm"].options = list(self.arms)
             c["arm"].value = s.arm
             c["lockable"].options = self.arm.joint_names
             c["lockable"].value = s.lockable
