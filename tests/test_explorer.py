@@ -107,10 +107,13 @@ def test_moving_the_lock_time_runs_only_the_rest_and_caches(explorer, monkeypatc
 
 def test_algorithms_are_the_registry_s(explorer):
     """The algorithms offered are the registered resolvers that honour joint limits, all of them."""
-    assert set(explorer.algorithms) == {n for n in names() if get(n).bounded is not None}
+    from fault_tolerance.simulation.simulate import PATH_PLANNERS
+
+    assert set(explorer.algorithms) == set(BOUNDED) | set(PATH_PLANNERS)
+    assert "global" in explorer.algorithms
     assert "jvja" in explorer.algorithms and "lnva" in explorer.algorithms
     off = Explorer("planar_3r", algorithm="lnva", limits=False)
-    assert off.algorithms == names()
+    assert off.algorithms == (*names(), *PATH_PLANNERS)
 
 
 def test_unknown_choices_and_values_raise_and_keep_the_state(explorer):

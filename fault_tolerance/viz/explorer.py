@@ -242,10 +242,17 @@ class Explorer:
 
     @property
     def algorithms(self) -> tuple[str, ...]:
-        """The registered resolvers that run with this explorer's joint limits setting."""
-        from fault_tolerance.resolution.registry import get, names
+        """The algorithms offered: registered resolvers, then the whole-path planners.
 
-        return tuple(n for n in names() if not self.limits or get(n).bounded is not None)
+        The resolvers are those that run with this explorer's joint limits setting; the planners
+        (``global``) have their lock runs simulated whole.
+        """
+        import fault_tolerance.planning.wholepath.run  # noqa: F401 - registers "global"
+        from fault_tolerance.resolution.registry import get, names
+        from fault_tolerance.simulation.simulate import PATH_PLANNERS
+
+        steps = (n for n in names() if not self.limits or get(n).bounded is not None)
+        return (*steps, *PATH_PLANNERS)
 
     @property
     def arm(self) -> Arm:
@@ -384,15 +391,20 @@ class Explorer:
 
     @property
     def lock_run(self) -> Run:
-        """The current setting's lock run, cached per lock joint and lock sample."""
-        from fault_tolerance.simulation.simulate import simulate
+        """The current setting's lock run, cached per lock joint and lock sample.
+
+        Re-played from the lock (:func:`replay_from_lock`) with perfect rate tracking and a step
+        resolver; simulated whole with a servo lag or a whole-path planner (whose tracking of its
+        plan counts the samples from the run's start).
+        """
+        from fault_tolerance.simulation.simulate import PATH_PLANNERS, simulate
 
         s, planned = self.setting, self.planned_run
         k = lock_sample(planned.t, s.lock_time)
         key = (s.arm, s.lockable, s.algorithm, s.lock_joint, k)
         if key not in self._locks:
             arm, (q0, path) = self._arms[s.arm], self.start(s)
-            if self.servo.tau == 0:
+            if self.servo.tau == 0 and s.algorithm not in PATH_PLANNERS:
                 run = replay_from_lock(
                     arm, path, planned, s.lock_joint, s.lock_time, **self._sim(s)
                 )
