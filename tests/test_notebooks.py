@@ -64,10 +64,8 @@ def test_notebook_committed_small(path: Path):
     assert not with_outputs, f"{path.name}: cells {with_outputs} have saved outputs; clear them"
 
 
-@pytest.mark.notebook
-@pytest.mark.parametrize("path", NOTEBOOKS, ids=lambda p: p.stem)
-def test_notebook_executes(path: Path, tmp_path: Path, kernel_manager_factory):
-    """Every cell of the notebook runs without an error, within the cell timeout."""
+def _execute(path: Path, tmp_path: Path, kernel_manager_factory):
+    """``path`` executed in memory (the executed copy saved in ``tmp_path``); its error outputs."""
     nbformat = pytest.importorskip("nbformat")
     nbclient = pytest.importorskip("nbclient")
 
@@ -93,4 +91,45 @@ def test_notebook_executes(path: Path, tmp_path: Path, kernel_manager_factory):
     errors = [
         o for c in nb.cells if c.cell_type == "code" for o in c.outputs if o.output_type == "error"
     ]
+    return nb, errors
+
+
+@pytest.mark.notebook
+@pytest.mark.parametrize("path", NOTEBOOKS, ids=lambda p: p.stem)
+def test_notebook_executes(path: Path, tmp_path: Path, kernel_manager_factory):
+    """Every cell of the notebook runs without an error, within the cell timeout."""
+    _, errors = _execute(path, tmp_path, kernel_manager_factory)
     assert not errors, json.dumps(errors, indent=1)[:4000]
+
+
+def _text(cell) -> str:
+    return "".join(o.get("text", "") for o in cell.outputs if o.output_type == "stream")
+
+
+@pytest.mark.notebook
+def test_interactive_notebook_shows_widgets_and_their_effect(
+    tmp_path: Path, kernel_manager_factory
+):
+    """05: the controls are displayed as widgets, driving them changes the lock and its jump (the
+    numbers an explorer with the same settings gives here), and the figure is drawn."""
+    pytest.importorskip("ipywidgets")
+    from fault_tolerance.viz.explorer import Explorer
+
+    nb, errors = _execute(NOTEBOOK_DIR / "05_interactive.ipynb", tmp_path, kernel_manager_factory)
+    assert not errors, json.dumps(errors, indent=1)[:4000]
+    code = [c for c in nb.cells if c.cell_type == "code"]
+    shown = [c for c in code if c.source.strip() == "ex.widgets()"]
+    assert shown and any(
+        "application/vnd.jupyter.widget-view+json" in o.get("data", {}) for o in shown[0].outputs
+    )
+    driven = _text(next(c for c in code if 'c["lock_time"].value = 0.5' in c.source)).splitlines()
+    ex = Explorer("planar_3r", algorithm="lnva", lock_time=0.5)
+    expected = [ex.describe()]
+    ex.update(algorithm="jvja")
+    expected.append(ex.describe())
+    ex.update(lock_joint="joint2")
+    expected.append(ex.describe())
+    assert driven == expected
+    assert len({line.rsplit("=", 1)[1] for line in driven}) == 3  # three different jumps
+    last = code[-1]
+    assert any("image/png" in o.get("data", {}) for o in last.outputs)
