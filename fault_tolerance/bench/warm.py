@@ -161,7 +161,11 @@ KERNELS: dict[str, tuple[tuple[str, str], ...]] = {
         ("fault_tolerance.control.fast.multi_step", "multi_kernel"),
         ("fault_tolerance.control.fast.mda_step", "mda_kernel"),
     ),
-    "bounded": (("fault_tolerance.control.fast.bounded_solve", "bounded_kernel"),),
+    "bounded": (
+        ("fault_tolerance.control.fast.bounded_solve", "bounded_kernel"),
+        ("fault_tolerance.control.fast.bounded_solve", "bounded_after"),
+        ("fault_tolerance.control.fast.bounded_free", "free_kernel"),
+    ),
     "simulate": (
         ("fault_tolerance.simulation.fast.sample", "sample_kernel"),
         ("fault_tolerance.simulation.fast.sample", "finish_kernel"),

@@ -295,6 +295,26 @@ def bounded_kernel(J, q, xdot, out, F, Iw):  # pragma: no cover - numba
     return 1 if state[1] != 0.0 else 0
 
 
+@_njit
+def bounded_after(J, q, xdot, out, F, Iw):  # pragma: no cover - numba
+    """:func:`bounded_kernel` after a box check that met a bound (LNVA or single-joint JVJA).
+
+    ``out`` holds the unbounded rates (:func:`fault_tolerance.control.fast.bounded_free.free_kernel`
+    found them outside the box): the box at ``q`` into the workspace, then :func:`bounded_solve`.
+    Returns 1 (solved, a bound met), 0 (solved, none met) or 3 (refused: the reference route).
+    """
+    n, m, mode, k = Iw[0], Iw[1], Iw[4], Iw[5]
+    if xdot.shape[0] != m or out.shape[0] != n or q.shape[0] != n or J.shape[1] != n:
+        return 3
+    R = _fm(F, Iw, _B, m + 9, n)
+    B, lim, buf = R[:m], R[m + 2 : m + 5], R[m + 5 :]
+    c = _fv(F, Iw, _C, n)
+    _box_status(q, lim, _fv(F, Iw, _PRM, 2), buf, out, B, B, c, _iv(F, Iw, _COLS, k), False)
+    if bounded_solve(J, xdot, out, mode, F, Iw):
+        return 3
+    return 1 if _fv(F, Iw, _STATE, n + 2)[1] != 0.0 else 0
+
+
 # Eqn. (L4) for chosen reduced robots (the simulated sample's jump under the box).
 @_njit
 def reduced_solve(J, xdot, target, todo, post, scales, codes, F, Iw):  # pragma: no cover - numba

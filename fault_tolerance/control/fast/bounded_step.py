@@ -83,19 +83,23 @@ def compiled_bounded_step(
     bounded_kernel(J0, np.zeros(n + 1), np.zeros(m), np.zeros(n), F, Iw)  # refused: sizes
     bounded_kernel.disable_compile(True)
 
+    target: list[Callable] = []  # the step built below, which retry calls again
+
     def retry(q, xdot, out):
         """Other types or layouts: contiguous float64 copies once, else the reference route."""
         try:
             q2, x2 = np.ascontiguousarray(q, dtype=float), np.ascontiguousarray(xdot, dtype=float)
             if type(out) is ndarray and out.dtype == _F64 and out.flags.c_contiguous:
                 if q2.shape == (n,) and x2.shape == (m,) and (q2 is not q or x2 is not xdot):
-                    return step(q2, x2, out)
+                    return target[0](q2, x2, out)
         except (TypeError, ValueError):
             pass
         return reference(q, xdot, out)  # converts, or says what is wrong
 
     if mode == KERNEL_MDA:
         return _mda_step(cw, inner, reference, F, Iw)
+    if Iw[4] != JVJA_MULTI:
+        return _free_step(cw, name, (retry, target), reference, (F, Iw, views), J0)
 
     def step(q: np.ndarray, xdot: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
         if out is None:
@@ -112,6 +116,56 @@ def compiled_bounded_step(
             return reference(q, xdot, out)
         return out
 
+    target.append(step)
+    step.__name__ = name
+    step.__doc__ = f"{name} inside the rate box of the joint limits; compiled."
+    return step
+
+
+def _free_step(cw: ControllerWorkspace, name: str, retrying, reference, tables, J0) -> Callable:
+    """LNVA and single-joint JVJA: the lean kernel (step and box check), the solve when a bound is met.
+
+    :func:`fault_tolerance.control.fast.bounded_free.free_kernel` in the unbounded step's layout, then, only
+    when a bound is met, :func:`fault_tolerance.control.fast.bounded_solve.bounded_after` from its rates.
+    ``retrying = (retry, target)``: ``retry`` converts other types once and calls ``target[0]``,
+    this step, again; ``reference`` is the reference route.
+    """
+    from fault_tolerance.control.fast.bounded_free import free_kernel, free_workspace
+    from fault_tolerance.control.fast.bounded_solve import bounded_after
+
+    F, Iw, views = tables
+    retry, target = retrying
+    n, m, counts = cw.n, cw.m, cw.counts
+    W = free_workspace(n, m, views["p4"], views["fw"], views["lim"], views["prm"], int(Iw[4]),
+                       views["cols"])  # fmt: skip
+    state = views["state"]
+    model, data, fid, rows = cw.model, cw.data, cw.frame_id, cw.rows
+    cfj, empty = pin.computeFrameJacobian, np.empty
+    for kernel, args in ((free_kernel, (W, state)), (bounded_after, (F, Iw))):
+        kernel.disable_compile(False)  # compiled for this layout here, then frozen (see above)
+        kernel(J0, np.zeros(n + 1), np.zeros(m), np.zeros(n), *args)  # refused: sizes
+        kernel.disable_compile(True)
+
+    def step(q: np.ndarray, xdot: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+        if out is None:
+            out = empty(n)
+        try:  # the kernels check the sizes (status 2, 3), numba the types and layouts (TypeError)
+            J = cfj(model, data, q, fid, _LWA)[rows]
+            status = free_kernel(J, q, xdot, out, W, state)
+            if status == 1:
+                status = bounded_after(J, q, xdot, out, F, Iw)
+                if status == 1:
+                    counts[BOUNDED_STEPS] += 1
+                    return out
+        except FaultToleranceError:
+            raise
+        except _ERRORS:
+            return retry(q, xdot, out)
+        if status:
+            return reference(q, xdot, out)
+        return out
+
+    target.append(step)
     step.__name__ = name
     step.__doc__ = f"{name} inside the rate box of the joint limits; compiled."
     return step

@@ -57,7 +57,7 @@ def box_status(q, lim, prm, buf, out, P, Q, c, cols, jv):  # pragma: no cover - 
         a[j] = out[j] - alpha * a[j]
     col = y  # y is spent: N[:, i] of each scenario, accumulated along the rows of P
     for t in range(cols.shape[0]):
-        i = cols[t]
+        i = int(cols[t])  # int, or a float holding one (the free kernel's workspace row)
         nii = 1.0
         for r in range(m):
             nii -= P[r, i] * Q[r, i]
