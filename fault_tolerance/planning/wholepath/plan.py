@@ -93,7 +93,7 @@ def plan_path(
     rcn_max: float | None = None,
     objective: str = "mean",
     method: str = "auto",
-    iterations: int = 15,
+    iterations: int = 80,
     dp_step: float = 0.01,
     dp_stage: float = 0.05,
     progress=None,

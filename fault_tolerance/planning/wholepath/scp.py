@@ -40,6 +40,8 @@ OSQP_MAX_ITER = 4000
 SCP_RTOL = 1e-4
 #: SCP stops after this many rejected steps in a row (each one shortens the step tenfold).
 MAX_REJECTED = 5
+#: Exponents of the max objective's surrogate (W6): the first, and the last of the doublings.
+P_START, P_MAX = 32.0, 1024.0
 
 
 class SCPResult(NamedTuple):
@@ -155,31 +157,63 @@ def _placed(blocks, starts_per_col):
     return rr, cmap[k, cc], vv
 
 
-def build_qp(prob: PathProblem, traj: Trajectory, lin: _Linear, mu: float, fixed_start: bool) -> QP:
-    """The sparse QP in ``x = (δq, δv[, u][, τ])``, proximal weight ``mu`` on ``δv``."""
+# MATH.md (W6): the smooth surrogate of the maximum.
+def sample_weights(lam: np.ndarray, objective: str, p: float, L: float):
+    """First and second derivatives ``(φ'(λ_k), φ''(λ_k))`` of the per-sample cost, shape (K,) each.
+
+    Mean: ``φ(λ) = λ/K``. Max: ``φ(λ) = (L/p)(λ/L)^p``, whose sum is a smooth stand-in for the
+    maximum (its p-th root tends to ``max λ`` as p grows; ``L`` is a fixed scale near it).
+    """
+    K = len(lam)
+    if objective == "mean":
+        return np.full(K, 1.0 / K), np.zeros(K)
+    s = np.maximum(lam, 0.0) / L
+    with np.errstate(over="ignore"):  # a sample far above L: inf, and the step is refused
+        return s ** (p - 1), (p - 1) / L * s ** (p - 2)
+
+
+def surrogate(lam: np.ndarray, objective: str, p: float, L: float) -> float:
+    """The cost the QP models: mean of λ, or ``Σ (L/p)(λ_k/L)^p`` for the maximum (W6)."""
+    if objective == "mean":
+        return float(np.mean(lam))
+    with np.errstate(over="ignore"):
+        return float(L / p * np.sum((np.maximum(lam, 0.0) / L) ** p))
+
+
+def build_qp(
+    prob: PathProblem,
+    traj: Trajectory,
+    lin: _Linear,
+    mu: float,
+    fixed_start: bool,
+    p: float = 1.0,
+    L: float = 1.0,
+) -> QP:
+    """The sparse QP in ``x = (δq, δv[, u])``, proximal weight ``mu`` on ``δv``.
+
+    The objective is the Gauss-Newton model of ``Σ_k φ(λ_k)`` (:func:`sample_weights`): per
+    sample ``φ'·2Hₖ + φ''·4gₖgₖᵀ`` and ``φ'·2gₖ`` with ``Hₖ = GₖᵀGₖ``, ``gₖ = GₖᵀRₖ``.
+    """
     K, n = traj.q.shape
     r = lin.Bn.shape[2]
     dt, T = prob.dt, K - 1
     nq, nv = K * n, K * r
     iu = nq + nv
-    it = iu + (0 if fixed_start else r)
-    nx = it + (prob.objective == "max")
+    nx = iu + (0 if fixed_start else r)
     kq, kv = np.arange(K) * n, nq + np.arange(K) * r
     AC = np.concatenate([lin.A, lin.C], axis=2)  # (K, f·n, n+r)
     H = np.einsum("kai,kaj->kij", AC, AC)
     g = np.einsum("kai,ka->ki", AC, lin.R)
+    d1, d2 = sample_weights(np.einsum("ka,ka->k", lin.R, lin.R), prob.objective, p, L)
+    Hs = 2 * d1[:, None, None] * H + 4 * d2[:, None, None] * np.einsum("ki,kj->kij", g, g)
     idx = np.concatenate([kq[:, None] + np.arange(n), kv[:, None] + np.arange(r)], axis=1)
     c = np.zeros(nx)
     diag = np.full(nx, 1e-9 / K)
-    diag[nq:it] = mu / K
-    if prob.objective == "mean":
-        Pr = np.broadcast_to(idx[:, :, None], H.shape).ravel()
-        Pc = np.broadcast_to(idx[:, None, :], H.shape).ravel()
-        P = sp.coo_matrix(((2.0 / K) * H.ravel(), (Pr, Pc)), shape=(nx, nx))
-        np.add.at(c, idx.ravel(), ((2.0 / K) * g).ravel())
-    else:
-        P = sp.coo_matrix((nx, nx))
-        c[it] = 1.0
+    diag[nq:nx] = mu / K
+    Pr = np.broadcast_to(idx[:, :, None], Hs.shape).ravel()
+    Pc = np.broadcast_to(idx[:, None, :], Hs.shape).ravel()
+    P = sp.coo_matrix((Hs.ravel(), (Pr, Pc)), shape=(nx, nx))
+    np.add.at(c, idx.ravel(), (2 * d1[:, None] * g).ravel())
     P = (P + sp.diags(diag)).tocsc()
     eq = _Rows()
     # dynamics δq_{k+1} − (I + dt D_k) δq_k − dt B̄_k δv_k = 0
@@ -217,12 +251,6 @@ def build_qp(prob: PathProblem, traj: Trajectory, lin: _Linear, mu: float, fixed
         ineq.add(
             rr, cc, vv, np.full(K * f, -np.inf), (np.maximum(prob.rcn_max, lin.k) - lin.k).ravel()
         )
-    if prob.objective == "max":  # λ̄_k + 2 g_kᵀ δ_k ≤ τ
-        lam = np.einsum("ka,ka->k", lin.R, lin.R)
-        rr = np.repeat(np.arange(K), n + r + 1)
-        cc = np.concatenate([idx, np.full((K, 1), it)], axis=1).ravel()
-        vv = np.concatenate([2 * g, -np.ones((K, 1))], axis=1).ravel()
-        ineq.add(rr, cc, vv, np.full(K, -np.inf), -lam)
     Ain, lin_, uin = ineq.matrix(nx)
     return QP(P, c, Aeq.tocsc(), beq, Ain, lin_, uin, nq)
 
@@ -254,10 +282,9 @@ def solve_qp(qp: QP, rounds: int = 6) -> np.ndarray | None:
         return None
     if qp.Ain is None:
         return x
-    is_max = qp.c[-1] == 1.0
     active = np.zeros(qp.Ain.shape[0], bool)
     bound = np.zeros(qp.Ain.shape[0])
-    for _ in range(0 if is_max else rounds):
+    for _ in range(rounds):
         lo, hi = _violated(qp, x)
         if not (lo.any() or hi.any()):
             return x
@@ -292,13 +319,41 @@ def solve_qp(qp: QP, rounds: int = 6) -> np.ndarray | None:
     return np.asarray(res.x)
 
 
-def _better(new: Trajectory, cur: Trajectory, tol: float) -> bool:
-    """Feasibility first (violation not above max(tol, current)), then the objective."""
+def _better(new: Trajectory, cur: Trajectory, tol: float, values=None) -> bool:
+    """Feasibility first (violation not above max(tol, current)), then the objective.
+
+    ``values``: ``(new, current)`` of the cost to compare instead of the trajectories' scores.
+    """
     if new.violation > max(tol, cur.violation) + 1e-12:
         return False
     if cur.violation > tol and new.violation < cur.violation - 1e-12:
         return True
-    return new.score < cur.score - 1e-12 * max(1.0, abs(cur.score))
+    a, b = (new.score, cur.score) if values is None else values
+    return a < b - 1e-12 * max(1.0, abs(b))
+
+
+class _Stage:
+    """The surrogate's exponent p and scale L (max objective; p = 1 for the mean) (W6)."""
+
+    def __init__(self, prob: PathProblem, cur: Trajectory) -> None:
+        self.objective = prob.objective
+        self.p = 1.0 if self.objective == "mean" else P_START
+        self.reset(cur)
+
+    def reset(self, cur: Trajectory) -> None:
+        self.L = max(float(np.max(cur.lam)), 1e-300)
+        self.value = self.of(cur)
+
+    def of(self, traj: Trajectory) -> float:
+        return surrogate(traj.lam, self.objective, self.p, self.L)
+
+    def sharpen(self, cur: Trajectory) -> bool:
+        """Double p (max objective) and rescale; False when there is nothing left to sharpen."""
+        if self.objective == "mean" or self.p >= P_MAX:
+            return False
+        self.p *= 2
+        self.reset(cur)
+        return True
 
 
 def scp(
@@ -314,45 +369,57 @@ def scp(
     """Improve ``warm`` (a rolled-out trajectory) by sequential convex programming.
 
     Never returns anything worse than ``warm``: a step is kept only when its exact rollout keeps
-    the limits and lowers the objective (the best feasible iterate).
+    the limits and lowers the modelled cost (the mean, or the surrogate (W6) of the maximum,
+    whose exponent doubles each time the steps stall); the best feasible iterate on the objective
+    itself is returned.
     """
     W = float(prob.sc.weights.sum())
-    mu = 0.1 * W if mu is None else float(mu)
-    if not (np.isfinite(mu) and mu > 0):
-        raise InvalidInput(f"proximal weight mu must be > 0, got {mu}")
-    cur = warm
+    mu0 = 0.1 * W if mu is None else float(mu)
+    if not (np.isfinite(mu0) and mu0 > 0):
+        raise InvalidInput(f"proximal weight mu must be > 0, got {mu0}")
+    mu = mu0
+    cur = best = warm
+    stage = _Stage(prob, cur)
     history = [warm.score]
     accepted = rejected = 0
     it = 0
     for it in range(1, iterations + 1):  # noqa: B007 - the count is returned below
-        lin = linearise(prob, cur)
-        qp = build_qp(prob, cur, lin, mu, fixed_start)
-        x = solve_qp(qp)
-        nq = qp.nq
-        new = None
-        if x is not None:
-            dq = x[:nq].reshape(cur.q.shape)
-            dq[0] = 0.0 if fixed_start else dq[0]  # a fixed start is kept bit for bit
-            q0 = cur.q[0] + dq[0]
-            if not fixed_start:
-                from fault_tolerance.planning.wholepath.dp import _correct
-
-                q0 = _correct(prob, q0[None], np.array([0]), iters=4)[0]
-            new = rollout(prob, q0, "track", q_ref=cur.q + dq)
-        if new is not None and _better(new, cur, tol):
-            gain = (cur.score - new.score) / max(abs(cur.score), 1e-300)
-            cur = new
+        new = _step(prob, cur, mu, fixed_start, stage)
+        value = None if new is None else stage.of(new)
+        if new is not None and _better(new, cur, tol, (value, stage.value)):
+            gain = (stage.value - value) / max(abs(stage.value), 1e-300)
+            cur, stage.value = new, value
+            best = cur if _better(cur, best, tol) else best
             accepted += 1
             rejected = 0
             history.append(cur.score)
             mu = max(mu * 0.3, 1e-6 * W)
-            if 0 <= gain < SCP_RTOL:
-                break
+            stalled = 0 <= gain < SCP_RTOL
         else:
             mu *= 10.0
             rejected += 1
-            if mu > 1e6 * W or rejected >= MAX_REJECTED:
+            stalled = mu > 1e6 * W or rejected >= MAX_REJECTED
+        if stalled:
+            if not stage.sharpen(cur):
                 break
+            mu, rejected = mu0, 0
         if progress is not None:
             progress.update(1)
-    return SCPResult(cur, warm, it, accepted, history)
+    return SCPResult(best, warm, it, accepted, history)
+
+
+def _step(prob, cur: Trajectory, mu: float, fixed_start: bool, stage: _Stage):
+    """One SCP candidate from ``cur`` (its exact rollout), or None when the QP fails."""
+    lin = linearise(prob, cur)
+    qp = build_qp(prob, cur, lin, mu, fixed_start, stage.p, stage.L)
+    x = solve_qp(qp)
+    if x is None:
+        return None
+    dq = x[: qp.nq].reshape(cur.q.shape)
+    dq[0] = 0.0 if fixed_start else dq[0]  # a fixed start is kept bit for bit
+    q0 = cur.q[0] + dq[0]
+    if not fixed_start:
+        from fault_tolerance.planning.wholepath.dp import _correct
+
+        q0 = _correct(prob, q0[None], np.array([0]), iters=4)[0]
+    return rollout(prob, q0, "track", q_ref=cur.q + dq)
