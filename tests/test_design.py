@@ -64,3 +64,62 @@ def test_bad_design_input():
         design(ft.load_arm("planar_3r"), objective="speed")
     with pytest.raises(InvalidInput, match="vary"):
         design(ft.load_arm("planar_3r"), vary="links")
+
+
+def _planar_spec(arm, vary: str, objective: str, search_dt: float = 2e-3) -> dict:
+    """The spec :func:`design` builds (default task, every joint lockable, no RCN requirement)."""
+    from fault_tolerance.analysis.design.planar import default_task
+    from fault_tolerance.model.arm_spec import robot_spec
+
+    task = default_task(arm)
+    return {
+        "kind": "design", "robot": robot_spec(arm), "vary": vary, "objective": objective,
+        "lockable": list(arm.default_lockable), "total_length": 1.5,
+        "task": {**task.__dict__, "x0": list(task.x0)}, "rcn_max": None, "grid": 41,
+        "search_dt": search_dt,
+    }  # fmt: skip
+
+
+def _search_best(spec, box, start, seed: int) -> float:
+    from fault_tolerance.analysis.design.search import _search
+
+    opts = dict(folder=None, workers=0, scheduler=None, progress=False)
+    return float(_search(spec, box, start, 32, 6, 4, seed, opts)["score"].min())
+
+
+@pytest.mark.slow
+def test_limits_search_is_within_one_percent_of_a_scan():
+    """The planar 3R's limits, centres of joints 2 and 3 free (widths ±1 rad): the search's
+    failure-tolerant area is within 1 % of the best of a 17 x 17 scan at the same grid, two seeds."""
+    from fault_tolerance.analysis.design.planar import evaluate
+
+    arm = ft.load_arm("planar_3r")
+    spec = _planar_spec(arm, "limits", "ftw-area")
+    base = np.array([0.0, 1.0, 0.0, 1.0, 0.0, 1.0])
+    box = np.stack([base, base], 1)
+    box[2] = box[4] = [-np.pi, np.pi]
+    g = np.linspace(-np.pi, np.pi, 17)
+    scan = max(-evaluate(spec, np.array([0, 1, u, 1, v, 1.0]))["score"] for u in g for v in g)
+    assert scan > 0.3  # the family has a real optimum (0.42 m² on this grid)
+    for seed in (0, 1):
+        assert -_search_best(spec, box, base, seed) >= 0.99 * scan
+
+
+@pytest.mark.slow
+def test_link_search_is_within_one_percent_of_a_scan():
+    """The planar 3R's link lengths (two shares free, total 1.5 m, no artificial limits), mean
+    JVJA jump: the search is within 1 % of the best of a 9 x 9 scan, two seeds."""
+    from fault_tolerance.analysis.design.planar import evaluate
+    from fault_tolerance.analysis.design.search import _baseline, clamp
+
+    arm = ft.load_arm("planar_3r")
+    spec = _planar_spec(arm, "links,limits", "jvj", search_dt=1e-2)
+    base = _baseline(arm, "links,limits")
+    box = np.stack([base, base], 1)
+    box[6] = box[7] = [0.15, 0.7]
+    g = np.linspace(0.15, 0.7, 9)
+    pts = [np.r_[base[:6], u, v] for u in g for v in g if u + v <= 0.85]
+    scan = min(evaluate(spec, clamp(p, box))["score"] for p in pts)
+    assert np.isfinite(scan)
+    for seed in (0, 1):
+        assert _search_best(spec, box, base, seed) <= 1.01 * scan

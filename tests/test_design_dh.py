@@ -166,3 +166,44 @@ def test_bad_cli_input_exits_2(tmp_path):
         p = subprocess.run(cmd, capture_output=True, text=True, timeout=300)
         assert p.returncode == 2, (extra, p.stderr)
         assert len(p.stderr.strip().splitlines()) == 1, p.stderr
+
+
+def test_ftw_volume_equals_the_workspace_command_on_the_exported_urdf(tmp_path):
+    """A candidate's sampled failure-tolerant volume (its limits as A inside the base table's)
+    equals failure_tolerant_workspace on the URDF of the physical table with those limits, and
+    is positive for the narrow limits of docs/figures.md (±20° on the lockable joints)."""
+    from dataclasses import replace
+
+    import fault_tolerance as ft
+    from fault_tolerance.analysis.design.dh import FTW_SETTINGS, ftw_volume
+    from fault_tolerance.analysis.workspace.closed_form import failure_tolerant_workspace
+    from fault_tolerance.model.dh import dh_urdf
+
+    A = np.radians([[-20, 20], [-20, 20], [-20, 20], [-170, 170]])
+    narrow = replace(
+        BASE,
+        joints=tuple(
+            replace(j, lower=a, upper=b) for j, (a, b) in zip(BASE.joints, A, strict=True)
+        ),
+    )
+    physical = [[j.lower, j.upper] for j in BASE.joints]
+    got = ftw_volume(narrow, LOCK, FTW_SETTINGS | {"physical": physical})
+    (tmp_path / "arm.urdf").write_text(dh_urdf(BASE))
+    arm = ft.load_arm(tmp_path / "arm.urdf", tip="tool", task="position")
+    ws = failure_tolerant_workspace(arm, A, LOCK, **FTW_SETTINGS)
+    assert got == ws.size_ftw > 0
+    assert ftw_volume(BASE, LOCK, FTW_SETTINGS | {"physical": physical}) == 0.0  # A = physical
+
+
+@pytest.mark.slow
+def test_a_volume_design_finds_failure_tolerant_limits(tmp_path):
+    """--vary dh,limits with the ftw-volume objective: the base arm (A = its physical limits) has
+    no failure-tolerant volume; the design's limits have one, stated with its sampling."""
+    params = parse_params(",".join(f"lower{i}:-3.1416:-0.2,upper{i}:0.2:3.1416" for i in (1, 2, 3)))
+    spec = design_spec(BASE, params, FIG6, LOCK, objective="ftw-volume", search_dt=2e-2)
+    d = dh_design(spec, popsize=4, generations=2, pattern_rounds=1, folder=tmp_path / "v")
+    rec = d.record
+    assert rec["baseline"]["ftw_volume"] == 0.0 < rec["ftw_volume"]
+    assert rec["settings"]["ftw"]["grid"] == 16 and "ftw_volume" in rec["units"]
+    feasible = d.evaluated["feasible"].astype(bool)  # the task and the RCN requirement hold
+    assert rec["ftw_volume"] >= np.nanmax(d.evaluated["ftw_volume"][feasible]) - 1e-12

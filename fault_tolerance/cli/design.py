@@ -46,7 +46,8 @@ def add_parser(sub) -> argparse.ArgumentParser:
         "--objective",
         default=None,
         help="ftw-area | jvj | rcn for a planar 3R (default ftw-area); mean-jvj | max-jvj | "
-        "manipulability for --vary dh (default mean-jvj)",
+        "manipulability | ftw-volume (sampled failure-tolerant volume) for --vary dh (default "
+        "mean-jvj)",
     )
     s.add_argument(
         "--x0",

@@ -146,9 +146,20 @@ def run_dh(args) -> int:
     print(
         f"{table.name}: {objective} design {names}; mean jump {r['mean_jvj']:.4g} (rad/s)² "
         f"(baseline {_num(b['mean_jvj'])}), largest k_S {r['rcn_max']:.4g} "
-        f"(limit {spec['rcn_max']:g}); {r['evaluations']} designs -> {args.out}/design.json"
+        f"(limit {spec['rcn_max']:g}){_volume(r)}; {r['evaluations']} designs -> "
+        f"{args.out}/design.json"
     )
     return 0
+
+
+def _volume(r: dict) -> str:
+    """The failure-tolerant volume part of the summary line (objective ftw-volume only)."""
+    if r.get("ftw_volume") is None:
+        return ""
+    return (
+        f", failure-tolerant volume {r['ftw_volume']:.4g} m³ "
+        f"(baseline {_num(r['baseline'].get('ftw_volume'))})"
+    )
 
 
 def _num(v) -> str:

@@ -34,7 +34,12 @@ from fault_tolerance.simulation.paths import CirclePath
 #: What a parameter may vary: a DH field or a joint limit.
 FIELDS = ("a", "d", "theta", "alpha", "lower", "upper")
 #: Objectives of a DH design (all minimised; manipulability is maximised as its negative).
-DH_OBJECTIVES = ("mean-jvj", "max-jvj", "manipulability")
+DH_OBJECTIVES = ("mean-jvj", "max-jvj", "manipulability", "ftw-volume")
+#: Sampled failure-tolerant volume of a candidate (objective ftw-volume): grid cells per axis,
+#: configurations per set and lock angles per lockable joint (the sampled workspace's settings,
+#: stated in design.json). The candidate's joint limits are the artificial limits A, the base
+#: table's the physical ones (docs/workspace.md), so ``--vary dh,limits`` designs A.
+FTW_SETTINGS = {"grid": 16, "samples": 4000, "theta_samples": 5}
 #: Candidates evaluated per chunk of a round.
 DH_PER_CHUNK = 4
 #: Seeds of the minimum-K start search per candidate (the paper's runs use 24; a search needs speed).
@@ -182,8 +187,12 @@ def evaluate_table(
     rcn_max: float = RCN_THRESHOLD,
     dt: float = 1e-3,
     seeds: int | None = None,
+    ftw: dict | None = None,
 ) -> dict:
     """The paper's planning of ``table``'s arm on ``task``: JVJA's mean and max λ, max k_S.
+
+    ``ftw`` (:data:`FTW_SETTINGS` and ``physical``, the base table's limits): also the sampled
+    failure-tolerant volume [m³] of the table's limits inside the physical ones (``ftw_volume``).
 
     A candidate that cannot reach the task, whose every start fails, or whose run breaks is
     *refused*: ``feasible`` False and the reason, never an exception (one refused candidate is
@@ -203,7 +212,8 @@ def evaluate_table(
     J = np.array([arm.jacobian(q) for q in run.q[:: max(len(run.q) // 50, 1)]])
     manip = float(np.mean(np.sqrt(np.abs(np.linalg.det(J @ np.swapaxes(J, 1, 2))))))
     ok = bool(np.isfinite(run.jvj).all() and k_max <= rcn_max)
-    return {
+    extra = {} if ftw is None else {"ftw_volume": ftw_volume(table, lockable, ftw)}
+    return extra | {
         "feasible": ok,
         "reason": "" if ok else f"largest k_S {k_max:.4g} > rcn_max {rcn_max:g}",
         "mean_jvj": float(np.mean(run.jvj)),
@@ -215,6 +225,26 @@ def evaluate_table(
     }
 
 
+def ftw_volume(table: DHTable, lockable: Sequence[str], settings: dict) -> float:
+    """The sampled failure-tolerant volume [m³] of ``table``'s limits as artificial limits.
+
+    The physical limits are ``settings["physical"]``; every lock angle in A (docs/workspace.md).
+    """
+    from fault_tolerance.analysis.workspace.closed_form import workspace_spec
+    from fault_tolerance.analysis.workspace.sampled import sampled_in_process
+
+    options = {k: v for k, v in settings.items() if k != "physical"}
+    A = np.array([[j.lower, j.upper] for j in table.joints])
+    joints = tuple(
+        replace(j, lower=lo, upper=hi)
+        for j, (lo, hi) in zip(table.joints, settings["physical"], strict=True)
+    )
+    arm = arm_from_dh(replace(table, joints=joints), task="position")
+    spec = workspace_spec(arm, np.clip(A, arm.lower[:, None], arm.upper[:, None]), list(lockable),
+                          **options)  # fmt: skip
+    return sampled_in_process(arm, spec).size_ftw
+
+
 def dh_score(objective: str, rec: dict) -> float:
     """The minimised number of a record (inf when refused)."""
     if not rec.get("feasible"):
@@ -223,6 +253,8 @@ def dh_score(objective: str, rec: dict) -> float:
         return rec["mean_jvj"]
     if objective == "max-jvj":
         return rec["max_jvj"]
+    if objective == "ftw-volume":
+        return -rec["ftw_volume"]
     return -rec["manipulability"]
 
 
@@ -245,7 +277,7 @@ def evaluate_candidate(spec: dict, u) -> dict:
     task = DHTask.from_spec(spec["task"])
     rec = evaluate_table(
         table, task, spec["lockable"], rcn_max=spec["rcn_max"], dt=spec["search_dt"],
-        seeds=SEARCH_SEEDS,
+        seeds=SEARCH_SEEDS, ftw=spec.get("ftw"),
     )  # fmt: skip
     rec["score"] = dh_score(spec["objective"], rec)
     return rec
@@ -258,7 +290,7 @@ def dh_design_chunk(spec: dict, k: int) -> dict[str, np.ndarray]:
     nan = float("nan")
     return {
         key: np.array([r.get(key, nan) for r in recs], dtype=float)
-        for key in ("score", "mean_jvj", "max_jvj", "rcn_max", "manipulability")
+        for key in ("score", "mean_jvj", "max_jvj", "rcn_max", "manipulability", "ftw_volume")
     } | {"feasible": np.array([bool(r["feasible"]) for r in recs])}
 
 
@@ -300,6 +332,8 @@ def design_spec(
         "total_length": None if total_length is None else float(total_length),
         "search_dt": float(search_dt),
     }
+    if objective == "ftw-volume":  # only then: the other objectives' chunk names stay as they were
+        spec["ftw"] = FTW_SETTINGS | {"physical": [[j.lower, j.upper] for j in base.joints]}
     json.dumps(spec)  # JSON-able: a chunk's name is its hash
     return spec
 
@@ -410,8 +444,9 @@ def _values(table: DHTable, params: Sequence[DHParam]) -> dict[str, float]:
 def _dh_record(spec, chosen: DHTable, base: DHTable, found, seen: dict, seed: int) -> dict:
     """design.json: the chosen table and values, the baseline, the Pareto front, the settings."""
     task = DHTask.from_spec(spec["task"])
-    final = evaluate_table(chosen, task, spec["lockable"], rcn_max=spec["rcn_max"])
-    base_rec = evaluate_table(base, task, spec["lockable"], rcn_max=spec["rcn_max"])
+    ftw = spec.get("ftw")
+    final = evaluate_table(chosen, task, spec["lockable"], rcn_max=spec["rcn_max"], ftw=ftw)
+    base_rec = evaluate_table(base, task, spec["lockable"], rcn_max=spec["rcn_max"], ftw=ftw)
     pts = np.stack([seen["mean_jvj"], seen["rcn_max"]], 1)
     pts[~seen["feasible"].astype(bool)] = np.nan
     front = pareto(pts).tolist()
@@ -426,12 +461,13 @@ def _dh_record(spec, chosen: DHTable, base: DHTable, found, seen: dict, seed: in
         "rcn_max": final.get("rcn_max"),
         "K_max": final.get("K_max"),
         "manipulability": final.get("manipulability"),
+        "ftw_volume": final.get("ftw_volume"),
         "feasible": final["feasible"],
         "q0": final.get("q0"),
         "baseline": {"dh": table_dict(base)}
         | {
             k: base_rec.get(k)
-            for k in ("mean_jvj", "max_jvj", "rcn_max", "manipulability", "feasible")
+            for k in ("mean_jvj", "max_jvj", "rcn_max", "manipulability", "ftw_volume", "feasible")
         },  # fmt: skip
         "pareto": [
             {
@@ -445,7 +481,8 @@ def _dh_record(spec, chosen: DHTable, base: DHTable, found, seen: dict, seed: in
         ],  # fmt: skip
         "settings": {
             k: spec[k]
-            for k in ("params", "task", "lockable", "rcn_max", "total_length", "search_dt")
+            for k in ("params", "task", "lockable", "rcn_max", "total_length", "search_dt", "ftw")
+            if k in spec
         }
         | {"seed": seed},  # fmt: skip
         "evaluations": int(found.evaluations),
@@ -454,6 +491,7 @@ def _dh_record(spec, chosen: DHTable, base: DHTable, found, seen: dict, seed: in
             "max_jvj": "(rad/s)^2",
             "rcn_max": "1",
             "manipulability": "m^3/rad^3 (position task)",
+            "ftw_volume": "m^3 (sampled: settings.ftw; cell edge 2R/grid, R the reach bound)",
             "dh": "m, rad",
         },  # fmt: skip
     }

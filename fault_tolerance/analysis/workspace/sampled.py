@@ -116,7 +116,19 @@ def _uniform(rng, lo, hi, size) -> np.ndarray:
 
 def sampled_chunk(spec: dict, k: int) -> dict[str, np.ndarray]:
     """Cells hit by one chunk of samples, and (W(A) chunks) the smallest indices per cell."""
-    arm = arm_of(spec)
+    return sampled_cells(arm_of(spec), spec, k)
+
+
+def sampled_in_process(arm, spec: dict) -> Workspace:
+    """The sampled workspace of ``spec`` for an arm built in this process, serially.
+
+    For an arm with no file to rebuild it from (a DH candidate): the same cells as a sweep's.
+    """
+    return assemble_sampled(spec, [sampled_cells(arm, spec, k) for k in range(n_chunks(spec))])
+
+
+def sampled_cells(arm, spec: dict, k: int) -> dict[str, np.ndarray]:
+    """Chunk ``k`` of :func:`sampled_chunk` for ``arm`` (the arm of ``spec``)."""
     kind, i, t, c = _jobs(spec)[k]
     rng = np.random.default_rng([spec["seed"], k])
     size = min(CHUNK_SAMPLES, spec["samples"] - c * CHUNK_SAMPLES)
