@@ -232,7 +232,7 @@ def test_spatial_slices_pass_through_the_ftw_and_say_where():
     """The z plane is the one with the largest FTW area; its title names it and that area."""
     ws = _synthetic(ftw_z=8)
     z, y, x = ftw_slices(ws)
-    assert (z.axis, z.index) == (2, 8)
+    assert (z.axis, z.cell) == (2, 8)
     np.testing.assert_allclose(z.area_ftw, 16 * 0.01, atol=1e-12)  # 16 cells of 0.1 m x 0.1 m
     assert ws.ftw[z.select()].sum() == 16 and ws.ftw[y.select()].any() and ws.ftw[x.select()].any()
     fig = workspace_figure(ws)
@@ -246,7 +246,7 @@ def test_the_spatial_4r_is_sliced_through_its_ftw(spatial_ws):
     for s in ftw_slices(spatial_ws):
         other = tuple(k for k in range(3) if k != s.axis)
         counts = spatial_ws.ftw.sum(axis=other)
-        assert counts[s.index] == counts.max() > 0
+        assert counts[s.cell] == counts.max() > 0
 
 
 def test_a_workspace_without_ftw_says_so():

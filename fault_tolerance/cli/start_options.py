@@ -222,7 +222,7 @@ def _other_tips(arm, count: int = 2) -> list[tuple[str, dict]]:
     model = arm.model
     joint = model.frames[arm.frame_id].parentJoint
     kinds = (pin.FrameType.BODY, pin.FrameType.OP_FRAME)
-    found = {}
+    found: dict[str, float] = {}
     for f in model.frames:
         if f.parentJoint == joint and f.type in kinds and f.name != arm.tip:
             found.setdefault(f.name, float(np.linalg.norm(f.placement.translation)))

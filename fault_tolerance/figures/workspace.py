@@ -19,10 +19,10 @@ MASK_COLOURS = ("white", "#9ecae1", "#08519c")
 
 
 class Slice(NamedTuple):
-    """One plane of a 3-D grid: normal ``axis`` (0 x, 1 y, 2 z) at grid ``index``."""
+    """One plane of a 3-D grid: normal ``axis`` (0 x, 1 y, 2 z) at grid index ``cell``."""
 
     axis: int
-    index: int
+    cell: int  # grid index of the plane along ``axis``
     coordinate: float  # [m]
     area_ftw: float  # FTW area on the plane [m²]
     area_pre: float  # W(A) area on the plane [m²]
@@ -34,7 +34,7 @@ class Slice(NamedTuple):
 
     def select(self) -> tuple:
         """The index tuple of the plane in a (Nx, Ny, Nz) array."""
-        return tuple(self.index if k == self.axis else slice(None) for k in range(3))
+        return tuple(self.cell if k == self.axis else slice(None) for k in range(3))
 
 
 def _spacing(axis_values: np.ndarray) -> float:

@@ -386,7 +386,7 @@ def scp(
     for it in range(1, iterations + 1):  # noqa: B007 - the count is returned below
         new = _step(prob, cur, mu, fixed_start, stage)
         value = None if new is None else stage.of(new)
-        if new is not None and _better(new, cur, tol, (value, stage.value)):
+        if new is not None and value is not None and _better(new, cur, tol, (value, stage.value)):
             gain = (stage.value - value) / max(abs(stage.value), 1e-300)
             cur, stage.value = new, value
             best = cur if _better(cur, best, tol) else best
