@@ -243,7 +243,16 @@ def test_scaled_rows_time_scaled_bounded_steps_and_their_targets():
 
     case = make_case("chain_14")
     rows = scaled_rows(case)
-    assert set(rows) == {"jvja_bounded_scaled", "lnva_bounded_scaled"}
+    from fault_tolerance.bench.routes import installed
+
+    expect = {"jvja_bounded_scaled", "lnva_bounded_scaled"}
+    expect |= {"qp_soft_task"} if installed("quadprog") else set()
+    expect |= {"pink_tick"} if installed("pink") else set()
+    assert set(rows) == expect
+    for name in expect - {"jvja_bounded_scaled", "lnva_bounded_scaled"}:
+        fn, args = rows[name]
+        qd = np.asarray(fn(*args[0]))
+        assert qd.shape == (case.arm.n,) and np.all(np.isfinite(qd))
     ctrl = Controller(case.arm, "all", backend=case.ctrl.backend)
     for q, xd, _ in rows["jvja_bounded_scaled"][1]:
         for step in (ctrl.jvja, ctrl.lnva):

@@ -67,6 +67,8 @@ DESCRIPTIONS = {
     "bound)",
     "lnva_bounded_scaled": "LNVA step with joint limits on, task scaled (s < 1, most joints at a "
     "bound)",
+    "pink_tick": "one pink QP tick (daqp) of a frame task moved by ẋ h, pink's limits",
+    "qp_soft_task": "one quadprog call: min ½‖J q̇ − ẋ‖² + ½ε‖q̇‖² in the rate box",
     "dyn_sample": "one dynamics sample: computed-torque law (RNEA + PD), saturation, one ABA "
     "semi-implicit Euler step (simulation.torque.control_step)",
 }

@@ -154,6 +154,12 @@ def _scaled_targets(key, med) -> list[dict]:
             r = scaled / free
             out.append(_item(key, f"scaled_{method}_over_{method}", f"bounded {method.upper()}, "
                              f"task scaled / {method.upper()}", r, limit, "<=", r <= limit))  # fmt: skip
+        for other, label in (("pink_tick", "pink QP tick"), ("qp_soft_task", "soft-task QP")):
+            o = med(other)
+            if scaled and o:
+                r = scaled / o
+                out.append(_item(key, f"scaled_{method}_over_{other}", f"bounded "
+                                 f"{method.upper()}, task scaled / {label}", r, 1.0, "<", r < 1.0))  # fmt: skip
     return out
 
 
