@@ -231,3 +231,34 @@ def test_check_exits_0_when_every_target_passes(monkeypatch):
     monkeypatch.setattr(bench_command, "targets",
                         lambda res: [t for t in real(res) if False])  # fmt: skip
     assert bench_command.main([*QUICK, "--check"]) == 0
+
+
+
+def test_scaled_rows_time_scaled_bounded_steps_and_their_targets():
+    """The "task scaled" rows: bounded steps with s < 1 and half the joints held; two targets."""
+    from fault_tolerance.bench.cases import make_case
+    from fault_tolerance.bench.scaled_rows import scaled_rows
+    from fault_tolerance.bench.targets import arm_targets
+    from fault_tolerance.control.controller import Controller
+
+    case = make_case("chain_14")
+    rows = scaled_rows(case)
+    from fault_tolerance.bench.routes import installed
+
+    expect = {"jvja_bounded_scaled", "lnva_bounded_scaled"}
+    expect |= {"qp_soft_task"} if installed("quadprog") else set()
+    expect |= {"pink_tick"} if installed("pink") else set()
+    assert set(rows) == expect
+    for name in expect - {"jvja_bounded_scaled", "lnva_bounded_scaled"}:
+        fn, args = rows[name]
+        qd = np.asarray(fn(*args[0]))
+        assert qd.shape == (case.arm.n,) and np.all(np.isfinite(qd))
+    ctrl = Controller(case.arm, "all", backend=case.ctrl.backend)
+    for q, xd, _ in rows["jvja_bounded_scaled"][1]:
+        for step in (ctrl.jvja, ctrl.lnva):
+            step(q, xd)
+            assert ctrl.last_scale < 1.0 and 2 * ctrl.last_active.sum() >= case.arm.n
+    ops = {k: {"median_us": v, "p99_us": v} for k, v in
+           {"jvja": 1.0, "lnva": 1.0, "jvja_bounded_scaled": 60.0, "lnva_bounded_scaled": 5.0}.items()}  # fmt: skip
+    got = {t["name"]: t["pass"] for t in arm_targets("chain_14", ops)}
+    assert got["scaled_jvja_over_jvja"] is False and got["scaled_lnva_over_lnva"] is True

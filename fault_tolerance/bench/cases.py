@@ -63,6 +63,12 @@ DESCRIPTIONS = {
     "jvja_bounded_free": "JVJA step with joint limits on, no bound active (fast step + box check)",
     "jvja_bounded_2": "JVJA step with joint limits on, two joints at a binding bound (bounded QPs)",
     "jvja_bounded_2_qp": "the same bounded JVJA problem by quadprog (f reduced QPs + 1)",
+    "jvja_bounded_scaled": "JVJA step with joint limits on, task scaled (s < 1, most joints at a "
+    "bound)",
+    "lnva_bounded_scaled": "LNVA step with joint limits on, task scaled (s < 1, most joints at a "
+    "bound)",
+    "pink_tick": "one pink QP tick (daqp) of a frame task moved by ẋ h, pink's limits",
+    "qp_soft_task": "one quadprog call: min ½‖J q̇ − ẋ‖² + ½ε‖q̇‖² in the rate box",
     "dyn_sample": "one dynamics sample: computed-torque law (RNEA + PD), saturation, one ABA "
     "semi-implicit Euler step (simulation.torque.control_step)",
 }
@@ -295,6 +301,12 @@ def _limits_rows(case: Case) -> dict[str, Row]:
     return limits_rows(case)
 
 
+def _scaled_rows(case: Case) -> dict[str, Row]:
+    from fault_tolerance.bench.scaled_rows import scaled_rows
+
+    return scaled_rows(case)
+
+
 def _fast_group(case: Case) -> dict[str, Row]:
     """The fast path, the floor, the simulated and the dynamics sample: side by side (ratios)."""
     return {**fast_rows(case), **floor_rows(case), **simulated_rows(case), **dynamics_rows(case)}
@@ -305,6 +317,7 @@ GROUPS: list[tuple[str, Callable[[Case], dict[str, Row]], int]] = [
     ("joint limits", _limits_rows, 1),
     ("reference routes", reference_rows, 1),
     ("slow routes", slow_rows, 10),
+    ("task scaled", _scaled_rows, 1000),  # milliseconds a call on a long chain (issue item 5)
 ]
 
 

@@ -15,6 +15,9 @@ MAX_JVJA_P99_US = 100.0
 #: Joint limits: bounded JVJA step / unbounded, with no bound and with two bounds active.
 MAX_BOUNDED_FREE_OVER_JVJA = 1.3
 MAX_BOUNDED_TWO_OVER_JVJA = 4.0
+#: Joint limits, task scaled (s < 1, most joints at a bound): bounded step / unbounded step.
+MAX_SCALED_JVJA_OVER_JVJA = 50.0
+MAX_SCALED_LNVA_OVER_LNVA = 10.0
 #: Dynamics: one dynamics sample (control law + ABA step) / one kinematic JVJA step.
 MAX_DYN_OVER_STEP = 20.0
 #: The compiled MDA step / the JVJA step (both with their Jacobian), per default arm.
@@ -135,9 +138,28 @@ def _limit_targets(key, jv, med) -> list[dict]:
         r = two / jv
         out.append(_item(key, "bounded_two_over_jvja", "bounded JVJA, two bounds active / JVJA",
                          r, MAX_BOUNDED_TWO_OVER_JVJA, "<=", r <= MAX_BOUNDED_TWO_OVER_JVJA))  # fmt: skip
+    out += _scaled_targets(key, med)
     if two and qp:
         out.append(_item(key, "bounded_qp_over_bounded", "quadprog on the bounded problem / "
                          "bounded JVJA (two active)", qp / two, 1.0, ">", qp / two > 1.0))  # fmt: skip
+    return out
+
+
+def _scaled_targets(key, med) -> list[dict]:
+    """Bounded JVJA and LNVA with the task scaled, against their unbounded steps."""
+    out = []
+    for method, limit in (("jvja", MAX_SCALED_JVJA_OVER_JVJA), ("lnva", MAX_SCALED_LNVA_OVER_LNVA)):
+        free, scaled = med(method), med(f"{method}_bounded_scaled")
+        if free and scaled:
+            r = scaled / free
+            out.append(_item(key, f"scaled_{method}_over_{method}", f"bounded {method.upper()}, "
+                             f"task scaled / {method.upper()}", r, limit, "<=", r <= limit))  # fmt: skip
+        for other, label in (("pink_tick", "pink QP tick"), ("qp_soft_task", "soft-task QP")):
+            o = med(other)
+            if scaled and o:
+                r = scaled / o
+                out.append(_item(key, f"scaled_{method}_over_{other}", f"bounded "
+                                 f"{method.upper()}, task scaled / {label}", r, 1.0, "<", r < 1.0))  # fmt: skip
     return out
 
 
