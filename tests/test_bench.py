@@ -233,7 +233,6 @@ def test_check_exits_0_when_every_target_passes(monkeypatch):
     assert bench_command.main([*QUICK, "--check"]) == 0
 
 
-
 def test_scaled_rows_time_scaled_bounded_steps_and_their_targets():
     """The "task scaled" rows: bounded steps with s < 1 and half the joints held; two targets."""
     from fault_tolerance.bench.cases import make_case
