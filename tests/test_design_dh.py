@@ -207,3 +207,40 @@ def test_a_volume_design_finds_failure_tolerant_limits(tmp_path):
     assert rec["settings"]["ftw"]["grid"] == 16 and "ftw_volume" in rec["units"]
     feasible = d.evaluated["feasible"].astype(bool)  # the task and the RCN requirement hold
     assert rec["ftw_volume"] >= np.nanmax(d.evaluated["ftw_volume"][feasible]) - 1e-12
+
+
+def _circle_csv(path, task: DHTask, dt: float = 1e-3):
+    """The task circle written as a CSV path (t, x, y, z with velocities), as a user would."""
+    circle = task.path()
+    t = np.arange(0.0, task.duration + dt / 2, dt)
+    rows = [[s, *circle.x(s), *circle.xdot(s)] for s in t]
+    np.savetxt(path, rows, delimiter=",", header="t,x,y,z,vx,vy,vz", comments="")
+    return path
+
+
+def test_a_csv_task_designs_like_the_circle_it_samples(tmp_path):
+    """The Fig. 6 circle as a CSV path gives the circle's jump and RCN (to the sampling), and a
+    circle's spec keeps its keys (its chunks are reused)."""
+    from fault_tolerance.simulation.paths import load_csv
+
+    sampled = DHTask.sampled(load_csv(_circle_csv(tmp_path / "c.csv", FIG6)))
+    a = evaluate_table(BASE, FIG6, LOCK, dt=1e-2)
+    b = evaluate_table(BASE, sampled, LOCK, dt=1e-2)
+    assert a["feasible"] and b["feasible"]
+    assert b["mean_jvj"] == pytest.approx(a["mean_jvj"], rel=1e-3)
+    assert b["rcn_max"] == pytest.approx(a["rcn_max"], rel=1e-3)
+    assert DHTask.from_spec(sampled.as_spec()) == sampled
+    assert set(FIG6.as_spec()) == {"x0", "radius", "omega", "duration", "rows"}
+
+
+def test_the_cli_takes_a_csv_task_for_dh_designs_only(tmp_path, capsys):
+    """--csv with --x0 is refused, and so is --csv for a planar design (exit 2, one line)."""
+    from fault_tolerance.cli import main
+
+    csv_file = str(_circle_csv(tmp_path / "c.csv", FIG6, dt=1e-2))
+    assert main(["design", "--vary", "dh", "--csv", csv_file, "--x0", "0.1,0.2,0.3",
+                 "--out", str(tmp_path / "o")]) == 2  # fmt: skip
+    assert "without --x0" in capsys.readouterr().err
+    assert main(["design", "--robot", "planar_3r", "--csv", csv_file,
+                 "--out", str(tmp_path / "p")]) == 2  # fmt: skip
+    assert "--csv" in capsys.readouterr().err

@@ -14,7 +14,7 @@ from fault_tolerance.errors import InvalidInput
 DEFAULT_PARAMS = {"spatial_4r": "d3:0.2:0.6,a4:0.1:0.5"}
 #: Options of --vary dh alone (flag -> argparse dest); a planar design refuses them.
 DH_ONLY = {"--dh": "dh", "--params": "params", "--total-length": "total_length",
-           "--popsize": "popsize", "--search-dt": "search_dt"}  # fmt: skip
+           "--popsize": "popsize", "--search-dt": "search_dt", "--csv": "csv"}  # fmt: skip
 #: Options of a planar design alone; --vary dh refuses them.
 PLANAR_ONLY = {"--candidates": "candidates", "--grid": "grid"}
 #: Default task of a template: the paper's Fig. 6 circle for the 4R.
@@ -36,6 +36,12 @@ def add_arguments(s: argparse.ArgumentParser) -> None:
         help="varied parameters FIELDJOINT:LO:HI or FIELDJOINT:{A|B|..}, fields a d theta alpha "
         "lower upper, e.g. d3:0.2:0.6,a4:0.1:0.5,alpha2:{0|pi/2|-pi/2} "
         "(default for spatial_4r: d3:0.2:0.6,a4:0.1:0.5)",
+    )
+    g.add_argument(
+        "--csv",
+        default=None,
+        help="the task path from a CSV file with header t,x,y,z [,vx,vy,vz] (times [s], "
+        "positions [m]) instead of the circle --x0/--radius",
     )
     add_deg_option(g, "the angles of --params (theta, alpha; lower, upper of revolute joints)")
     g.add_argument(
@@ -74,7 +80,12 @@ def _table(args):
 
 def _task(args, template):
     from fault_tolerance.analysis.design.dh import DHTask
+    from fault_tolerance.simulation.paths import load_csv
 
+    if args.csv:
+        if args.x0 is not None or args.radius is not None:
+            raise InvalidInput("--csv is the whole task path: give it without --x0 and --radius")
+        return DHTask.sampled(load_csv(args.csv))
     x0, radius = DEFAULT_TASKS.get(template, (None, None))
     if args.x0 is not None:
         x0 = tuple(floats(args.x0, "--x0"))

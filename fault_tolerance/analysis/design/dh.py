@@ -29,7 +29,7 @@ from fault_tolerance.model.dh import DHTable, arm_from_dh, table_from_dict
 from fault_tolerance.planning.paper_loop import plan
 from fault_tolerance.planning.posture import initial_posture
 from fault_tolerance.resolution.indices import RCN_THRESHOLD
-from fault_tolerance.simulation.paths import CirclePath
+from fault_tolerance.simulation.paths import CirclePath, SampledPath
 
 #: What a parameter may vary: a DH field or a joint limit.
 FIELDS = ("a", "d", "theta", "alpha", "lower", "upper")
@@ -161,22 +161,52 @@ def table_dict(table: DHTable) -> dict:
 
 @dataclass(frozen=True)
 class DHTask:
-    """The task of a DH design: a circle of the paper's kind (Figs. 6-7 by default)."""
+    """The task of a DH design: a circle of the paper's kind (Figs. 6-7 by default) or a path.
+
+    A sampled path (``--csv``) has ``t`` [s] and ``xs`` [m], one position per time; then
+    ``x0 = xs[0]`` and the circle fields are unused.
+    """
 
     x0: tuple[float, ...]
     radius: float
     omega: float = 2 * math.pi
     duration: float = 1.0
     rows: tuple[int, int] = (1, 2)
+    t: tuple[float, ...] = ()
+    xs: tuple[tuple[float, ...], ...] = ()
 
-    def path(self) -> CirclePath:
+    def path(self) -> CirclePath | SampledPath:
         """The task path."""
+        if self.t:
+            return SampledPath(np.array(self.t), np.array(self.xs), source="design task")
         return CirclePath(np.array(self.x0), self.radius, self.omega, self.duration, rows=self.rows)
+
+    @classmethod
+    def sampled(cls, path: SampledPath) -> DHTask:
+        """The task of a sampled path (a position task: three columns x, y, z)."""
+        xs = np.asarray(path.xs, dtype=float)
+        if xs.ndim != 2 or xs.shape[1] != 3:
+            raise InvalidInput(
+                f"a DH design's path needs three position columns x, y, z; got {xs.shape[1]}"
+            )
+        rows = tuple(tuple(float(v) for v in x) for x in xs)
+        return cls(rows[0], 0.0, t=tuple(float(v) for v in path.t), xs=rows)
+
+    def as_spec(self) -> dict:
+        """The JSON form (a circle's keeps exactly its old keys, so its chunks are reused)."""
+        out = asdict(self) | {"x0": list(self.x0), "rows": list(self.rows)}
+        if not self.t:
+            out.pop("t"), out.pop("xs")
+        else:
+            out.update(t=list(self.t), xs=[list(x) for x in self.xs])
+        return out
 
     @classmethod
     def from_spec(cls, task: dict) -> DHTask:
         """The task of a design spec's (JSON) ``task`` entry."""
-        return cls(**{**task, "x0": tuple(task["x0"]), "rows": tuple(task["rows"])})
+        fields: dict = dict(task, x0=tuple(task["x0"]), rows=tuple(task["rows"]))
+        fields.update(t=tuple(task.get("t", ())), xs=tuple(tuple(x) for x in task.get("xs", ())))
+        return cls(**fields)
 
 
 def evaluate_table(
@@ -325,7 +355,7 @@ def design_spec(
         "kind": "dh-design",
         "table": table_dict(base),
         "params": [asdict(p) | {"choices": list(p.choices)} for p in params],
-        "task": asdict(task) | {"x0": list(task.x0), "rows": list(task.rows)},
+        "task": task.as_spec(),
         "lockable": list(lockable),
         "objective": objective,
         "rcn_max": float(rcn_max),
