@@ -1,0 +1,70 @@
+"""Default starts and refusals on the Schunk LWA4P kinematics (issue "For the people who use it").
+
+The URDF is written here from the LWA4P joint layout (shoulder 0.35 m, forearm 0.305 m, wrist
+offset 0.005263 m, limits ±2.947 / ±2.694 rad, as in larics/schunk_lwa4p_ros's exported
+schunk_lwa4p.urdf); the upstream file itself is not stored (its package.xml licence is "TODO").
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pinocchio as pin
+
+from fault_tolerance.cli import main
+
+_JOINTS = [  # name, rpy, xyz, limit
+    ("1", "0 0 0", "0 0 0", 2.947),
+    ("2", "1.5708 0 0", "0 0 0", 2.947),
+    ("3", "0 3.14159 0", "0 0.350 0", 2.694),
+    ("4", "-1.5708 3.14159 0", "0 0 0", 2.947),
+    ("5", "1.5708 0 3.14159", "0 0.005263 0.305", 2.947),
+    ("6", "-1.5708 0 0", "0 0 0", 2.947),
+]
+_INERTIA = '<inertial><mass value="1"/><inertia ixx="0.01" ixy="0" ixz="0" iyy="0.01" iyz="0" izz="0.01"/></inertial>'
+
+
+def _urdf(tool: bool) -> str:
+    parts = ['<?xml version="1.0"?>', '<robot name="lwa4p">', '<link name="lwa4p_base_link"/>']
+    parent = "lwa4p_base_link"
+    for name, rpy, xyz, lim in _JOINTS:
+        parts.append(f'<link name="lwa4p_link{name}">{_INERTIA}</link>')
+        parts.append(
+            f'<joint name="lwa4p_joint{name}" type="revolute"><origin rpy="{rpy}" xyz="{xyz}"/>'
+            f'<parent link="{parent}"/><child link="lwa4p_link{name}"/><axis xyz="0 0 1"/>'
+            f'<limit effort="20" lower="-{lim}" upper="{lim}" velocity="1.26"/></joint>'
+        )
+        parent = f"lwa4p_link{name}"
+    if tool:
+        parts.append('<link name="separator_base"/>')
+        parts.append(
+            '<joint name="lwa4p_separator_joint" type="fixed"><parent link="lwa4p_link6"/>'
+            '<child link="separator_base"/><origin rpy="0 0 1.5708" xyz="0 0 0.1"/></joint>'
+        )
+    parts.append("</robot>")
+    return "\n".join(parts)
+
+
+def test_lwa4p_with_a_tool_frame_gets_a_default_start(tmp_path):
+    urdf = tmp_path / "lwa4p.urdf"
+    urdf.write_text(_urdf(tool=True))
+    argv = ["simulate", "--description", str(urdf), "--out", str(tmp_path / "o"), "--no-progress"]
+    assert main(argv) == 0
+
+
+def test_lwa4p_tip_at_the_wrist_centre_is_refused_as_nearly_intolerable(tmp_path, capsys):
+    urdf = tmp_path / "lwa4p.urdf"
+    urdf.write_text(_urdf(tool=False))
+    argv = ["simulate", "--description", str(urdf), "--out", str(tmp_path / "o"), "--no-progress"]
+    assert main(argv) == 2
+    assert "nearly intolerable" in capsys.readouterr().err
+    # Independent check: the tip sits at the wrist centre, so the wrist joints 5, 6 barely move it
+    # and the position task rests on joints 1-4 only (no real redundancy left).
+    model = pin.buildModelFromXML(_urdf(tool=False))
+    data = model.createData()
+    frame = model.getFrameId("lwa4p_link6")
+    rng = np.random.default_rng(0)
+    for _ in range(20):
+        q = rng.uniform(model.lowerPositionLimit, model.upperPositionLimit)
+        pin.computeFrameJacobian(model, data, q, frame, pin.LOCAL_WORLD_ALIGNED)
+        jac = pin.getFrameJacobian(model, data, frame, pin.LOCAL_WORLD_ALIGNED)[:3]
+        assert np.linalg.norm(jac[:, 4:], axis=0).max() < 1e-3
