@@ -1,4 +1,4 @@
-"""Default starts and refusals on the Schunk LWA4P kinematics (issue "For the people who use it").
+"""Default starts and refusals on real arm layouts: the Schunk LWA4P, a Stretch-like mobile arm.
 
 The URDF is written here from the LWA4P joint layout (shoulder 0.35 m, forearm 0.305 m, wrist
 offset 0.005263 m, limits ±2.947 / ±2.694 rad, as in larics/schunk_lwa4p_ros's exported
@@ -68,3 +68,44 @@ def test_lwa4p_tip_at_the_wrist_centre_is_refused_as_nearly_intolerable(tmp_path
         pin.computeFrameJacobian(model, data, q, frame, pin.LOCAL_WORLD_ALIGNED)
         jac = pin.getFrameJacobian(model, data, frame, pin.LOCAL_WORLD_ALIGNED)[:3]
         assert np.linalg.norm(jac[:, 4:], axis=0).max() < 1e-3
+
+
+_STRETCH_LIKE = """<?xml version="1.0"?>
+<robot name="stretch_like">
+  <link name="base_link"/>
+  <link name="mast"/><link name="lift"/><link name="l0"/><link name="l1"/><link name="grasp"/>
+  <joint name="joint_yaw" type="revolute"><parent link="base_link"/><child link="mast"/>
+    <axis xyz="0 0 1"/><limit lower="-3" upper="3" effort="10" velocity="1"/></joint>
+  <joint name="joint_lift" type="prismatic"><parent link="mast"/><child link="lift"/>
+    <origin xyz="0 0 0.2"/><axis xyz="0 0 1"/><limit lower="0" upper="1.0" effort="10" velocity="1"/></joint>
+  <joint name="joint_arm_l0" type="prismatic"><parent link="lift"/><child link="l0"/>
+    <origin xyz="0.1 0 0"/><axis xyz="1 0 0"/><limit lower="0" upper="0.25" effort="10" velocity="1"/></joint>
+  <joint name="joint_arm_l1" type="prismatic"><parent link="l0"/><child link="l1"/>
+    <axis xyz="1 0 0"/><limit lower="0" upper="0.25" effort="10" velocity="1"/></joint>
+  <joint name="joint_grasp" type="fixed"><parent link="l1"/><child link="grasp"/>
+    <origin xyz="0.05 0 0"/></joint>
+</robot>
+"""
+
+
+def test_every_structural_joint_is_left_out_by_one_fix(tmp_path, capsys):
+    """A Stretch-like arm (base yaw, lift, two telescoping joints; position task): the yaw and
+    the lift are each the only joint for their direction, so both are structurally intolerable.
+    The refusal proposes --lockable without both (dropping one alone meets the other), and that
+    fix runs (exit 0)."""
+    import fault_tolerance as ft
+    from fault_tolerance.planning.start_checks import intolerable_everywhere
+
+    urdf = tmp_path / "stretch_like.urdf"
+    urdf.write_text(_STRETCH_LIKE)
+    arm = ft.load_arm(urdf, tip="grasp", task="position")
+    singles = [(j,) for j in arm.joint_names]
+    assert sorted(intolerable_everywhere(arm, singles)) == [("joint_lift",), ("joint_yaw",)]
+    base = ["simulate", "--description", str(urdf), "--tip", "grasp", "--task", "position",
+            "--algorithms", "jvja", "--no-progress", "--radius", "0.02", "--omega", "1"]  # fmt: skip
+    assert main([*base, "--lockable", "all"]) == 2
+    err = capsys.readouterr().err
+    assert "--lockable joint_arm_l0,joint_arm_l1" in err and "a start passes with" in err
+    assert (
+        main([*base, "--lockable", "joint_arm_l0,joint_arm_l1", "--out", str(tmp_path / "r")]) == 0
+    )

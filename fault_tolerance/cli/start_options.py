@@ -149,6 +149,8 @@ def fix_options(args, arm, reasons, lockable, extra=()) -> list[tuple[str, dict]
     radius, omega = _path_speed(args, arm)
     for category, _, joints in reasons:
         if category == sc.STRUCTURAL:
+            every = _every_structural(arm, lockable, joints)
+            out += _without(lockable, every, extra) if every != tuple(joints) else []
             out += _without(lockable, joints, extra) + _spanned_task(args, arm)
             out += _other_tips(arm)
         elif category in (sc.UNDER_LIMITS, sc.NEARLY_INTOLERABLE):
@@ -167,6 +169,19 @@ def fix_options(args, arm, reasons, lockable, extra=()) -> list[tuple[str, dict]
         elif category in (sc.SINGULAR, sc.NEAR_LIMIT):
             out += _spanned_task(args, arm) + _other_planes(args, arm)
     return list({text: (text, changes) for text, changes in out}.values())
+
+
+def _every_structural(arm, lockable, joints) -> tuple[str, ...]:
+    """``joints`` and every other lockable joint that no start can make up.
+
+    One fix drops them all: the start search stops at the first such joint, so a fix that drops
+    only that one meets the next.
+    """
+    from fault_tolerance.planning.start_checks import intolerable_everywhere
+
+    singles = [(j,) for j in lockable if isinstance(j, str) and j not in joints]
+    found = [s[0] for s in intolerable_everywhere(arm, singles)] if singles else []
+    return (*joints, *found)
 
 
 def _set(option: str, value: float) -> tuple[str, dict]:
@@ -243,6 +258,7 @@ def _spanned_task(args, arm, samples: int = 20, seed: int = 0) -> list[tuple[str
     if len(arm.task) == 6 and arm.n > 3:
         out.append(("--task position", {"task": "position", "rows": None}))
     return out
+
 
 def given_start(args, arm) -> np.ndarray:
     """``--q0`` [rad; ``--deg``: degrees on angular joints] checked as a start (docs/units.md).
