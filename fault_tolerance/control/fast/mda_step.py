@@ -55,6 +55,8 @@ __all__ = [
 
 _INF = math.inf
 _EPS = 2.220446049250313e-16
+#: A closed-form eigenvector (eq. H6) is kept when its residual is below this many ``m ε λ_max``.
+RESIDUAL_TOL = 8.0
 #: Entries of the parameter block (the first of the float workspace).
 P_TRACE, P_RANK, P_GAIN, P_MAXSTEP, P_RCN_MAX, P_SINGULAR = range(6)
 N_PARAMS = 6
@@ -219,6 +221,107 @@ def _derivative(Jf, rix, i, u, ut, w, S, D, n, m) -> None:  # pragma: no cover -
     hessian_contract(Jf, ut, w, S, D)
 
 
+# Eqn. (H5): ∇_j = ω_j · Σ_{k>j} c_k + a_j · Σ_{k≤j} e_k, c_k = a_k × M_lin,k + ω_k × M_ang,k,
+# e_k = M_lin,k × ω_k: all the vectors' contractions (H1) at once, from M = Σ_t c_t ũ_t x_tᵀ.
+@njit
+def matrix_contract(Jf, M, grad) -> None:  # pragma: no cover - numba
+    r"""``grad_j = Σ_{r,k} M[r, k] (∂J/∂q_j)[r, k]`` for every joint j (eq. H5), ``O(n)``.
+
+    ``M`` (6, n), zero off the task rows; the Hessian never formed. With ``M = ũ xᵀ`` this is
+    :func:`hessian_contract`; a sum of such terms is contracted in one pass.
+    """
+    n = Jf.shape[1]
+    s0, s1, s2 = 0.0, 0.0, 0.0  # Σ_{k>j} c_k, built from the end
+    for j in range(n - 1, -1, -1):
+        grad[j] = Jf[3, j] * s0 + Jf[4, j] * s1 + Jf[5, j] * s2
+        a0, a1, a2, w0, w1, w2 = Jf[0, j], Jf[1, j], Jf[2, j], Jf[3, j], Jf[4, j], Jf[5, j]
+        l0, l1, l2, g0, g1, g2 = M[0, j], M[1, j], M[2, j], M[3, j], M[4, j], M[5, j]
+        s0 += a1 * l2 - a2 * l1 + w1 * g2 - w2 * g1
+        s1 += a2 * l0 - a0 * l2 + w2 * g0 - w0 * g2
+        s2 += a0 * l1 - a1 * l0 + w0 * g1 - w1 * g0
+    p0, p1, p2 = 0.0, 0.0, 0.0  # Σ_{k≤j} e_k
+    for j in range(n):
+        l0, l1, l2, w0, w1, w2 = M[0, j], M[1, j], M[2, j], Jf[3, j], Jf[4, j], Jf[5, j]
+        p0 += l1 * w2 - l2 * w1
+        p1 += l2 * w0 - l0 * w2
+        p2 += l0 * w1 - l1 * w0
+        grad[j] += Jf[0, j] * p0 + Jf[1, j] * p1 + Jf[2, j] * p2
+
+
+# Eqn. (H6): u ∝ V (diag(d) − μ)⁻¹ Vᵀ J_i, kept when ‖(W_S − μ) u‖ ≤ RESIDUAL_TOL m ε λ_max(G).
+@njit
+def _secular_vector(G, J, V, d, z, mu, top, i, u, y, m) -> bool:  # pragma: no cover - numba
+    """The closed-form unit eigenvector of ``W = G − J_i J_iᵀ`` for ``μ`` (eq. H6) into ``u``.
+
+    True when its residual ``‖G u − J_i (J_iᵀ u) − μ u‖`` is at rounding level (then it is as
+    accurate as inverse iteration would make it); False sends the caller to :func:`_eigenvector`.
+    """
+    tiny = _EPS * max(abs(d[m - 1]), 1e-300)
+    for k in range(m):
+        den = d[k] - mu
+        if abs(den) < tiny:
+            den = tiny if den >= 0.0 else -tiny
+        y[k] = z[k] / den
+    if not _unit(y, m):
+        return False
+    ji = 0.0
+    for r in range(m):
+        s = 0.0
+        for k in range(m):
+            s += V[r, k] * y[k]
+        u[r] = s
+        ji += J[r, i] * s
+    res = 0.0
+    for r in range(m):
+        s = -mu * u[r] - J[r, i] * ji
+        for c in range(m):
+            s += (G[r, c] if c <= r else G[c, r]) * u[c]
+        res += s * s
+    return math.sqrt(res) <= RESIDUAL_TOL * m * _EPS * max(abs(d[m - 1]), 1e-300)
+
+
+@njit
+def _accumulate(J, rix, i, u, coef, w, M, n, m) -> None:  # pragma: no cover - numba
+    """``M[rix] += coef · u xᵀ`` with ``x = J_Sᵀu / ‖J_Sᵀu‖`` (column ``i`` locked: ``x_i = 0``).
+
+    ``w`` (n) scratch: ``J_Sᵀu``, formed once.
+    """
+    s = 0.0
+    for c in range(n):
+        t = 0.0
+        if c != i:
+            for k in range(m):
+                t += J[k, c] * u[k]
+        w[c] = t
+        s += t * t
+    if not s > 0.0:
+        return
+    f = coef / math.sqrt(s)
+    for k in range(m):
+        row, uk = rix[k], u[k] * f
+        for c in range(n):
+            M[row, c] += uk * w[c]
+
+
+@njit
+def _extreme_vectors(G, J, V, d, z, W, M, lo, hi, i, umin, umax, y) -> bool:  # pragma: no cover
+    """Unit eigenvectors of ``W_S`` for ``λ_min = lo`` and ``λ_max = hi`` (eq. H6, else LU).
+
+    ``W`` and ``M`` (m, m) scratch, formed only when a closed form is refused; ``y`` 2 m numbers.
+    """
+    m = J.shape[0]
+    okx = _secular_vector(G, J, V, d, z, hi, True, i, umax, y, m)
+    okn = _secular_vector(G, J, V, d, z, lo, False, i, umin, y, m)
+    if okx and okn:
+        return True
+    for r in range(m):
+        for c in range(m):
+            W[r, c] = (G[r, c] if c <= r else G[c, r]) - J[r, i] * J[c, i]
+    if not okx and not _eigenvector(W, V, d, z, hi, True, umax, y, M, m):
+        return False
+    return okn or _eigenvector(W, V, d, z, lo, False, umin, y, M, m)
+
+
 @njit
 def rcn_gradient_kernel(Jf, J, G, cols, params, F, grad) -> int:  # pragma: no cover - numba
     r"""``∇K``, ``K = Σ_S k_S²`` over the single-joint scenarios ``cols`` (eq. 15), into ``grad``.
@@ -226,12 +329,13 @@ def rcn_gradient_kernel(Jf, J, G, cols, params, F, grad) -> int:  # pragma: no c
     ``J`` (m, n) the task rows of ``Jf``, ``G = J Jᵀ`` (lower triangle read). Per scenario
     :math:`\partial(k^2)/\partial q_j = 2k(\sigma'_{max}\sigma_{min} -
     \sigma_{max}\sigma'_{min})/\sigma_{min}^2` with ``σ_min`` floored at ``σ_max / RCN_MAX`` and
-    ``σ' = uᵀ(∂J_S/∂q_j)v``; singular reduced robots add nothing (eq. S1). ``F`` scratch of
-    :func:`gradient_scratch` numbers. Returns :data:`OK` or :data:`NO_EIGEN`.
+    ``σ' = uᵀ(∂J_S/∂q_j)v``; singular reduced robots add nothing (eq. S1). The vectors of all
+    scenarios are summed into one ``6 × n`` matrix, contracted with the Hessian once (eq. H5).
+    ``F`` scratch of :func:`gradient_scratch` numbers. Returns :data:`OK` or :data:`NO_EIGEN`.
     """
     m, n = J.shape
     V, A = F[0 : m * m].reshape((m, m)), F[m * m : 2 * m * m].reshape((m, m))
-    M, W = F[2 * m * m : 3 * m * m].reshape((m, m)), F[3 * m * m : 4 * m * m].reshape((m, m))
+    Mlu, W = F[2 * m * m : 3 * m * m].reshape((m, m)), F[3 * m * m : 4 * m * m].reshape((m, m))
     o = 4 * m * m
     d, z, u2, y = (
         F[o : o + m],
@@ -239,17 +343,13 @@ def rcn_gradient_kernel(Jf, J, G, cols, params, F, grad) -> int:  # pragma: no c
         F[o + 2 * m : o + 3 * m],
         F[o + 3 * m : o + 5 * m],
     )
-    umin, umax, ut = (
-        F[o + 5 * m : o + 6 * m],
-        F[o + 6 * m : o + 7 * m],
-        F[o + 7 * m : o + 7 * m + 6],
-    )
+    umin, umax = F[o + 5 * m : o + 6 * m], F[o + 6 * m : o + 7 * m]
     o += 7 * m + 6
     work = F[o : o + 2 * m]
     o += 2 * m
-    w, Dmax, Dmin = F[o : o + n], F[o + n : o + 2 * n], F[o + 2 * n : o + 3 * n]
+    w = F[o : o + n]
     o += 3 * n
-    S = F[o : o + 6 * n].reshape((n, 6))
+    M = F[o : o + 6 * n].reshape((6, n))
     rix = cols[cols.shape[0] - m :]  # the task rows, after the scenarios' columns
     f = cols.shape[0] - m
     for c in range(n):
@@ -261,6 +361,9 @@ def rcn_gradient_kernel(Jf, J, G, cols, params, F, grad) -> int:  # pragma: no c
             A[r, c] = G[r, c]
     if not eigenpairs(A, m, V, d, work):
         return NO_EIGEN
+    for r in range(6):
+        for c in range(n):
+            M[r, c] = 0.0
     for s in range(f):
         i = cols[s]
         total = 0.0
@@ -280,20 +383,13 @@ def rcn_gradient_kernel(Jf, J, G, cols, params, F, grad) -> int:  # pragma: no c
         smax, sminr = math.sqrt(max(hi, 0.0)), math.sqrt(max(lo, 0.0))
         if not sminr > smax / params[P_SINGULAR]:  # a singular reduced robot: no term (eq. S1)
             continue
-        for r in range(m):
-            for c in range(m):
-                W[r, c] = (G[r, c] if c <= r else G[c, r]) - J[r, i] * J[c, i]
-        if not _eigenvector(W, V, d, z, hi, True, umax, y, M, m):
+        if not _extreme_vectors(G, J, V, d, z, W, Mlu, lo, hi, i, umin, umax, y):
             return NO_EIGEN
-        if not _eigenvector(W, V, d, z, lo, False, umin, y, M, m):
-            return NO_EIGEN
-        _derivative(Jf, rix, i, umax, ut, w, S, Dmax, n, m)
-        _derivative(Jf, rix, i, umin, ut, w, S, Dmin, n, m)
         smin = max(sminr, smax / params[P_RCN_MAX])
         k = smax / smin
-        cmax, cmin = 2.0 * k / smin, 2.0 * k * smax / (smin * smin)
-        for c in range(n):
-            grad[c] += cmax * Dmax[c] - cmin * Dmin[c]
+        _accumulate(J, rix, i, umax, 2.0 * k / smin, w, M, n, m)
+        _accumulate(J, rix, i, umin, -2.0 * k * smax / (smin * smin), w, M, n, m)
+    matrix_contract(Jf, M, grad)
     return OK
 
 
