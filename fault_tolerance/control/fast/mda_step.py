@@ -248,13 +248,14 @@ def matrix_contract(Jf, M, grad) -> None:  # pragma: no cover - numba
         grad[j] += Jf[0, j] * p0 + Jf[1, j] * p1 + Jf[2, j] * p2
 
 
-# Eqn. (H6): u ∝ V (diag(d) − μ)⁻¹ Vᵀ J_i, kept when ‖(W_S − μ) u‖ ≤ RESIDUAL_TOL m ε λ_max(G).
+# Eqn. (H6): y = (diag(d) − μ)⁻¹ z / ‖·‖ (u = V y), kept when ‖(diag(d) − z zᵀ − μ) y‖ ≤ 8 m ε d_m.
 @njit
-def _secular_vector(G, J, V, d, z, mu, top, i, u, y, m) -> bool:  # pragma: no cover - numba
-    """The closed-form unit eigenvector of ``W = G − J_i J_iᵀ`` for ``μ`` (eq. H6) into ``u``.
+def _secular_vector(d, z, mu, y, m) -> bool:  # pragma: no cover - numba
+    """The closed-form unit eigenvector of ``diag(d) − z zᵀ`` for ``μ`` (eq. H6) into ``y``.
 
-    True when its residual ``‖G u − J_i (J_iᵀ u) − μ u‖`` is at rounding level (then it is as
-    accurate as inverse iteration would make it); False sends the caller to :func:`_eigenvector`.
+    ``y`` is ``Vᵀu`` of the eigenvector ``u`` of ``W_S = G − J_i J_iᵀ`` (``z = Vᵀ J_i``). True
+    when its residual in that basis is at rounding level (then ``u`` is as accurate as a
+    backward-stable solver's); False sends the caller to :func:`_eigenvector`.
     """
     tiny = _EPS * max(abs(d[m - 1]), 1e-300)
     for k in range(m):
@@ -264,62 +265,67 @@ def _secular_vector(G, J, V, d, z, mu, top, i, u, y, m) -> bool:  # pragma: no c
         y[k] = z[k] / den
     if not _unit(y, m):
         return False
-    ji = 0.0
-    for r in range(m):
-        s = 0.0
-        for k in range(m):
-            s += V[r, k] * y[k]
-        u[r] = s
-        ji += J[r, i] * s
+    zy = 0.0
+    for k in range(m):
+        zy += z[k] * y[k]
     res = 0.0
-    for r in range(m):
-        s = -mu * u[r] - J[r, i] * ji
-        for c in range(m):
-            s += (G[r, c] if c <= r else G[c, r]) * u[c]
-        res += s * s
+    for k in range(m):
+        r = (d[k] - mu) * y[k] - z[k] * zy
+        res += r * r
     return math.sqrt(res) <= RESIDUAL_TOL * m * _EPS * max(abs(d[m - 1]), 1e-300)
 
 
 @njit
-def _accumulate(J, rix, i, u, coef, w, M, n, m) -> None:  # pragma: no cover - numba
-    """``M[rix] += coef · u xᵀ`` with ``x = J_Sᵀu / ‖J_Sᵀu‖`` (column ``i`` locked: ``x_i = 0``).
+def _accumulate(Z, i, y, coef, w, M, n, m) -> None:  # pragma: no cover - numba
+    """``M += coef · y xᵀ`` with ``x = J_Sᵀu / ‖J_Sᵀu‖ = Zᵀy / ‖·‖`` (``x_i = 0``: ``i`` locked).
 
-    ``w`` (n) scratch: ``J_Sᵀu``, formed once.
+    ``Z = Vᵀ J``, ``y = Vᵀ u``; ``M`` (m, n) in the eigenbasis of ``G``; ``w`` (n) scratch.
     """
     s = 0.0
     for c in range(n):
-        t = 0.0
-        if c != i:
-            for k in range(m):
-                t += J[k, c] * u[k]
-        w[c] = t
-        s += t * t
+        w[c] = 0.0
+    for k in range(m):
+        yk = y[k]
+        for c in range(n):
+            w[c] += Z[k, c] * yk
+    w[i] = 0.0
+    for c in range(n):
+        s += w[c] * w[c]
     if not s > 0.0:
         return
     f = coef / math.sqrt(s)
     for k in range(m):
-        row, uk = rix[k], u[k] * f
+        yk = y[k] * f
         for c in range(n):
-            M[row, c] += uk * w[c]
+            M[k, c] += yk * w[c]
 
 
 @njit
-def _extreme_vectors(G, J, V, d, z, W, M, lo, hi, i, umin, umax, y) -> bool:  # pragma: no cover
-    """Unit eigenvectors of ``W_S`` for ``λ_min = lo`` and ``λ_max = hi`` (eq. H6, else LU).
+def _extreme_vectors(G, J, V, d, z, W, M, lo, hi, i, ymin, ymax, y) -> bool:  # pragma: no cover
+    """``Vᵀu`` of the unit eigenvectors of ``W_S`` for ``λ_min = lo``, ``λ_max = hi`` (H6, else LU).
 
-    ``W`` and ``M`` (m, m) scratch, formed only when a closed form is refused; ``y`` 2 m numbers.
+    ``W`` and ``M`` (m, m) scratch, formed only when a closed form is refused; ``y`` 3 m numbers.
     """
     m = J.shape[0]
-    okx = _secular_vector(G, J, V, d, z, hi, True, i, umax, y, m)
-    okn = _secular_vector(G, J, V, d, z, lo, False, i, umin, y, m)
+    okx = _secular_vector(d, z, hi, ymax, m)
+    okn = _secular_vector(d, z, lo, ymin, m)
     if okx and okn:
         return True
     for r in range(m):
         for c in range(m):
             W[r, c] = (G[r, c] if c <= r else G[c, r]) - J[r, i] * J[c, i]
-    if not okx and not _eigenvector(W, V, d, z, hi, True, umax, y, M, m):
-        return False
-    return okn or _eigenvector(W, V, d, z, lo, False, umin, y, M, m)
+    for ok, mu, top, out in ((okx, hi, True, ymax), (okn, lo, False, ymin)):
+        if ok:
+            continue
+        u = y[2 * m : 3 * m]
+        if not _eigenvector(W, V, d, z, mu, top, u, y, M, m):
+            return False
+        for k in range(m):  # back to the eigenbasis: Vᵀu
+            t = 0.0
+            for r in range(m):
+                t += V[r, k] * u[r]
+            out[k] = t
+    return True
 
 
 @njit
@@ -329,27 +335,25 @@ def rcn_gradient_kernel(Jf, J, G, cols, params, F, grad) -> int:  # pragma: no c
     ``J`` (m, n) the task rows of ``Jf``, ``G = J Jᵀ`` (lower triangle read). Per scenario
     :math:`\partial(k^2)/\partial q_j = 2k(\sigma'_{max}\sigma_{min} -
     \sigma_{max}\sigma'_{min})/\sigma_{min}^2` with ``σ_min`` floored at ``σ_max / RCN_MAX`` and
-    ``σ' = uᵀ(∂J_S/∂q_j)v``; singular reduced robots add nothing (eq. S1). The vectors of all
-    scenarios are summed into one ``6 × n`` matrix, contracted with the Hessian once (eq. H5).
+    ``σ' = uᵀ(∂J_S/∂q_j)v``; singular reduced robots add nothing (eq. S1). Everything per
+    scenario is done in the eigenbasis of ``G`` (``Z = VᵀJ`` once; eq. H6); the vectors of all
+    scenarios are summed into one matrix, rotated back and contracted with the Hessian once (H5).
     ``F`` scratch of :func:`gradient_scratch` numbers. Returns :data:`OK` or :data:`NO_EIGEN`.
     """
     m, n = J.shape
     V, A = F[0 : m * m].reshape((m, m)), F[m * m : 2 * m * m].reshape((m, m))
     Mlu, W = F[2 * m * m : 3 * m * m].reshape((m, m)), F[3 * m * m : 4 * m * m].reshape((m, m))
     o = 4 * m * m
-    d, z, u2, y = (
-        F[o : o + m],
-        F[o + m : o + 2 * m],
-        F[o + 2 * m : o + 3 * m],
-        F[o + 3 * m : o + 5 * m],
-    )
-    umin, umax = F[o + 5 * m : o + 6 * m], F[o + 6 * m : o + 7 * m]
-    o += 7 * m + 6
+    d, u2, y = F[o : o + m], F[o + m : o + 2 * m], F[o + 2 * m : o + 5 * m]
+    ymin, ymax, z = F[o + 5 * m : o + 6 * m], F[o + 6 * m : o + 7 * m], F[o + 7 * m : o + 8 * m]
+    o += 8 * m
     work = F[o : o + 2 * m]
     o += 2 * m
     w = F[o : o + n]
-    o += 3 * n
+    o += n
     M = F[o : o + 6 * n].reshape((6, n))
+    o += 6 * n
+    Z, Me = F[o : o + m * n].reshape((m, n)), F[o + m * n : o + 2 * m * n].reshape((m, n))
     rix = cols[cols.shape[0] - m :]  # the task rows, after the scenarios' columns
     f = cols.shape[0] - m
     for c in range(n):
@@ -361,18 +365,20 @@ def rcn_gradient_kernel(Jf, J, G, cols, params, F, grad) -> int:  # pragma: no c
             A[r, c] = G[r, c]
     if not eigenpairs(A, m, V, d, work):
         return NO_EIGEN
-    for r in range(6):
+    for k in range(m):  # Z = Vᵀ J, Me = 0
         for c in range(n):
-            M[r, c] = 0.0
+            Z[k, c] = 0.0
+            Me[k, c] = 0.0
+        for r in range(m):
+            v = V[r, k]
+            for c in range(n):
+                Z[k, c] += v * J[r, c]
     for s in range(f):
         i = cols[s]
         total = 0.0
         for k in range(m):
-            t = 0.0
-            for r in range(m):
-                t += V[r, k] * J[r, i]
-            z[k] = t
-            u2[k] = t * t
+            z[k] = Z[k, i]
+            u2[k] = z[k] * z[k]
             total += u2[k]
         lo, ok = lowest_root(d, u2, m, total)
         if not ok:
@@ -383,12 +389,21 @@ def rcn_gradient_kernel(Jf, J, G, cols, params, F, grad) -> int:  # pragma: no c
         smax, sminr = math.sqrt(max(hi, 0.0)), math.sqrt(max(lo, 0.0))
         if not sminr > smax / params[P_SINGULAR]:  # a singular reduced robot: no term (eq. S1)
             continue
-        if not _extreme_vectors(G, J, V, d, z, W, Mlu, lo, hi, i, umin, umax, y):
+        if not _extreme_vectors(G, J, V, d, z, W, Mlu, lo, hi, i, ymin, ymax, y):
             return NO_EIGEN
         smin = max(sminr, smax / params[P_RCN_MAX])
         k = smax / smin
-        _accumulate(J, rix, i, umax, 2.0 * k / smin, w, M, n, m)
-        _accumulate(J, rix, i, umin, -2.0 * k * smax / (smin * smin), w, M, n, m)
+        _accumulate(Z, i, ymax, 2.0 * k / smin, w, Me, n, m)
+        _accumulate(Z, i, ymin, -2.0 * k * smax / (smin * smin), w, Me, n, m)
+    for r in range(6):
+        for c in range(n):
+            M[r, c] = 0.0
+    for r in range(m):  # M[rix] = V Me: back to the task rows
+        row = rix[r]
+        for k in range(m):
+            v = V[r, k]
+            for c in range(n):
+                M[row, c] += v * Me[k, c]
     matrix_contract(Jf, M, grad)
     return OK
 
@@ -396,7 +411,7 @@ def rcn_gradient_kernel(Jf, J, G, cols, params, F, grad) -> int:  # pragma: no c
 @njit
 def gradient_scratch(m, n):  # pragma: no cover - numba
     """Length of the scratch ``F`` of :func:`rcn_gradient_kernel`."""
-    return 4 * m * m + 9 * m + 6 + 9 * n
+    return 4 * m * m + 10 * m + 7 * n + 2 * m * n
 
 
 @njit
