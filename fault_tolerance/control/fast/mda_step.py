@@ -301,30 +301,24 @@ def _accumulate(Z, i, y, coef, w, M, n, m) -> None:  # pragma: no cover - numba
 
 
 @njit
-def _extreme_vectors(G, J, V, d, z, W, M, lo, hi, i, ymin, ymax, y) -> bool:  # pragma: no cover
-    """``Vᵀu`` of the unit eigenvectors of ``W_S`` for ``λ_min = lo``, ``λ_max = hi`` (H6, else LU).
+def _refine(G, J, V, d, z, W, M, mu, top, i, out, y) -> bool:  # pragma: no cover - numba
+    """``out = Vᵀu``, ``u`` the unit eigenvector of ``W_S`` for ``μ`` by inverse iteration.
 
-    ``W`` and ``M`` (m, m) scratch, formed only when a closed form is refused; ``y`` 3 m numbers.
+    For the vectors whose closed form (eq. H6) was refused. ``W`` and ``M`` (m, m) scratch;
+    ``y`` 3 m numbers.
     """
     m = J.shape[0]
-    okx = _secular_vector(d, z, hi, ymax, m)
-    okn = _secular_vector(d, z, lo, ymin, m)
-    if okx and okn:
-        return True
     for r in range(m):
         for c in range(m):
             W[r, c] = (G[r, c] if c <= r else G[c, r]) - J[r, i] * J[c, i]
-    for ok, mu, top, out in ((okx, hi, True, ymax), (okn, lo, False, ymin)):
-        if ok:
-            continue
-        u = y[2 * m : 3 * m]
-        if not _eigenvector(W, V, d, z, mu, top, u, y, M, m):
-            return False
-        for k in range(m):  # back to the eigenbasis: Vᵀu
-            t = 0.0
-            for r in range(m):
-                t += V[r, k] * u[r]
-            out[k] = t
+    u = y[2 * m : 3 * m]
+    if not _eigenvector(W, V, d, z, mu, top, u, y, M, m):
+        return False
+    for k in range(m):  # back to the eigenbasis: Vᵀu
+        t = 0.0
+        for r in range(m):
+            t += V[r, k] * u[r]
+        out[k] = t
     return True
 
 
@@ -389,23 +383,34 @@ def rcn_gradient_kernel(Jf, J, G, cols, params, F, grad) -> int:  # pragma: no c
         smax, sminr = math.sqrt(max(hi, 0.0)), math.sqrt(max(lo, 0.0))
         if not sminr > smax / params[P_SINGULAR]:  # a singular reduced robot: no term (eq. S1)
             continue
-        if not _extreme_vectors(G, J, V, d, z, W, Mlu, lo, hi, i, ymin, ymax, y):
-            return NO_EIGEN
+        if not _secular_vector(d, z, hi, ymax, m):  # eq. (H6), else inverse iteration
+            if not _refine(G, J, V, d, z, W, Mlu, hi, True, i, ymax, y):
+                return NO_EIGEN
+        if not _secular_vector(d, z, lo, ymin, m):
+            if not _refine(G, J, V, d, z, W, Mlu, lo, False, i, ymin, y):
+                return NO_EIGEN
         smin = max(sminr, smax / params[P_RCN_MAX])
         k = smax / smin
         _accumulate(Z, i, ymax, 2.0 * k / smin, w, Me, n, m)
         _accumulate(Z, i, ymin, -2.0 * k * smax / (smin * smin), w, Me, n, m)
+    _rotate_back(V, Me, rix, M)
+    matrix_contract(Jf, M, grad)
+    return OK
+
+
+@njit
+def _rotate_back(V, Me, rix, M) -> None:  # pragma: no cover - numba
+    """``M[rix] = V Me`` (the eigenbasis sum back on the task rows), zero elsewhere."""
+    m, n = Me.shape
     for r in range(6):
         for c in range(n):
             M[r, c] = 0.0
-    for r in range(m):  # M[rix] = V Me: back to the task rows
+    for r in range(m):
         row = rix[r]
         for k in range(m):
             v = V[r, k]
             for c in range(n):
                 M[row, c] += v * Me[k, c]
-    matrix_contract(Jf, M, grad)
-    return OK
 
 
 @njit
