@@ -5,12 +5,12 @@
 
 * the certificate and the least-norm rates as the LNVA / JVJA step (:mod:`.step`): one Cholesky
   factor of ``G = J Jᵀ``, ``trace(G⁻¹) ≤ TRACE_MAX``, ``Y = L⁻¹J``, ``a = Yᵀ(L⁻¹ẋ)``;
-* ``∇K`` (:func:`rcn_gradient_kernel`, eq. 15 and its gradient): ``G = V diag(d) Vᵀ`` once; each
-  scenario's ``W_S = G − J_i J_iᵀ`` by its secular equation (the extreme eigenvalues,
-  :mod:`fault_tolerance.numerics.fast.rank_one_eigen`), the eigenvectors from the secular formula
-  ``u ∝ V (diag(d) − μ)⁻¹ Vᵀ J_i`` refined by one inverse-iteration step on ``W_S − μ I``;
-  ``∂λ/∂q_j = 2 ũᵀ (∂J/∂q_j) J_Sᵀ u`` with the kinematic Hessian never formed (eq. H1, suffix
-  sums, ``O(n)`` per vector);
+* ``∇K`` (:func:`rcn_gradient_kernel`, eq. 15 and its gradient): ``G = V diag(d) Vᵀ`` once and
+  ``Z = VᵀJ``; each scenario's ``W_S = G − J_i J_iᵀ`` by its secular equation (the extreme
+  eigenvalues, :mod:`fault_tolerance.numerics.fast.rank_one_eigen`), the eigenvectors in that
+  basis in closed form ``y ∝ (diag(d) − μ)⁻¹ z`` (eq. H6; inverse iteration on ``W_S − μ I`` when
+  the residual refuses one); ``∂λ/∂q_j = 2 ũᵀ (∂J/∂q_j) J_Sᵀ u`` summed over all the vectors
+  into one matrix and contracted with the kinematic Hessian once, never formed (eq. H5, ``O(n)``);
 * the singular reduced robots (``σ_min ≤ σ_max / RCN_SINGULAR``) add nothing (eq. S1), as in the
   reference :func:`fault_tolerance.resolution.indices.rcn_gradient`;
 * the null step ``α N ∇K = α(∇K − Yᵀ(Y ∇K))``, capped at ``max_step`` as
