@@ -88,6 +88,25 @@ def test_hessian_contraction_equals_the_kinematic_hessian():
             np.testing.assert_allclose(D, np.einsum("i,jik,k->j", u, dJ, x), atol=1e-12)
 
 
+def test_matrix_contraction_equals_the_kinematic_hessian():
+    """matrix_contract (H5) equals Σ M[r, k] (∂J/∂q_j)[r, k] from Arm.jacobian_derivatives, 1e-12."""
+    rng = np.random.default_rng(SEED)
+    for arm in (ft.load_arm("panda", task="pose"), ft.load_arm("spatial_4r")):
+        data = arm.model.createData()
+        rows = np.arange(6)[np.asarray(arm.rows)]
+        for _ in range(5):
+            q = arm.random_q(rng)
+            Jf = pin.computeFrameJacobian(arm.model, data, q, arm.frame_id, pin.LOCAL_WORLD_ALIGNED)
+            dJ = arm.jacobian_derivatives(q)
+            Mt = rng.standard_normal((arm.m, arm.n))
+            M = np.zeros((6, arm.n))
+            M[rows] = Mt
+            g = np.zeros(arm.n)
+            ms.matrix_contract(Jf, M, g)
+            np.testing.assert_allclose(g, np.einsum("ik,jik->j", Mt, dJ), atol=1e-12)
+            assert np.abs(g).max() > 1e-3  # not trivially zero
+
+
 def test_plain_python_kernel_equals_the_compiled_one():
     """mda_kernel.py_func (no numba) gives the compiled kernel's rates to 1e-13."""
     arm = ft.load_arm("spatial_4r")

@@ -5,12 +5,12 @@
 
 * the certificate and the least-norm rates as the LNVA / JVJA step (:mod:`.step`): one Cholesky
   factor of ``G = J Jᵀ``, ``trace(G⁻¹) ≤ TRACE_MAX``, ``Y = L⁻¹J``, ``a = Yᵀ(L⁻¹ẋ)``;
-* ``∇K`` (:func:`rcn_gradient_kernel`, eq. 15 and its gradient): ``G = V diag(d) Vᵀ`` once; each
-  scenario's ``W_S = G − J_i J_iᵀ`` by its secular equation (the extreme eigenvalues,
-  :mod:`fault_tolerance.numerics.fast.rank_one_eigen`), the eigenvectors from the secular formula
-  ``u ∝ V (diag(d) − μ)⁻¹ Vᵀ J_i`` refined by one inverse-iteration step on ``W_S − μ I``;
-  ``∂λ/∂q_j = 2 ũᵀ (∂J/∂q_j) J_Sᵀ u`` with the kinematic Hessian never formed (eq. H1, suffix
-  sums, ``O(n)`` per vector);
+* ``∇K`` (:func:`rcn_gradient_kernel`, eq. 15 and its gradient): ``G = V diag(d) Vᵀ`` once and
+  ``Z = VᵀJ``; each scenario's ``W_S = G − J_i J_iᵀ`` by its secular equation (the extreme
+  eigenvalues, :mod:`fault_tolerance.numerics.fast.rank_one_eigen`), the eigenvectors in that
+  basis in closed form ``y ∝ (diag(d) − μ)⁻¹ z`` (eq. H6; inverse iteration on ``W_S − μ I`` when
+  the residual refuses one); ``∂λ/∂q_j = 2 ũᵀ (∂J/∂q_j) J_Sᵀ u`` summed over all the vectors
+  into one matrix and contracted with the kinematic Hessian once, never formed (eq. H5, ``O(n)``);
 * the singular reduced robots (``σ_min ≤ σ_max / RCN_SINGULAR``) add nothing (eq. S1), as in the
   reference :func:`fault_tolerance.resolution.indices.rcn_gradient`;
 * the null step ``α N ∇K = α(∇K − Yᵀ(Y ∇K))``, capped at ``max_step`` as
@@ -55,6 +55,8 @@ __all__ = [
 
 _INF = math.inf
 _EPS = 2.220446049250313e-16
+#: A closed-form eigenvector (eq. H6) is kept when its residual is below this many ``m ε λ_max``.
+RESIDUAL_TOL = 8.0
 #: Entries of the parameter block (the first of the float workspace).
 P_TRACE, P_RANK, P_GAIN, P_MAXSTEP, P_RCN_MAX, P_SINGULAR = range(6)
 N_PARAMS = 6
@@ -219,6 +221,107 @@ def _derivative(Jf, rix, i, u, ut, w, S, D, n, m) -> None:  # pragma: no cover -
     hessian_contract(Jf, ut, w, S, D)
 
 
+# Eqn. (H5): ∇_j = ω_j · Σ_{k>j} c_k + a_j · Σ_{k≤j} e_k, c_k = a_k × M_lin,k + ω_k × M_ang,k,
+# e_k = M_lin,k × ω_k: all the vectors' contractions (H1) at once, from M = Σ_t c_t ũ_t x_tᵀ.
+@njit
+def matrix_contract(Jf, M, grad) -> None:  # pragma: no cover - numba
+    r"""``grad_j = Σ_{r,k} M[r, k] (∂J/∂q_j)[r, k]`` for every joint j (eq. H5), ``O(n)``.
+
+    ``M`` (6, n), zero off the task rows; the Hessian never formed. With ``M = ũ xᵀ`` this is
+    :func:`hessian_contract`; a sum of such terms is contracted in one pass.
+    """
+    n = Jf.shape[1]
+    s0, s1, s2 = 0.0, 0.0, 0.0  # Σ_{k>j} c_k, built from the end
+    for j in range(n - 1, -1, -1):
+        grad[j] = Jf[3, j] * s0 + Jf[4, j] * s1 + Jf[5, j] * s2
+        a0, a1, a2, w0, w1, w2 = Jf[0, j], Jf[1, j], Jf[2, j], Jf[3, j], Jf[4, j], Jf[5, j]
+        l0, l1, l2, g0, g1, g2 = M[0, j], M[1, j], M[2, j], M[3, j], M[4, j], M[5, j]
+        s0 += a1 * l2 - a2 * l1 + w1 * g2 - w2 * g1
+        s1 += a2 * l0 - a0 * l2 + w2 * g0 - w0 * g2
+        s2 += a0 * l1 - a1 * l0 + w0 * g1 - w1 * g0
+    p0, p1, p2 = 0.0, 0.0, 0.0  # Σ_{k≤j} e_k
+    for j in range(n):
+        l0, l1, l2, w0, w1, w2 = M[0, j], M[1, j], M[2, j], Jf[3, j], Jf[4, j], Jf[5, j]
+        p0 += l1 * w2 - l2 * w1
+        p1 += l2 * w0 - l0 * w2
+        p2 += l0 * w1 - l1 * w0
+        grad[j] += Jf[0, j] * p0 + Jf[1, j] * p1 + Jf[2, j] * p2
+
+
+# Eqn. (H6): y = (diag(d) − μ)⁻¹ z / ‖·‖ (u = V y), kept when ‖(diag(d) − z zᵀ − μ) y‖ ≤ 8 m ε d_m.
+@njit
+def _secular_vector(d, z, mu, y, m) -> bool:  # pragma: no cover - numba
+    """The closed-form unit eigenvector of ``diag(d) − z zᵀ`` for ``μ`` (eq. H6) into ``y``.
+
+    ``y`` is ``Vᵀu`` of the eigenvector ``u`` of ``W_S = G − J_i J_iᵀ`` (``z = Vᵀ J_i``). True
+    when its residual in that basis is at rounding level (then ``u`` is as accurate as a
+    backward-stable solver's); False sends the caller to :func:`_eigenvector`.
+    """
+    tiny = _EPS * max(abs(d[m - 1]), 1e-300)
+    for k in range(m):
+        den = d[k] - mu
+        if abs(den) < tiny:
+            den = tiny if den >= 0.0 else -tiny
+        y[k] = z[k] / den
+    if not _unit(y, m):
+        return False
+    zy = 0.0
+    for k in range(m):
+        zy += z[k] * y[k]
+    res = 0.0
+    for k in range(m):
+        r = (d[k] - mu) * y[k] - z[k] * zy
+        res += r * r
+    return math.sqrt(res) <= RESIDUAL_TOL * m * _EPS * max(abs(d[m - 1]), 1e-300)
+
+
+@njit
+def _accumulate(Z, i, y, coef, w, M, n, m) -> None:  # pragma: no cover - numba
+    """``M += coef · y xᵀ`` with ``x = J_Sᵀu / ‖J_Sᵀu‖ = Zᵀy / ‖·‖`` (``x_i = 0``: ``i`` locked).
+
+    ``Z = Vᵀ J``, ``y = Vᵀ u``; ``M`` (m, n) in the eigenbasis of ``G``; ``w`` (n) scratch.
+    """
+    s = 0.0
+    for c in range(n):
+        w[c] = 0.0
+    for k in range(m):
+        yk = y[k]
+        for c in range(n):
+            w[c] += Z[k, c] * yk
+    w[i] = 0.0
+    for c in range(n):
+        s += w[c] * w[c]
+    if not s > 0.0:
+        return
+    f = coef / math.sqrt(s)
+    for k in range(m):
+        yk = y[k] * f
+        for c in range(n):
+            M[k, c] += yk * w[c]
+
+
+@njit
+def _refine(G, J, V, d, z, W, M, mu, top, i, out, y) -> bool:  # pragma: no cover - numba
+    """``out = Vᵀu``, ``u`` the unit eigenvector of ``W_S`` for ``μ`` by inverse iteration.
+
+    For the vectors whose closed form (eq. H6) was refused. ``W`` and ``M`` (m, m) scratch;
+    ``y`` 3 m numbers.
+    """
+    m = J.shape[0]
+    for r in range(m):
+        for c in range(m):
+            W[r, c] = (G[r, c] if c <= r else G[c, r]) - J[r, i] * J[c, i]
+    u = y[2 * m : 3 * m]
+    if not _eigenvector(W, V, d, z, mu, top, u, y, M, m):
+        return False
+    for k in range(m):  # back to the eigenbasis: Vᵀu
+        t = 0.0
+        for r in range(m):
+            t += V[r, k] * u[r]
+        out[k] = t
+    return True
+
+
 @njit
 def rcn_gradient_kernel(Jf, J, G, cols, params, F, grad) -> int:  # pragma: no cover - numba
     r"""``∇K``, ``K = Σ_S k_S²`` over the single-joint scenarios ``cols`` (eq. 15), into ``grad``.
@@ -226,30 +329,25 @@ def rcn_gradient_kernel(Jf, J, G, cols, params, F, grad) -> int:  # pragma: no c
     ``J`` (m, n) the task rows of ``Jf``, ``G = J Jᵀ`` (lower triangle read). Per scenario
     :math:`\partial(k^2)/\partial q_j = 2k(\sigma'_{max}\sigma_{min} -
     \sigma_{max}\sigma'_{min})/\sigma_{min}^2` with ``σ_min`` floored at ``σ_max / RCN_MAX`` and
-    ``σ' = uᵀ(∂J_S/∂q_j)v``; singular reduced robots add nothing (eq. S1). ``F`` scratch of
-    :func:`gradient_scratch` numbers. Returns :data:`OK` or :data:`NO_EIGEN`.
+    ``σ' = uᵀ(∂J_S/∂q_j)v``; singular reduced robots add nothing (eq. S1). Everything per
+    scenario is done in the eigenbasis of ``G`` (``Z = VᵀJ`` once; eq. H6); the vectors of all
+    scenarios are summed into one matrix, rotated back and contracted with the Hessian once (H5).
+    ``F`` scratch of :func:`gradient_scratch` numbers. Returns :data:`OK` or :data:`NO_EIGEN`.
     """
     m, n = J.shape
     V, A = F[0 : m * m].reshape((m, m)), F[m * m : 2 * m * m].reshape((m, m))
-    M, W = F[2 * m * m : 3 * m * m].reshape((m, m)), F[3 * m * m : 4 * m * m].reshape((m, m))
+    Mlu, W = F[2 * m * m : 3 * m * m].reshape((m, m)), F[3 * m * m : 4 * m * m].reshape((m, m))
     o = 4 * m * m
-    d, z, u2, y = (
-        F[o : o + m],
-        F[o + m : o + 2 * m],
-        F[o + 2 * m : o + 3 * m],
-        F[o + 3 * m : o + 5 * m],
-    )
-    umin, umax, ut = (
-        F[o + 5 * m : o + 6 * m],
-        F[o + 6 * m : o + 7 * m],
-        F[o + 7 * m : o + 7 * m + 6],
-    )
-    o += 7 * m + 6
+    d, u2, y = F[o : o + m], F[o + m : o + 2 * m], F[o + 2 * m : o + 5 * m]
+    ymin, ymax, z = F[o + 5 * m : o + 6 * m], F[o + 6 * m : o + 7 * m], F[o + 7 * m : o + 8 * m]
+    o += 8 * m
     work = F[o : o + 2 * m]
     o += 2 * m
-    w, Dmax, Dmin = F[o : o + n], F[o + n : o + 2 * n], F[o + 2 * n : o + 3 * n]
-    o += 3 * n
-    S = F[o : o + 6 * n].reshape((n, 6))
+    w = F[o : o + n]
+    o += n
+    M = F[o : o + 6 * n].reshape((6, n))
+    o += 6 * n
+    Z, Me = F[o : o + m * n].reshape((m, n)), F[o + m * n : o + 2 * m * n].reshape((m, n))
     rix = cols[cols.shape[0] - m :]  # the task rows, after the scenarios' columns
     f = cols.shape[0] - m
     for c in range(n):
@@ -261,15 +359,20 @@ def rcn_gradient_kernel(Jf, J, G, cols, params, F, grad) -> int:  # pragma: no c
             A[r, c] = G[r, c]
     if not eigenpairs(A, m, V, d, work):
         return NO_EIGEN
+    for k in range(m):  # Z = Vᵀ J, Me = 0
+        for c in range(n):
+            Z[k, c] = 0.0
+            Me[k, c] = 0.0
+        for r in range(m):
+            v = V[r, k]
+            for c in range(n):
+                Z[k, c] += v * J[r, c]
     for s in range(f):
         i = cols[s]
         total = 0.0
         for k in range(m):
-            t = 0.0
-            for r in range(m):
-                t += V[r, k] * J[r, i]
-            z[k] = t
-            u2[k] = t * t
+            z[k] = Z[k, i]
+            u2[k] = z[k] * z[k]
             total += u2[k]
         lo, ok = lowest_root(d, u2, m, total)
         if not ok:
@@ -280,27 +383,40 @@ def rcn_gradient_kernel(Jf, J, G, cols, params, F, grad) -> int:  # pragma: no c
         smax, sminr = math.sqrt(max(hi, 0.0)), math.sqrt(max(lo, 0.0))
         if not sminr > smax / params[P_SINGULAR]:  # a singular reduced robot: no term (eq. S1)
             continue
-        for r in range(m):
-            for c in range(m):
-                W[r, c] = (G[r, c] if c <= r else G[c, r]) - J[r, i] * J[c, i]
-        if not _eigenvector(W, V, d, z, hi, True, umax, y, M, m):
-            return NO_EIGEN
-        if not _eigenvector(W, V, d, z, lo, False, umin, y, M, m):
-            return NO_EIGEN
-        _derivative(Jf, rix, i, umax, ut, w, S, Dmax, n, m)
-        _derivative(Jf, rix, i, umin, ut, w, S, Dmin, n, m)
+        if not _secular_vector(d, z, hi, ymax, m):  # eq. (H6), else inverse iteration
+            if not _refine(G, J, V, d, z, W, Mlu, hi, True, i, ymax, y):
+                return NO_EIGEN
+        if not _secular_vector(d, z, lo, ymin, m):
+            if not _refine(G, J, V, d, z, W, Mlu, lo, False, i, ymin, y):
+                return NO_EIGEN
         smin = max(sminr, smax / params[P_RCN_MAX])
         k = smax / smin
-        cmax, cmin = 2.0 * k / smin, 2.0 * k * smax / (smin * smin)
-        for c in range(n):
-            grad[c] += cmax * Dmax[c] - cmin * Dmin[c]
+        _accumulate(Z, i, ymax, 2.0 * k / smin, w, Me, n, m)
+        _accumulate(Z, i, ymin, -2.0 * k * smax / (smin * smin), w, Me, n, m)
+    _rotate_back(V, Me, rix, M)
+    matrix_contract(Jf, M, grad)
     return OK
+
+
+@njit
+def _rotate_back(V, Me, rix, M) -> None:  # pragma: no cover - numba
+    """``M[rix] = V Me`` (the eigenbasis sum back on the task rows), zero elsewhere."""
+    m, n = Me.shape
+    for r in range(6):
+        for c in range(n):
+            M[r, c] = 0.0
+    for r in range(m):
+        row = rix[r]
+        for k in range(m):
+            v = V[r, k]
+            for c in range(n):
+                M[row, c] += v * Me[k, c]
 
 
 @njit
 def gradient_scratch(m, n):  # pragma: no cover - numba
     """Length of the scratch ``F`` of :func:`rcn_gradient_kernel`."""
-    return 4 * m * m + 9 * m + 6 + 9 * n
+    return 4 * m * m + 10 * m + 7 * n + 2 * m * n
 
 
 @njit
