@@ -14,6 +14,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from fault_tolerance.bench.routes import installed, jvja_qp, jvja_slsqp, post_failure_rates_explicit
+from fault_tolerance.bench.scaled_rows import DESCRIPTIONS as SCALED_DESCRIPTIONS
 from fault_tolerance.bench.timing import Row, stats, time_rows
 from fault_tolerance.errors import InvalidInput
 
@@ -63,12 +64,7 @@ DESCRIPTIONS = {
     "jvja_bounded_free": "JVJA step with joint limits on, no bound active (fast step + box check)",
     "jvja_bounded_2": "JVJA step with joint limits on, two joints at a binding bound (bounded QPs)",
     "jvja_bounded_2_qp": "the same bounded JVJA problem by quadprog (f reduced QPs + 1)",
-    "jvja_bounded_scaled": "JVJA step with joint limits on, task scaled (s < 1, most joints at a "
-    "bound)",
-    "lnva_bounded_scaled": "LNVA step with joint limits on, task scaled (s < 1, most joints at a "
-    "bound)",
-    "pink_tick": "one pink QP tick (daqp) of a frame task moved by ẋ h, pink's limits",
-    "qp_soft_task": "one quadprog call: min ½‖J q̇ − ẋ‖² + ½ε‖q̇‖² in the rate box",
+    **SCALED_DESCRIPTIONS,
     "dyn_sample": "one dynamics sample: computed-torque law (RNEA + PD), saturation, one ABA "
     "semi-implicit Euler step (simulation.torque.control_step)",
 }
@@ -317,7 +313,7 @@ GROUPS: list[tuple[str, Callable[[Case], dict[str, Row]], int]] = [
     ("joint limits", _limits_rows, 1),
     ("reference routes", reference_rows, 1),
     ("slow routes", slow_rows, 10),
-    ("task scaled", _scaled_rows, 1000),  # milliseconds a call on a long chain (issue item 5)
+    ("task scaled", _scaled_rows, 1000),  # milliseconds a call on a long chain
 ]
 
 

@@ -2,7 +2,7 @@
 
 * ``jvja_bounded_scaled``, ``lnva_bounded_scaled``: ``Controller(limits=True)`` JVJA and LNVA
   steps on configurations of the pool with ``ẋ`` grown until the task is scaled (L3) and most
-  joints are held at a bound (issue "Exact and honest under limits", item 5: long chains). Their
+  joints are held at a bound (the long chains' cost). Their
   targets compare them to the unbounded steps (``jvja``, ``lnva``) of the same arm;
 * ``pink_tick``: one QP tick of pink (PyPI ``pin-pink``, solver daqp) on the same configurations:
   a frame task whose target is the pose moved by ``ẋ h``, pink's default limits (position and
