@@ -175,13 +175,7 @@ def _eigenvector(W, V, d, z, mu, top, u, y, M, m) -> bool:  # pragma: no cover -
     ``W − μ I`` (one factorisation): exact also where ``J_i`` is (nearly) zero and ``W = G``.
     ``y`` holds ``2 m`` numbers.
     """
-    tiny = _EPS * max(abs(d[m - 1]), 1e-300)
-    for k in range(m):
-        den = d[k] - mu
-        if abs(den) < tiny:
-            den = tiny if den >= 0.0 else -tiny
-        y[k] = z[k] / den
-    if not _unit(y, m):
+    if not _secular_start(d, z, mu, y, m):
         for k in range(m):
             y[k] = 0.0
         y[m - 1 if top else 0] = 1.0
@@ -250,12 +244,10 @@ def matrix_contract(Jf, M, grad) -> None:  # pragma: no cover - numba
 
 # Eqn. (H6): y = (diag(d) − μ)⁻¹ z / ‖·‖ (u = V y), kept when ‖(diag(d) − z zᵀ − μ) y‖ ≤ 8 m ε d_m.
 @njit
-def _secular_vector(d, z, mu, y, m) -> bool:  # pragma: no cover - numba
-    """The closed-form unit eigenvector of ``diag(d) − z zᵀ`` for ``μ`` (eq. H6) into ``y``.
+def _secular_start(d, z, mu, y, m) -> bool:  # pragma: no cover - numba
+    """``y = (diag(d) − μ)⁻¹ z`` normalised (eq. H6), each distance at least ``ε d_m``.
 
-    ``y`` is ``Vᵀu`` of the eigenvector ``u`` of ``W_S = G − J_i J_iᵀ`` (``z = Vᵀ J_i``). True
-    when its residual in that basis is at rounding level (then ``u`` is as accurate as a
-    backward-stable solver's); False sends the caller to :func:`_eigenvector`.
+    False when nothing is left to normalise (``z`` zero where ``μ`` is not a pole).
     """
     tiny = _EPS * max(abs(d[m - 1]), 1e-300)
     for k in range(m):
@@ -263,7 +255,18 @@ def _secular_vector(d, z, mu, y, m) -> bool:  # pragma: no cover - numba
         if abs(den) < tiny:
             den = tiny if den >= 0.0 else -tiny
         y[k] = z[k] / den
-    if not _unit(y, m):
+    return _unit(y, m)
+
+
+@njit
+def _secular_vector(d, z, mu, y, m) -> bool:  # pragma: no cover - numba
+    """The closed-form unit eigenvector of ``diag(d) − z zᵀ`` for ``μ`` (eq. H6) into ``y``.
+
+    ``y`` is ``Vᵀu`` of the eigenvector ``u`` of ``W_S = G − J_i J_iᵀ`` (``z = Vᵀ J_i``). True
+    when its residual in that basis is at rounding level (then ``u`` is as accurate as a
+    backward-stable solver's); False sends the caller to :func:`_eigenvector`.
+    """
+    if not _secular_start(d, z, mu, y, m):
         return False
     zy = 0.0
     for k in range(m):
