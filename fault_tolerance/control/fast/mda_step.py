@@ -34,7 +34,8 @@ from fault_tolerance.control.lapack_steps import _LWA, _STEP_ERRORS, TRACE_MAX
 from fault_tolerance.control.workspace import ControllerWorkspace
 from fault_tolerance.errors import FaultToleranceError
 from fault_tolerance.numerics.fast.dense import (
-    cholesky,
+    cholesky_into,
+    gram_into,
     least_norm,
     null_apply,
     rank_ok,
@@ -423,19 +424,13 @@ def gradient_scratch(m, n):  # pragma: no cover - numba
 
 
 @njit
-def _task_gram(Jf, rix, J, G, L) -> None:  # pragma: no cover - numba
-    """``J = Jf[rix]`` and ``G = J Jᵀ`` into the lower triangles of ``G`` and ``L``."""
+def _task_gram(Jf, rix, J, G) -> None:  # pragma: no cover - numba
+    """``J = Jf[rix]`` and ``G = J Jᵀ`` into the lower triangle of ``G``."""
     m, n = J.shape
     for r in range(m):
         for c in range(n):
             J[r, c] = Jf[rix[r], c]
-    for r in range(m):
-        for c in range(r + 1):
-            s = 0.0
-            for k in range(n):
-                s += J[r, k] * J[c, k]
-            G[r, c] = s
-            L[r, c] = s
+    gram_into(J, G)
 
 
 @njit
@@ -448,9 +443,8 @@ def gradient_kernel(Jf, F, Iw, m) -> int:  # pragma: no cover - numba
     o = N_PARAMS
     J = F[o : o + m * n].reshape((m, n))
     G = F[o + m * n : o + m * n + m * m].reshape((m, m))
-    L = F[o + m * n + m * m : o + m * n + 2 * m * m].reshape((m, m))
     o += 2 * m * n + 2 * m * m + m
-    _task_gram(Jf, Iw[f:], J, G, L)
+    _task_gram(Jf, Iw[f:], J, G)
     return rcn_gradient_kernel(Jf, J, G, Iw, F[0:N_PARAMS], F[o + n :], F[o : o + n])
 
 
@@ -485,8 +479,8 @@ def mda_kernel(Jf, xdot, out, F, Iw) -> int:  # pragma: no cover - numba
     zm, grad = F[o : o + m], F[o + m : o + m + n]
     o += m + n
     scratch = F[o:]
-    _task_gram(Jf, Iw[f:], J, G, L)
-    if not cholesky(L, m):
+    _task_gram(Jf, Iw[f:], J, G)
+    if not cholesky_into(G, L, m):
         return UNCERTIFIED
     tr = trace_inverse(L, zm, m)
     if not tr <= params[P_TRACE] or not rank_ok(J, tr, params[P_RANK]):

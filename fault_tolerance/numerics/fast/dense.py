@@ -49,8 +49,8 @@ def cholesky_into(G, L, m) -> bool:  # pragma: no cover - numba
 
 
 @njit
-def gram_factor(J, G) -> bool:  # pragma: no cover - numba
-    """``G = J Jᵀ`` (lower triangle) and its Cholesky factor ``L``, in place; False unless PD."""
+def gram_into(J, G) -> None:  # pragma: no cover - numba
+    """``G = J Jᵀ`` into the lower triangle of ``G``."""
     m, n = J.shape
     for i in range(m):
         for j in range(i + 1):
@@ -58,7 +58,13 @@ def gram_factor(J, G) -> bool:  # pragma: no cover - numba
             for k in range(n):
                 s += J[i, k] * J[j, k]
             G[i, j] = s
-    return cholesky(G, m)
+
+
+@njit
+def gram_factor(J, G) -> bool:  # pragma: no cover - numba
+    """``G = J Jᵀ`` (lower triangle) and its Cholesky factor ``L``, in place; False unless PD."""
+    gram_into(J, G)
+    return cholesky(G, J.shape[0])
 
 
 @njit
