@@ -22,7 +22,8 @@ LAYERS: tuple[tuple[str, ...], ...] = (
     ("simulation",),
     ("planning",),
     ("analysis",),
-    ("figures", "viz"),
+    ("figures",),
+    ("viz",),
     ("paper", "bench"),
     ("cli", "__main__"),
 )

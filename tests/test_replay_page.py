@@ -20,6 +20,7 @@ from fault_tolerance.simulation.paths import CirclePath
 from fault_tolerance.simulation.simulate import simulate
 
 viz = pytest.importorskip("fault_tolerance.viz")
+from fault_tolerance.figures import scales  # noqa: E402
 from fault_tolerance.viz import charts  # noqa: E402
 from fault_tolerance.viz.page import embed, export_html  # noqa: E402
 from fault_tolerance.viz.server import serve  # noqa: E402
@@ -112,8 +113,8 @@ def test_k_uses_a_log_axis_only_when_it_spans_decades(planar_runs):
     assert 'data-scale="log"' in svg and "log axis" in svg
     ticks = re.findall(r'class="ft-tick">([^<]+)</text>', svg)
     assert {"1", "10", "100", "1000", "1e4", "1e5", "1e6"} <= set(ticks)
-    assert charts.use_log(np.array([1.0, 99.0])) is False
-    assert charts.use_log(np.array([1.0, 101.0])) is True
+    assert scales.use_log(np.array([1.0, 99.0])) is False
+    assert scales.use_log(np.array([1.0, 101.0])) is True
 
 
 def test_decimation_keeps_every_peak():

@@ -9,7 +9,7 @@
 Position errors are drawn in mm and orientation errors in mrad, on separate axes: metres and
 radians are never added (docs/MATH.md, "Notation and units").
 
-K is drawn on a log axis when it spans more than two decades (``viz.svg.LOG_DECADES``, the replay
+K is drawn on a log axis when it spans more than two decades (``figures.scales.LOG_DECADES``, the replay
 page's rule too); every figure has a title (a default one when none is given).
 """
 
@@ -21,6 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from fault_tolerance.figures.colors import DASHES, joint_colour, run_styles
+from fault_tolerance.figures.scales import use_log
 from fault_tolerance.figures.text import plain, wrapped
 from fault_tolerance.simulation.run import Run
 from fault_tolerance.storage.atomic import write_atomic
@@ -84,8 +85,6 @@ def save_figure(fig, stem: str | Path, formats: Sequence[str] = ("png", "svg")) 
 
 def _log_when_decades(ax, values) -> None:
     """A log y axis on ``ax`` when the positive ``values`` span more than LOG_DECADES decades."""
-    from fault_tolerance.viz.svg import use_log
-
     if use_log(np.concatenate([np.ravel(v) for v in values])):
         ax.set_yscale("log")
 

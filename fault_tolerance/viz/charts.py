@@ -4,7 +4,7 @@
 and :func:`plots_html` draws it as three SVG panels for the element ``#ft-plots`` of the replay
 page (:mod:`.page`): (a) the square-sum jump λ(t) of eq. (9)/(10) and, dashed, its per-scenario
 parts ``w_S ‖ˢq̇' − q̇‖²`` (per joint for the usual one-joint scenarios); (b) the square-sum RCN
-K(t) of eq. (15), on a log axis when it spans more than :data:`LOG_DECADES` decades; (c) the joint
+K(t) of eq. (15), on a log axis when it spans more than :data:`~fault_tolerance.figures.scales.LOG_DECADES` decades; (c) the joint
 rates against their velocity limits (dashed). Lock moments are marked on every panel.
 
 Several runs of one command (e.g. the algorithms of one ``simulate``) share the panels: λ and K of
@@ -25,6 +25,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from fault_tolerance.figures.colors import DASHES, JOINT_COLOURS, run_styles
+from fault_tolerance.figures.scales import use_log
 from fault_tolerance.viz.svg import (
     BOTTOM,
     HEIGHT,
@@ -36,7 +37,6 @@ from fault_tolerance.viz.svg import (
     _frame,
     _polyline,
     _range,
-    use_log,
 )
 
 #: Time buckets of the decimation: each keeps the smallest and largest sample of every curve.

@@ -17,8 +17,6 @@ import numpy as np
 # view box of one panel [px]: width, height and the plot area's margins
 WIDTH, HEIGHT = 460.0, 178.0
 LEFT, RIGHT, TOP, BOTTOM = 56.0, 10.0, 24.0, 26.0
-#: K is drawn on a log axis when max K / min K exceeds 10**LOG_DECADES (the figures use the same).
-LOG_DECADES = 2.0
 
 
 def nice_ticks(lo: float, hi: float, count: int = 5) -> list[float]:
@@ -35,13 +33,6 @@ def nice_ticks(lo: float, hi: float, count: int = 5) -> list[float]:
         ticks.append(0.0 if abs(v) < 1e-12 * step else v)
         v += step
     return ticks
-
-
-def use_log(values: np.ndarray) -> bool:
-    """Whether positive ``values`` span more than :data:`LOG_DECADES` decades."""
-    v = np.asarray(values, dtype=float)
-    v = v[np.isfinite(v) & (v > 0)]
-    return len(v) > 1 and math.log10(v.max() / v.min()) > LOG_DECADES
 
 
 def _fmt(v: float) -> str:
