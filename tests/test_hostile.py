@@ -620,18 +620,9 @@ def test_plain_text_in_figures_draws_dollar_names():
 def test_the_page_of_evil_names_renders_and_runs_no_injected_script(evil_run):
     """In headless Chromium the replay of the evil-named arm renders its 3D view and plots, and
     no script but the page's own runs (no page error, no marker set by an injected script)."""
-    chromium = Path("/usr/bin/chromium")
-    if not chromium.exists():
-        pytest.skip(f"{chromium} is not installed (scripts/install_browser.sh installs it)")
-    sync = pytest.importorskip("playwright.sync_api", reason="playwright is not installed")
-    args = [
-        "--no-sandbox",
-        "--disable-gpu",
-        "--disable-background-networking",
-        "--enable-unsafe-swiftshader",
-    ]
-    with sync.sync_playwright() as p:
-        browser = p.chromium.launch(executable_path=str(chromium), args=args, headless=True)
+    from headless import launched
+
+    with launched() as browser:
         page = browser.new_page()
         errors: list[str] = []
         page.on("pageerror", lambda e: errors.append(str(e)))
@@ -646,7 +637,6 @@ def test_the_page_of_evil_names_renders_and_runs_no_injected_script(evil_run):
         assert meshes >= 3
         assert page.evaluate("() => document.querySelectorAll('svg').length") >= 1
         assert errors == []
-        browser.close()
 
 
 # -- (f) bad numbers anywhere in the Python API --------------------------------------------------

@@ -199,24 +199,20 @@ def test_dns_rebinding_in_chromium(saved_run):
     """A real browser that resolves an outside name to 127.0.0.1 (DNS rebinding, emulated with
     Chromium's host resolver rules) gets 403 for the viewer page, and a page of that name cannot
     open the websocket; the same browser on 127.0.0.1 loads the viewer."""
-    from test_viz import CHROMIUM, CHROMIUM_ARGS, _browser_missing
+    from headless import browser_missing, launched
 
     from fault_tolerance.viz import server as viz
 
-    reason = _browser_missing()
+    reason = browser_missing()
     if reason:
         pytest.skip(reason)
-    from playwright.sync_api import sync_playwright
 
     run, arm, _ = saved_run
     url, server = viz.serve(run, arm, fps=10)
     port = urlparse(url).port
     rules = "--host-resolver-rules=MAP rebind.test 127.0.0.1"
     try:
-        with sync_playwright() as p:
-            browser = p.chromium.launch(
-                executable_path=str(CHROMIUM), args=[*CHROMIUM_ARGS, rules], headless=True
-            )
+        with launched([rules]) as browser:
             page = browser.new_page()
             assert page.goto(url).status == 200
             foreign = page.goto(f"http://rebind.test:{port}/static/")
@@ -231,6 +227,5 @@ def test_dns_rebinding_in_chromium(saved_run):
                 port,
             )
             assert opened == "refused"
-            browser.close()
     finally:
         server.close()

@@ -13,6 +13,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from headless import launched
 
 import fault_tolerance as ft
 from fault_tolerance.planning.posture import initial_posture
@@ -25,8 +26,6 @@ from fault_tolerance.viz import charts  # noqa: E402
 from fault_tolerance.viz.page import embed, export_html  # noqa: E402
 from fault_tolerance.viz.server import serve  # noqa: E402
 
-CHROMIUM = Path("/usr/bin/chromium")
-CHROMIUM_ARGS = ["--no-sandbox", "--disable-gpu", "--enable-unsafe-swiftshader"]
 VIEWPORT = {"width": 1200, "height": 700}
 
 
@@ -179,15 +178,8 @@ def test_page_lists_the_runs_warnings(planar_runs, tmp_path):
 @pytest.fixture(scope="module")
 def chromium():
     """Headless Debian chromium driven by Playwright (never a downloaded browser)."""
-    if not CHROMIUM.exists():
-        pytest.skip(f"{CHROMIUM} is not installed (scripts/install_browser.sh installs it)")
-    sync_api = pytest.importorskip("playwright.sync_api")
-    with sync_api.sync_playwright() as p:
-        browser = p.chromium.launch(
-            executable_path=str(CHROMIUM), args=CHROMIUM_ARGS, headless=True
-        )
+    with launched() as browser:
         yield browser
-        browser.close()
 
 
 def open_page(browser, url: str):

@@ -8,6 +8,7 @@ import warnings
 from pathlib import Path
 
 import pytest
+from headless import launched
 
 import fault_tolerance as ft
 from fault_tolerance.errors import MeshNotFound, MeshRefused, PackageNotFound, URDFError
@@ -16,8 +17,6 @@ from fault_tolerance.model.formats import packages
 from fault_tolerance.model.formats.packages import find_package, locate_mesh, packages_below
 
 DATA = Path(__file__).resolve().parent / "data" / "robots"
-CHROMIUM = Path("/usr/bin/chromium")
-CHROMIUM_ARGS = ["--no-sandbox", "--disable-gpu", "--enable-unsafe-swiftshader"]
 
 #: The five packages of the mobile manipulator and where they sit below ``ws/`` (depths 2 to 5).
 PACKAGES = {
@@ -237,29 +236,20 @@ def test_the_record_of_the_mobile_manipulator_replays_its_meshes(workspace):
 
 def _robot_meshes_in_browser(html: Path) -> list[str]:
     """The three.js meshes the page draws under the robot (their paths), in headless Chromium."""
-    if not CHROMIUM.exists():
-        pytest.skip(f"{CHROMIUM} is not installed")
-    sync_api = pytest.importorskip("playwright.sync_api")
-    with sync_api.sync_playwright() as p:
-        browser = p.chromium.launch(
-            executable_path=str(CHROMIUM), args=CHROMIUM_ARGS, headless=True
+    with launched() as browser:
+        page = browser.new_page(viewport={"width": 800, "height": 600})
+        errors: list[str] = []
+        page.on("pageerror", lambda e: errors.append(str(e)))
+        page.goto(html.as_uri())
+        page.wait_for_function(
+            "() => window.ftReplay && ftReplay.ready && viewer.animator.duration > 0",
+            timeout=60_000,
         )
-        try:
-            page = browser.new_page(viewport={"width": 800, "height": 600})
-            errors: list[str] = []
-            page.on("pageerror", lambda e: errors.append(str(e)))
-            page.goto(html.as_uri())
-            page.wait_for_function(
-                "() => window.ftReplay && ftReplay.ready && viewer.animator.duration > 0",
-                timeout=60_000,
-            )
-            drawn = page.evaluate("""() => { const out = [];
-                viewer.scene.traverse(o => { if (!o.isMesh) return;
-                    const path = []; for (let p = o; p; p = p.parent) path.unshift(p.name);
-                    if (path.includes('robot')) out.push(path.join('/')); });
-                return out; }""")
-        finally:
-            browser.close()
+        drawn = page.evaluate("""() => { const out = [];
+            viewer.scene.traverse(o => { if (!o.isMesh) return;
+                const path = []; for (let p = o; p; p = p.parent) path.unshift(p.name);
+                if (path.includes('robot')) out.push(path.join('/')); });
+            return out; }""")
     assert not errors, errors
     return drawn
 

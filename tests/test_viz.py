@@ -21,6 +21,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from headless import launched
 
 import fault_tolerance as ft
 from fault_tolerance.errors import InvalidInput
@@ -34,13 +35,6 @@ from fault_tolerance.viz.geometry import LOCK_COLOR, TRACE_COLOR  # noqa: E402
 from fault_tolerance.viz.page import embed, export_html, scene_commands  # noqa: E402
 from fault_tolerance.viz.server import serve  # noqa: E402
 
-CHROMIUM = Path("/usr/bin/chromium")
-CHROMIUM_ARGS = [
-    "--no-sandbox",
-    "--disable-gpu",
-    "--disable-background-networking",
-    "--enable-unsafe-swiftshader",
-]
 VIEWPORT = {"width": 1000, "height": 650}
 LOCK_TIME = 0.5
 #: Largest HTML of a shipped arm for a 1 s run at 50 fps [bytes] (measured: about 1.2 MB).
@@ -346,30 +340,11 @@ def test_replay_main(planar, tmp_path):
 # -- in a real browser ----------------------------------------------------------------------
 
 
-def _browser_missing() -> str | None:
-    if not CHROMIUM.exists():
-        return f"{CHROMIUM} is not installed (scripts/install_browser.sh installs it)"
-    try:
-        import playwright.sync_api  # noqa: F401
-    except ImportError:
-        return "playwright is not installed (pip install playwright; no browser download needed)"
-    return None
-
-
 @pytest.fixture(scope="module")
 def chromium():
     """Headless Debian chromium driven by Playwright (never a downloaded browser)."""
-    reason = _browser_missing()
-    if reason:
-        pytest.skip(reason)
-    from playwright.sync_api import sync_playwright
-
-    with sync_playwright() as p:
-        browser = p.chromium.launch(
-            executable_path=str(CHROMIUM), args=CHROMIUM_ARGS, headless=True
-        )
+    with launched() as browser:
         yield browser
-        browser.close()
 
 
 COUNT_MESHES = (
