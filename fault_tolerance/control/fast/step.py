@@ -125,7 +125,7 @@ def _jvja(J, xdot, out, G, B, c, fw, params, tr) -> int:  # pragma: no cover - n
     return 0 if s2 < _INF else 1
 
 
-@_inline
+@_njit
 def step_kernel(J, xdot, out, G, B, c, fw, params, jvja):  # pragma: no cover - numba
     """LNVA (``jvja=0``) or single-joint JVJA (``jvja=1``) rates into ``out``; returns a status.
 
@@ -137,6 +137,12 @@ def step_kernel(J, xdot, out, G, B, c, fw, params, jvja):  # pragma: no cover - 
     ``PIVOT_EPS`` with ``tolerate``: to be damped by the planner). Status 3: ``xdot`` or ``out``
     has the wrong size (nothing written).
     """
+    return _step(J, xdot, out, G, B, c, fw, params, jvja)
+
+
+@_inline
+def _step(J, xdot, out, G, B, c, fw, params, jvja):  # pragma: no cover - numba
+    """:func:`step_kernel`'s body, inlined into :func:`packed_step_kernel` too."""
     m, n = J.shape
     if xdot.shape[0] != m or out.shape[0] != n:
         return 3
@@ -161,7 +167,7 @@ def packed_step_kernel(J, xdot, out, ws, jvja):  # pragma: no cover - numba
     if ws.shape[0] != rows or ws.shape[1] != width:
         return 3
     params, fw, G, B, c = _views(ws, m, n)
-    return step_kernel(J, xdot, out, G, B, c, fw, params, jvja)
+    return _step(J, xdot, out, G, B, c, fw, params, jvja)
 
 
 @_njit
