@@ -182,6 +182,26 @@ def test_kernel_as_plain_python(robot, draw_q, draw_xdot, rng):
             assert_close(out, ref)
 
 
+def test_compiled_kernel_equals_its_plain_python_source(robot, draw_q, draw_xdot, rng):
+    """The compiled step (inner kernels inlined) gives its plain-Python source's rates bit for bit."""
+    from fault_tolerance.control.fast import step as single_kernel
+
+    ctrl = _controllers(robot, "numpy")
+    ws, _ = single_kernel.workspace(ctrl.workspace)
+    ws_py = ws.copy()
+    compiled, done = single_kernel.compiled_kernel("packed"), 0
+    for q, xd in _samples(robot, draw_q, draw_xdot, rng, k=4):
+        J = np.ascontiguousarray(robot.arm.jacobian(q))
+        for jvja in (0, 1):
+            out, out_py = np.empty(robot.n), np.empty(robot.n)
+            status = compiled(J, xd, out, ws, jvja)
+            assert status == single_kernel.packed_step_kernel.py_func(J, xd, out_py, ws_py, jvja)
+            if status == 0:
+                np.testing.assert_array_equal(out, out_py)
+                done += 1
+    assert done > 0
+
+
 # -- workspace: outputs land in the caller's array -----------------------------------------------
 
 

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-#: The issues' targets.
+#: JVJA step / LNVA step, and the bounds of the fast path's other ratios.
 MAX_JVJA_OVER_LNVA = 1.5
 #: Tighter JVJA / LNVA bounds for some arms.
 JVJA_OVER_LNVA_BY_ARM = {"panda_pose": 1.15, "panda_position": 1.15, "chain_50": 1.3}
@@ -56,7 +56,7 @@ def arm_targets(key: str, ops: dict) -> list[dict]:
         out.append(
             _item(key, "jvja_over_lnva", "JVJA step / LNVA step", r, lim, "<=", r <= lim)
         )  # fmt: skip
-    out += _issue11(key, med, jv)
+    out += _overhead_targets(key, med, jv)
     for backend in ("lapack", "numpy", "numba"):
         j2, l2 = med(f"jvja_{backend}"), med(f"lnva_{backend}")
         if j2 and l2:
@@ -78,14 +78,12 @@ def arm_targets(key: str, ops: dict) -> list[dict]:
     out += _limit_targets(key, jv, med)
     dyn = med("dyn_sample")
     if jv and dyn:
-        r = dyn / jv
-        out.append(_item(key, "dyn_over_jvja", "dynamics sample / kinematic JVJA step", r,
-                         MAX_DYN_OVER_STEP, "<=", r <= MAX_DYN_OVER_STEP))  # fmt: skip
+        out.append(_at_most(key, "dyn_over_jvja", "dynamics sample / kinematic JVJA step",
+                            dyn / jv, MAX_DYN_OVER_STEP))  # fmt: skip
     mda, sim_mda = med("mda"), med("sim_mda")
     if jv and mda:
-        r = mda / jv
-        out.append(_item(key, "mda_over_jvja", "MDA step / JVJA step", r, MAX_MDA_OVER_JVJA,
-                         "<=", r <= MAX_MDA_OVER_JVJA))  # fmt: skip
+        out.append(_at_most(key, "mda_over_jvja", "MDA step / JVJA step", mda / jv,
+                            MAX_MDA_OVER_JVJA))  # fmt: skip
     if jv and sim_mda:
         r = sim_mda / jv
         out.append(_item(key, "sim_mda_over_jvja", "simulated MDA sample / JVJA step", r,
@@ -102,27 +100,28 @@ def arm_targets(key: str, ops: dict) -> list[dict]:
     return out
 
 
-def _issue11(key: str, med, jv) -> list[dict]:
-    """Floor, simulated sample and multi-joint targets, when their rows are there."""
+def _at_most(key: str, name: str, label: str, r: float, limit: float) -> dict:
+    """A ratio target ``r <= limit``."""
+    return _item(key, name, label, r, limit, "<=", r <= limit)
+
+
+def _overhead_targets(key: str, med, jv) -> list[dict]:
+    """The fast path's overheads: over the floor, the simulated samples, two-joint scenarios."""
     out = []
     floor, sim, multi = med("floor"), med("sim_jvja"), med("jvja_multi")
     if jv and floor:
-        r = jv / floor
-        out.append(_item(key, "jvja_over_floor", "JVJA step / floor", r, MAX_JVJA_OVER_FLOOR,
-                         "<=", r <= MAX_JVJA_OVER_FLOOR))  # fmt: skip
+        out.append(_at_most(key, "jvja_over_floor", "JVJA step / floor", jv / floor,
+                            MAX_JVJA_OVER_FLOOR))  # fmt: skip
     if jv and sim:
-        r = sim / jv
-        out.append(_item(key, "sim_over_jvja", "simulated JVJA sample / JVJA step", r,
-                         MAX_SIM_OVER_STEP, "<=", r <= MAX_SIM_OVER_STEP))  # fmt: skip
+        out.append(_at_most(key, "sim_over_jvja", "simulated JVJA sample / JVJA step", sim / jv,
+                            MAX_SIM_OVER_STEP))  # fmt: skip
     lim, free = med("sim_jvja_lim"), med("jvja_bounded_free")
     if free and lim:
-        r = lim / free
-        out.append(_item(key, "sim_lim_over_bounded", "simulated JVJA sample under limits / "
-                         "bounded JVJA step", r, MAX_SIM_OVER_STEP, "<=", r <= MAX_SIM_OVER_STEP))  # fmt: skip
+        out.append(_at_most(key, "sim_lim_over_bounded", "simulated JVJA sample under limits / "
+                            "bounded JVJA step", lim / free, MAX_SIM_OVER_STEP))  # fmt: skip
     if jv and multi:
-        r = multi / jv
-        out.append(_item(key, "multi_over_single", "two-joint JVJA / single-joint JVJA", r,
-                         MAX_MULTI_OVER_SINGLE, "<=", r <= MAX_MULTI_OVER_SINGLE))  # fmt: skip
+        out.append(_at_most(key, "multi_over_single", "two-joint JVJA / single-joint JVJA",
+                            multi / jv, MAX_MULTI_OVER_SINGLE))  # fmt: skip
     return out
 
 
@@ -131,13 +130,11 @@ def _limit_targets(key, jv, med) -> list[dict]:
     out = []
     free, two, qp = med("jvja_bounded_free"), med("jvja_bounded_2"), med("jvja_bounded_2_qp")
     if jv and free:
-        r = free / jv
-        out.append(_item(key, "bounded_free_over_jvja", "bounded JVJA, no bound active / JVJA",
-                         r, MAX_BOUNDED_FREE_OVER_JVJA, "<=", r <= MAX_BOUNDED_FREE_OVER_JVJA))  # fmt: skip
+        out.append(_at_most(key, "bounded_free_over_jvja", "bounded JVJA, no bound active / JVJA",
+                            free / jv, MAX_BOUNDED_FREE_OVER_JVJA))  # fmt: skip
     if jv and two:
-        r = two / jv
-        out.append(_item(key, "bounded_two_over_jvja", "bounded JVJA, two bounds active / JVJA",
-                         r, MAX_BOUNDED_TWO_OVER_JVJA, "<=", r <= MAX_BOUNDED_TWO_OVER_JVJA))  # fmt: skip
+        out.append(_at_most(key, "bounded_two_over_jvja", "bounded JVJA, two bounds active / JVJA",
+                            two / jv, MAX_BOUNDED_TWO_OVER_JVJA))  # fmt: skip
     out += _scaled_targets(key, med)
     if two and qp:
         out.append(_item(key, "bounded_qp_over_bounded", "quadprog on the bounded problem / "
@@ -151,9 +148,9 @@ def _scaled_targets(key, med) -> list[dict]:
     for method, limit in (("jvja", MAX_SCALED_JVJA_OVER_JVJA), ("lnva", MAX_SCALED_LNVA_OVER_LNVA)):
         free, scaled = med(method), med(f"{method}_bounded_scaled")
         if free and scaled:
-            r = scaled / free
-            out.append(_item(key, f"scaled_{method}_over_{method}", f"bounded {method.upper()}, "
-                             f"task scaled / {method.upper()}", r, limit, "<=", r <= limit))  # fmt: skip
+            out.append(_at_most(key, f"scaled_{method}_over_{method}", f"bounded "
+                                f"{method.upper()}, task scaled / {method.upper()}", scaled / free,
+                                limit))  # fmt: skip
         for other, label in (("pink_tick", "pink QP tick"), ("qp_soft_task", "soft-task QP")):
             o = med(other)
             if scaled and o:

@@ -44,10 +44,15 @@ try:  # compiled when numba is there (lazily, on first call; cached on disk)
     import numba
 
     _njit = numba.njit(cache=True, nogil=True, error_model="numpy")
+    #: Inlined into their callers at numba's IR level: a call of a compiled function from another
+    #: passes every array as its fields, which costs as much as a pass over ``J`` at these sizes.
+    _inline = numba.njit(cache=True, nogil=True, error_model="numpy", inline="always")
 except ImportError:  # pragma: no cover - numba is a core dependency
 
     def _njit(fn):
         return fn
+
+    _inline = _njit
 
 
 _INF = math.inf
@@ -62,7 +67,7 @@ _trace_inverse = trace_inverse  # the certificate trace(G⁻¹)
 _forward = forward  # y = L⁻¹ b (compiled_linalg)
 
 
-@_njit
+@_inline
 def _lnva(J, xdot, out, G, c) -> int:  # pragma: no cover - numba
     """LNVA: ``y = G⁻¹ ẋ`` (``L z = ẋ``, ``Lᵀ y = z``, in ``c``), ``a = Jᵀ y``; status."""
     m, n = J.shape
@@ -82,7 +87,7 @@ def _lnva(J, xdot, out, G, c) -> int:  # pragma: no cover - numba
     return 0 if s < _INF else 1
 
 
-@_njit
+@_inline
 def _pivots(Y, a, c, fw, threshold, n) -> bool:  # pragma: no cover - numba
     """``N_ii = 1 − ‖Y_i‖²`` (``Y_i`` column i) and ``c_i = (w_i/W) a_i / N_ii``; True if a pivot is low.
 
@@ -103,7 +108,7 @@ def _pivots(Y, a, c, fw, threshold, n) -> bool:  # pragma: no cover - numba
     return low
 
 
-@_njit
+@_inline
 def _jvja(J, xdot, out, G, B, c, fw, params, tr) -> int:  # pragma: no cover - numba
     """JVJA (G2): ``out = a + alpha N c``, ``c_i = (w_i/W) a_i / N_ii`` on lockable columns."""
     n = J.shape[1]
@@ -112,7 +117,7 @@ def _jvja(J, xdot, out, G, B, c, fw, params, tr) -> int:  # pragma: no cover - n
         return 1
     if _pivots(B, out, c, fw, params[1], n):
         return 2
-    null_apply(B, c, G[:, 0], n)  # c ← N c (the factor is no longer needed: scratch)
+    null_apply(B, c, G[0], n)  # c ← N c (the factor is no longer needed: its row 0 is scratch)
     alpha, s2 = params[3], 0.0
     for i in range(n):
         out[i] += alpha * c[i]
@@ -132,6 +137,12 @@ def step_kernel(J, xdot, out, G, B, c, fw, params, jvja):  # pragma: no cover - 
     ``PIVOT_EPS`` with ``tolerate``: to be damped by the planner). Status 3: ``xdot`` or ``out``
     has the wrong size (nothing written).
     """
+    return _step(J, xdot, out, G, B, c, fw, params, jvja)
+
+
+@_inline
+def _step(J, xdot, out, G, B, c, fw, params, jvja):  # pragma: no cover - numba
+    """:func:`step_kernel`'s body, inlined into :func:`packed_step_kernel` too."""
     m, n = J.shape
     if xdot.shape[0] != m or out.shape[0] != n:
         return 3
@@ -156,7 +167,7 @@ def packed_step_kernel(J, xdot, out, ws, jvja):  # pragma: no cover - numba
     if ws.shape[0] != rows or ws.shape[1] != width:
         return 3
     params, fw, G, B, c = _views(ws, m, n)
-    return step_kernel(J, xdot, out, G, B, c, fw, params, jvja)
+    return _step(J, xdot, out, G, B, c, fw, params, jvja)
 
 
 @_njit
@@ -164,19 +175,20 @@ def workspace_shape(m, n):  # pragma: no cover - numba
     """Rows and width of the workspace of :func:`packed_step_kernel` (a 2-d C array).
 
     Rows: ``params`` (its first :data:`N_PARAMS` entries), ``fw`` (2), ``B`` (m), ``c`` (1),
-    ``G`` (m); width ``max(n, 4)``.
+    ``G`` (m); width ``max(n, m, 4)``.
     """
-    return 4 + 2 * m, max(n, N_PARAMS)
+    return 4 + 2 * m, max(n, m, N_PARAMS)
 
 
 @_njit
 def _views(ws, m, n):  # pragma: no cover - numba
     """``params, fw, G, B, c`` in the workspace, as row slices (no reshape, nothing copied).
 
-    ``fw``, ``B`` and ``c`` are whole rows (C order: the kernels' loops along them vectorise),
-    ``width - n`` columns wider than their tables when ``n < 4``; the kernels loop to ``n``.
+    ``fw``, ``G``, ``B`` and ``c`` are whole rows (C order: the kernels' loops along them
+    vectorise and index them without strides), ``width - n`` (``G``: ``width - m``) columns wider
+    than their tables; the kernels loop to ``n`` (``m``).
     """
-    return ws[0, :N_PARAMS], ws[1:3], ws[4 + m : 4 + 2 * m, :m], ws[3 : 3 + m], ws[3 + m]
+    return ws[0, :N_PARAMS], ws[1:3], ws[4 + m : 4 + 2 * m], ws[3 : 3 + m], ws[3 + m]
 
 
 def workspace(cw: ControllerWorkspace) -> tuple[np.ndarray, tuple]:
@@ -188,7 +200,7 @@ def workspace(cw: ControllerWorkspace) -> tuple[np.ndarray, tuple]:
     m, n = cw.m, cw.n
     ws = np.zeros(workspace_shape.py_func(m, n))
     params, fw, G, B, c = _views.py_func(ws, m, n)
-    views = params, fw[:, :n], G, B[:, :n], c[:n]
+    views = params, fw[:, :n], G[:, :m], B[:, :n], c[:n]
     params[:] = TRACE_MAX, cw.pivot_threshold, cw.rank_coef, cw.alpha
     views[1][:] = cw.fw
     return ws, views

@@ -1,8 +1,10 @@
 """The small dense factorisations the compiled kernels share (numba, scalar loops).
 
-One copy of each: the Controller's step (:mod:`.single_kernel`), the compiled bounded step
-(:mod:`.boxkernel`, :mod:`.boxbasis`) and the simulated sample (:mod:`.sample_linalg`) call these. ``G = J Jᵀ = L Lᵀ`` is kept in the lower triangle,
-the factor overwrites it in place.
+One copy of each: the Controller's steps (:mod:`fault_tolerance.control.fast.step`,
+:mod:`~fault_tolerance.control.fast.multi_step`, :mod:`~fault_tolerance.control.fast.mda_step`), the
+compiled bounded step (:mod:`fault_tolerance.resolution.fast.box_basis`) and the simulated sample
+(:mod:`fault_tolerance.numerics.fast.sample_dense`, :mod:`fault_tolerance.simulation.fast.sample`)
+call these. ``G = J Jᵀ = L Lᵀ`` is kept in the lower triangle, the factor overwrites it in place.
 """
 
 from __future__ import annotations

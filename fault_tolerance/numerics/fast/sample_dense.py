@@ -12,7 +12,7 @@ import math
 
 import numpy as np
 
-from fault_tolerance.numerics.fast.dense import chol_solve, cholesky_into, trace_inverse
+from fault_tolerance.numerics.fast.dense import chol_solve, cholesky_into, rank_ok, trace_inverse
 from fault_tolerance.numerics.fast.rank_one_eigen import downdate_extremes, eigenpairs
 from fault_tolerance.numerics.fast.small_eigen import extreme_eigenvalues
 
@@ -143,13 +143,8 @@ def _factor(J, xd, cols, params, G, L, B, a, piv, y, z) -> bool:  # pragma: no c
     tr = _trace_inverse(L, z, m)
     if not tr <= params[P_TRACE]:
         return False
-    if params[P_RANK] > 0.0:
-        s = 0.0
-        for i in range(m):
-            for c in range(n):
-                s += J[i, c] * J[i, c]
-        if not params[P_RANK] * s * tr < 1.0:
-            return False
+    if not rank_ok(J, tr, params[P_RANK]):
+        return False
     for c in range(n):  # B = G⁻¹ J column by column
         for i in range(m):
             y[i] = J[i, c]

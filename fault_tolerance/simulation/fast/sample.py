@@ -37,7 +37,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 
-from fault_tolerance.numerics.fast.dense import chol_solve
+from fault_tolerance.numerics.fast.dense import chol_solve, gram_into
 from fault_tolerance.numerics.fast.sample_dense import (
     P_ACCEL,
     P_BOUNDED,
@@ -51,6 +51,7 @@ from fault_tolerance.numerics.fast.sample_dense import (
     P_TRACE,
     P_WSUM,
     _cholesky,
+    _downdate,
     _factor,
     _null_times,
     _spectra,
@@ -148,9 +149,7 @@ def _locked(J, xd, G, params, Wm, L, y, z, qd) -> bool:  # pragma: no cover - nu
     """Least-norm rates of the joints left after the lock, ``G_r = G − J_l J_lᵀ``; False: reference."""
     m, n = J.shape
     lock = int(params[P_LOCK])
-    for i in range(m):
-        for j in range(m):
-            Wm[i, j] = G[i, j] - J[i, lock] * J[j, lock]
+    _downdate(G, J, lock, Wm)  # G_r = J_r J_rᵀ, the joints left
     if not _cholesky(Wm, L, m) or not _trace_inverse(L, z, m) <= params[P_TRACE]:
         return False
     for i in range(m):
@@ -183,15 +182,12 @@ def _follow(qd_cmd, qd_prev, params, k, locked, out) -> None:  # pragma: no cove
 
 @njit
 def _gram(J, G) -> None:  # pragma: no cover - numba
-    """``G = J Jᵀ`` (both triangles)."""
-    m, n = J.shape
+    """``G = J Jᵀ`` (both triangles): :func:`.dense.gram_into`'s lower triangle, mirrored."""
+    gram_into(J, G)
+    m = J.shape[0]
     for i in range(m):
-        for j in range(i + 1):
-            s = 0.0
-            for c in range(n):
-                s += J[i, c] * J[j, c]
-            G[i, j] = s
-            G[j, i] = s
+        for j in range(i):
+            G[j, i] = G[i, j]
 
 
 @njit
