@@ -9,6 +9,8 @@ the same kinematics and is loaded as it is.
 
 from __future__ import annotations
 
+import re
+
 import numpy as np
 import pinocchio as pin
 from real_arms import ARMS, cli_args, load
@@ -177,3 +179,25 @@ def test_every_structural_joint_is_left_out_by_one_fix(tmp_path, capsys):
     assert (
         main([*base, "--lockable", "joint_arm_l0,joint_arm_l1", "--out", str(tmp_path / "r")]) == 0
     )
+
+
+def test_a_path_too_fast_in_the_default_plane_gets_a_tried_rows_fix(tmp_path, capsys):
+    """The Stretch-like arm with telescopes of 1 mm/s: a circle in x, y (the default rows) needs
+    them radially, so no start passes and neither half the rate nor half the radius helps; in
+    y, z the yaw and the lift move the tool alone. The refusal proposes --rows y,z, and the
+    command with that option, as printed, runs (exit 0)."""
+    slow = _STRETCH_LIKE.replace('upper="0.25" effort="10" velocity="1"', 'upper="0.25" effort="10" velocity="0.001"')  # fmt: skip
+    assert slow.count('velocity="0.001"') == 2
+    urdf = tmp_path / "stretch_slow.urdf"
+    urdf.write_text(slow)
+    base = ["simulate", "--description", str(urdf), "--tip", "grasp", "--task", "position",
+            "--algorithms", "jvja", "--no-progress", "--radius", "0.02", "--omega", "1",
+            "--lockable", "joint_arm_l0,joint_arm_l1"]  # fmt: skip
+    assert main([*base, "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err
+    assert "too fast for the velocity limits (joint_arm_l0, joint_arm_l1)" in err
+    proposed = re.search(r"a start passes with (.+?) \(that option set so", err).group(1)
+    fixes = proposed.split(" or with ")
+    assert "--rows y,z" in fixes and not {"--omega 0.5", "--radius 0.01"} & set(fixes)
+    fix = next(f for f in fixes if f.startswith("--rows "))  # the option as printed
+    assert main([*base, *fix.split(), "--out", str(tmp_path / "r")]) == 0

@@ -154,7 +154,8 @@ def fix_options(args, arm, reasons, lockable, extra=(), still=()) -> list[tuple[
     """Candidate fixes ``(option text, changed args)`` for the failure ``reasons``, best first.
 
     Lockable joints that fail (structurally, under limits, nearly intolerable) are left out of
-    ``--lockable``; a path too fast gets a slower ``--omega`` or a smaller ``--radius``; a path
+    ``--lockable``; a path too fast gets a slower ``--omega``, a smaller ``--radius`` or another
+    plane (``--rows``: other joints may move the tool there); a path
     out of reach a smaller ``--radius`` or another plane (``--rows``); a singular arm the task
     rows its Jacobian spans (``--task``) or another plane. A structurally intolerable joint may
     also be made up for from another tip frame on the last link (``--tip``, farthest first).
@@ -175,9 +176,10 @@ def fix_options(args, arm, reasons, lockable, extra=(), still=()) -> list[tuple[
             out += _without(lockable, joints, extra)
             out += [_set("omega", omega / 2), _set("radius", radius / 2)]
             out += [_set("omega", omega / 5), _set("radius", radius / 5)]
-        elif category == sc.TOO_FAST:
+        elif category == sc.TOO_FAST:  # another plane may need only the faster joints
             out += [_set("omega", omega / 2), _set("radius", radius / 2)]
-            out += [_set("omega", omega / 5), _set("radius", radius / 5)]
+            out += [*_other_planes(args, arm)[:2], _set("omega", omega / 5)]
+            out += [_set("radius", radius / 5)]
         elif category == sc.OUT_OF_REACH:
             out += [
                 _set("radius", radius / 2),
