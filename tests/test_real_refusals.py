@@ -201,3 +201,21 @@ def test_a_path_too_fast_in_the_default_plane_gets_a_tried_rows_fix(tmp_path, ca
     assert "--rows y,z" in fixes and not {"--omega 0.5", "--radius 0.01"} & set(fixes)
     fix = next(f for f in fixes if f.startswith("--rows "))  # the option as printed
     assert main([*base, *fix.split(), "--out", str(tmp_path / "r")]) == 0
+
+
+def test_still_joints_are_the_wrist_joints_and_a_prismatic_one_is_not_called_a_wrist(tmp_path):
+    """``still_joints`` finds the joints that do not move the task at the tip: the LWA4P's wrist
+    joints 5, 6 for a position task at the wrist centre (none for a pose task, which they
+    rotate), and the Stretch-like lift for a task in x, y, worded without a wrist."""
+    import fault_tolerance as ft
+    from fault_tolerance.planning.start_checks import still_joints, still_joints_text
+
+    assert still_joints(load("lwa4p"))[0] == ("arm_5_joint", "arm_6_joint")
+    assert still_joints(load("lwa4p", task="pose"))[0] == ()
+    urdf = tmp_path / "stretch_like.urdf"
+    urdf.write_text(_STRETCH_LIKE)
+    arm = ft.load_arm(urdf, tip="grasp", task="x,y")
+    still, lever = still_joints(arm)
+    assert still == ("joint_lift",) and lever < 1e-12
+    text = still_joints_text(arm, still, lever)
+    assert text.startswith("joint_lift does not move the task (") and "wrist" not in text

@@ -310,13 +310,18 @@ def still_joints(arm: Arm, samples: int = 20, seed: int = 0) -> tuple[tuple[str,
 def still_joints_text(arm: Arm, still: tuple[str, ...], lever: float, samples: int = 20) -> str:
     """The cause a refusal names when joints do not move the tip (:func:`still_joints`)."""
     others = ", ".join(n for n in arm.joint_names if n not in still)
-    where = (
-        f"the tip lies at the wrist centre: {', '.join(still)} do not move it"
-        if len(still) > 1
-        else f"the tip lies on the axis of {still[0]}: it does not move it"
-    )
+    model = arm.model
+    kinds = [model.joints[model.getJointId(n)].shortname() for n in still]
+    if not all(
+        k.startswith("JointModelR") for k in kinds
+    ):  # a prismatic joint, task rows it misses
+        where = f"{', '.join(still)} {'does' if len(still) == 1 else 'do'} not move the task"
+    elif len(still) > 1:
+        where = f"the tip lies at the wrist centre: {', '.join(still)} do not move it"
+    else:
+        where = f"the tip lies on the axis of {still[0]}: it does not move it"
     return (
-        f"{where} (their columns of the task Jacobian stay below {STILL_TOL:g} per rad at "
+        f"{where} (their columns of the task Jacobian stay below {STILL_TOL:g} per rad or m at "
         f"{samples} sampled configurations, at most {lever:.1g}), so the task rests on {others} "
         "alone"
     )
