@@ -312,9 +312,8 @@ def still_joints_text(arm: Arm, still: tuple[str, ...], lever: float, samples: i
     others = ", ".join(n for n in arm.joint_names if n not in still)
     model = arm.model
     kinds = [model.joints[model.getJointId(n)].shortname() for n in still]
-    if not all(
-        k.startswith("JointModelR") for k in kinds
-    ):  # a prismatic joint, task rows it misses
+    revolute = all(k.startswith("JointModelR") for k in kinds)
+    if not revolute:  # a prismatic joint, or one that moves only rows the task leaves out
         where = f"{', '.join(still)} {'does' if len(still) == 1 else 'do'} not move the task"
     elif len(still) > 1:
         where = f"the tip lies at the wrist centre: {', '.join(still)} do not move it"
