@@ -313,7 +313,7 @@ def still_joints_text(arm: Arm, still: tuple[str, ...], lever: float, samples: i
     model = arm.model
     kinds = [model.joints[model.getJointId(n)].shortname() for n in still]
     revolute = all(k.startswith("JointModelR") for k in kinds)
-    if not revolute:  # a prismatic joint, or one that moves only rows the task leaves out
+    if not revolute:  # a prismatic joint: no axis for the tip to lie on
         where = f"{', '.join(still)} {'does' if len(still) == 1 else 'do'} not move the task"
     elif len(still) > 1:
         where = f"the tip lies at the wrist centre: {', '.join(still)} do not move it"
