@@ -206,7 +206,9 @@ class NoStartFound(InvalidInput):
 
     ``reasons``: ``(category, count, joints)`` of the dominant failure categories (see
     ``fault_tolerance.planning.start_checks.CATEGORIES``); ``fixes``: option texts that were tried
-    and found a start (the command line adds them; empty when none was tried or none worked).
+    and found a start (the command line adds them; empty when none was tried or none worked);
+    ``still``: joints that do not move the tip (a tip at the wrist centre, named in the message as
+    the cause; empty otherwise).
     """
 
     def __init__(
@@ -214,9 +216,11 @@ class NoStartFound(InvalidInput):
         message: str,
         reasons: Sequence[tuple[str, int, tuple[str, ...]]] = (),
         fixes: Sequence[str] = (),
+        still: Sequence[str] = (),
     ) -> None:
         self.reasons = [(c, int(n), tuple(j)) for c, n, j in reasons]
         self.fixes = list(fixes)
+        self.still = tuple(still)
         super().__init__(message)
 
 

@@ -115,6 +115,7 @@ def refusal_with_fixes(args, arm, err, lockable, rerun) -> NoStartFound:
         reasons = [(STRUCTURAL, 1, tuple(err.joints))]
     else:
         reasons = err.reasons
+    still = tuple(getattr(err, "still", ()))
 
     def attempt(changes: dict):
         def run():
@@ -127,25 +128,43 @@ def refusal_with_fixes(args, arm, err, lockable, rerun) -> NoStartFound:
 
         return run
 
-    options = fix_options(args, arm, reasons, lockable, extra)
+    options = fix_options(args, arm, reasons, lockable, extra, still)
     trials = try_fixes((text, attempt(changes)) for text, changes in options)
     return NoStartFound(
-        f"{err}; {fixes_line(trials)}", reasons, [t.option for t in trials if t.works]
+        f"{err}; {fixes_line(trials)}{_no_tip_past(arm, still, options)}",
+        reasons,
+        [t.option for t in trials if t.works],
+        still=still,
     )
 
 
-def fix_options(args, arm, reasons, lockable, extra=()) -> list[tuple[str, dict]]:
+def _no_tip_past(arm, still, options) -> str:
+    """What to do when the tip lies at the wrist centre and no frame past it can be proposed."""
+    if not still or any(text.startswith("--tip ") for text, _ in options):
+        return ""
+    link = arm.model.names[arm.model.frames[arm.frame_id].parentJoint]
+    return (
+        f"; no --tip to propose: no other frame is attached to the tip's link (after {link}) "
+        f"away from the wrist centre; a tool frame in the description (a fixed joint from "
+        f"{arm.tip} to a link past the wrist) gives one"
+    )
+
+
+def fix_options(args, arm, reasons, lockable, extra=(), still=()) -> list[tuple[str, dict]]:
     """Candidate fixes ``(option text, changed args)`` for the failure ``reasons``, best first.
 
     Lockable joints that fail (structurally, under limits, nearly intolerable) are left out of
-    ``--lockable``; a path too fast gets a slower ``--omega`` or a smaller ``--radius``; a path
+    ``--lockable``; a path too fast gets a slower ``--omega``, a smaller ``--radius`` or another
+    plane (``--rows``: other joints may move the tool there); a path
     out of reach a smaller ``--radius`` or another plane (``--rows``); a singular arm the task
     rows its Jacobian spans (``--task``) or another plane. A structurally intolerable joint may
     also be made up for from another tip frame on the last link (``--tip``, farthest first).
+    ``still``: joints that do not move the tip (the tip at the wrist centre); then the tip frames
+    past the wrist on the last link (``--tip``) come first.
     """
     from fault_tolerance.planning import start_checks as sc
 
-    out: list[tuple[str, dict]] = []
+    out: list[tuple[str, dict]] = _past_the_wrist(arm, lockable, extra) if still else []
     radius, omega = _path_speed(args, arm)
     for category, _, joints in reasons:
         if category == sc.STRUCTURAL:
@@ -157,9 +176,10 @@ def fix_options(args, arm, reasons, lockable, extra=()) -> list[tuple[str, dict]
             out += _without(lockable, joints, extra)
             out += [_set("omega", omega / 2), _set("radius", radius / 2)]
             out += [_set("omega", omega / 5), _set("radius", radius / 5)]
-        elif category == sc.TOO_FAST:
+        elif category == sc.TOO_FAST:  # another plane may need only the faster joints
             out += [_set("omega", omega / 2), _set("radius", radius / 2)]
-            out += [_set("omega", omega / 5), _set("radius", radius / 5)]
+            out += [*_other_planes(args, arm)[:2], _set("omega", omega / 5)]
+            out += [_set("radius", radius / 5)]
         elif category == sc.OUT_OF_REACH:
             out += [
                 _set("radius", radius / 2),
@@ -169,6 +189,15 @@ def fix_options(args, arm, reasons, lockable, extra=()) -> list[tuple[str, dict]
         elif category in (sc.SINGULAR, sc.NEAR_LIMIT):
             out += _spanned_task(args, arm) + _other_planes(args, arm)
     return list({text: (text, changes) for text, changes in out}.values())
+
+
+def _past_the_wrist(arm, lockable, extra) -> list[tuple[str, dict]]:
+    """Fixes of a tip at the wrist centre: a tip frame past it, the joints others make up there."""
+    from fault_tolerance.planning.start_checks import often_tolerable
+
+    spare = set(often_tolerable(arm, lockable))
+    drop = tuple(n for n in lockable if isinstance(n, str) and n not in spare)
+    return _other_tips(arm) + (_without(lockable, drop, extra)[:1] if spare and drop else [])
 
 
 def _every_structural(arm, lockable, joints) -> tuple[str, ...]:

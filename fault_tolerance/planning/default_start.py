@@ -62,6 +62,8 @@ from fault_tolerance.planning.start_checks import (
     run_caveat,
     run_failure,
     start_failure,
+    still_joints,
+    still_joints_text,
     too_fast_at_start,
     under_limits_at_start,
 )
@@ -335,9 +337,12 @@ def default_start(
     if found is not None:
         return found
     where = f"at x0 = {np.round(x0, 4).tolist()}" if x0 is not None else "from mid-range seeds"
+    still, lever = still_joints(arm)
+    cause = f"; {still_joints_text(arm, still, lever)}" if still else ""
     raise NoStartFound(
-        f"no start {where} for {arm.name} passed the checks ({tally.summary()})",
+        f"no start {where} for {arm.name} passed the checks ({tally.summary()}){cause}",
         tally.dominant(),
+        still=still,
     )
 
 

@@ -287,6 +287,65 @@ def intolerable_everywhere(
     return [tuple(sc.name(sc.sets[k])) for k in sorted(always)]
 
 
+#: Largest column norm of the task Jacobian [task units per rad] of a joint that does not move
+#: the tip (a tip at the wrist centre: the wrist joints' axes pass through it).
+STILL_TOL = 1e-3
+
+
+def still_joints(arm: Arm, samples: int = 20, seed: int = 0) -> tuple[tuple[str, ...], float]:
+    """Joints whose column of the task Jacobian stays below :data:`STILL_TOL` at every sample.
+
+    ``(names, largest such column norm)`` over ``samples`` random configurations (seeded). A
+    position task whose tip lies on the axes of the wrist joints is one: those joints do not move
+    it, so the task rests on the others alone.
+    """
+    rng = np.random.default_rng(seed)
+    lever = np.zeros(arm.n)
+    for _ in range(samples):
+        lever = np.maximum(lever, np.linalg.norm(arm.jacobian(arm.random_q(rng)), axis=0))
+    still = np.flatnonzero(lever < STILL_TOL)
+    return tuple(arm.joint_names[j] for j in still), float(lever[still].max(initial=0.0))
+
+
+def still_joints_text(arm: Arm, still: tuple[str, ...], lever: float, samples: int = 20) -> str:
+    """The cause a refusal names when joints do not move the tip (:func:`still_joints`)."""
+    others = ", ".join(n for n in arm.joint_names if n not in still)
+    model = arm.model
+    kinds = [model.joints[model.getJointId(n)].shortname() for n in still]
+    revolute = all(k.startswith("JointModelR") for k in kinds)
+    if not revolute:  # a prismatic joint: no axis for the tip to lie on
+        where = f"{', '.join(still)} {'does' if len(still) == 1 else 'do'} not move the task"
+    elif len(still) > 1:
+        where = f"the tip lies at the wrist centre: {', '.join(still)} do not move it"
+    else:
+        where = f"the tip lies on the axis of {still[0]}: it does not move it"
+    return (
+        f"{where} (their columns of the task Jacobian stay below {STILL_TOL:g} per rad or m at "
+        f"{samples} sampled configurations, at most {lever:.1g}), so the task rests on {others} "
+        "alone"
+    )
+
+
+def often_tolerable(arm: Arm, lockable, samples: int = 20, seed: int = 0) -> tuple[str, ...]:
+    """Single lockable joints whose pivot is at least :data:`PIVOT_MARGIN` at most samples.
+
+    Over ``samples`` random regular configurations (``σ_min(J) >= SIGMA_REGULAR``, seeded): the
+    joints a start can likely make up, the lockable set a refusal may try instead.
+    """
+    sc = lockable_scenarios(arm, [n for n in lockable if isinstance(n, str)])
+    rng = np.random.default_rng(seed)
+    good, seen = np.zeros(sc.f), 0
+    for _ in range(20 * samples):
+        proj = projection(arm.jacobian(arm.random_q(rng)))
+        if proj.sigma_min < SIGMA_REGULAR:
+            continue
+        good += sc.pivots(proj.N) >= PIVOT_MARGIN
+        seen += 1
+        if seen == samples:
+            break
+    return tuple(sc.name(sc.sets[k])[0] for k in range(sc.f) if seen and 2 * good[k] > seen)
+
+
 class FailureTally:
     """Candidate starts counted by why they failed (:class:`Failure`), and the joints concerned.
 
