@@ -23,7 +23,7 @@ _FLAG_SERVO_CLIPPED = 256
 
 
 @njit
-def _in_box(q, lim, prm, buf, qd, J, B, v, cols, locked) -> bool:  # pragma: no cover - numba
+def _in_box(q, lim, prm, buf, qd, P, Q, v, cols, locked) -> bool:  # pragma: no cover - numba
     """Box (L1) at ``q`` into ``buf[0], buf[1]`` (``box_status``); whether ``qd`` is inside it.
 
     Inside, ``qd`` is clipped into the box (``bounded.resolve_bounded`` does so). After a lock the
@@ -31,7 +31,7 @@ def _in_box(q, lim, prm, buf, qd, J, B, v, cols, locked) -> bool:  # pragma: no 
     """
     n = qd.shape[0]
     lock = int(prm[2]) if locked else -1
-    if _box_status(q, lim, prm, buf, qd, J, B, v, cols, False) != 0:
+    if _box_status(q, lim, prm, buf, qd, P, Q, v, cols, False) != 0:
         if lock < 0:
             return False
         for c in range(n):  # the locked joint's own bound does not count
@@ -60,22 +60,25 @@ def _servo_clip(q, lim, dt, qd) -> int:  # pragma: no cover - numba
 
 # Eqn. (G1) / (G3) of every reduced robot from the kernel's factors, checked against the box.
 @njit
-def g1_posts(J, B, base, piv, cols, lo, hi, post, inside) -> int:  # pragma: no cover - numba
-    """``post[t] = base − (base_c / N_cc) N[c, :]`` (``c = cols[t]``, ``N = I − JᵀB``), clipped.
+def g1_posts(P, Q, base, piv, cols, lo, hi, post, inside) -> int:  # pragma: no cover - numba
+    """``post[t] = base − (base_c / N_cc) N[c, :]`` (``c = cols[t]``, ``N = I − PᵀQ``), clipped.
+
+    The sample passes ``P = Q = Y = L⁻¹J`` (the Controller's compiled step's factor) and ``piv``
+    its pivots ``N_cc`` by column.
 
     ``inside[t]`` gets 1 when row ``t`` was inside the box ``[lo, hi]`` (to ``BOX_TOL``) before
     the clip, else 0; returns how many were not (they need the bounded solve (L4)).
     """
-    m, n = J.shape
+    m, n = P.shape
     out = 0
     for t in range(cols.shape[0]):
         c = cols[t]
-        ratio = base[c] / piv[t]
+        ratio = base[c] / piv[c]
         ok = True
         for j in range(n):
             s = 0.0
             for i in range(m):
-                s += B[i, c] * J[i, j]
+                s += Q[i, c] * P[i, j]
             v = 0.0 if j == c else base[j] - ratio * (-s)
             ok = ok and lo[j] - BOX_TOL <= v <= hi[j] + BOX_TOL
             post[t, j] = min(max(v, lo[j]), hi[j])
