@@ -61,8 +61,7 @@ from fault_tolerance.numerics.fast.sample_dense import (
     _trace_inverse,
     njit,
 )
-from fault_tolerance.resolution.box_qp import BOX_TOL
-from fault_tolerance.simulation.fast.sample_limits import _in_box, _servo_clip
+from fault_tolerance.simulation.fast.sample_limits import _in_box, _servo_clip, g1_post
 
 #: ``method`` codes of :func:`sample_kernel`.
 LNVA, JVJA, MDA, GIVEN, LOCKED = 0, 1, 2, 3, 4
@@ -107,30 +106,24 @@ def _planned(Y, a, c, params, method, qd_in, grad, qd, Nv, u) -> int:  # pragma:
 
 
 @njit
-def _jumps(Y, a, qd, piv, cols, w, cont, parts, lo, hi, bounded) -> float:  # pragma: no cover
+def _jumps(Y, a, qd, piv, cols, w, cont, parts, box, row) -> float:  # pragma: no cover - numba
     """``w_S ‖ˢq̇' − q̇‖²`` of every scenario into ``parts`` (eqs. 9/10, G1/G3); their sum.
 
-    ``N = I − YᵀY`` (``Y = L⁻¹J``), ``piv`` its diagonal ``N_ii`` by column.
-
-    ``bounded``: each ``ˢq̇'`` is checked against the box ``[lo, hi]`` (L4) and clipped into it as
+    ``ˢq̇'`` by :func:`.sample_limits.g1_post` (``N = I − YᵀY``, ``Y = L⁻¹J``, ``piv`` its
+    diagonal by column) into ``row`` (n, scratch). ``box = (lo, hi, bounded)``: with ``bounded``
+    each ``ˢq̇'`` is checked against the box ``[lo, hi]`` (L4) and clipped into it as
     ``bounded.reduced_bounded``; -1.0 when one leaves it (the reduced robot meets a bound).
     """
-    m, n = Y.shape
+    n = Y.shape[1]
+    lo, hi, bounded = box
+    base = qd if cont else a
     total = 0.0
     for k in range(cols.shape[0]):
-        i = cols[k]
-        t = (qd[i] if cont else a[i]) / piv[i]
+        if not g1_post(Y, Y, base, piv, cols[k], lo, hi, row, bounded):
+            return -1.0
         acc = 0.0
         for c in range(n):
-            ncol = 1.0 if c == i else 0.0
-            for r in range(m):
-                ncol -= Y[r, c] * Y[r, i]
-            post = 0.0 if c == i else (qd[c] if cont else a[c]) - t * ncol
-            if bounded:
-                if post < lo[c] - BOX_TOL or post > hi[c] + BOX_TOL:
-                    return -1.0
-                post = min(max(post, lo[c]), hi[c])
-            e = post - qd[c]
+            e = row[c] - qd[c]
             acc += e * e
         parts[k] = w[k] * acc
         total += parts[k]
@@ -216,7 +209,7 @@ def _rates(
     if bounded and not _in_box(q, lim, prm, buf, qd, B, B, v, cols, False):
         return BOUNDED
     ws[-2] = 1.0
-    jv = _jumps(B, a, qd, piv, cols, w, params[P_CONT] > 0.0, parts, buf[0], buf[1], bounded)
+    jv = _jumps(B, a, qd, piv, cols, w, params[P_CONT] > 0.0, parts, (buf[0], buf[1], bounded), Nv)
     if jv < 0.0:
         return BOUNDED
     ws[-1] = jv
