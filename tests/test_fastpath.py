@@ -285,6 +285,17 @@ def test_continuation_jvja_under_limits_takes_the_reference():
           simulate(arm, path, "lnva", q0=q0, response="continuation", engine="reference"))  # fmt: skip
 
 
+def _kernel_tables(arm, lockable):
+    """``(params, ws)`` of the sample kernel for ``lockable``, as the Sampler builds them."""
+    cw = ft.Controller(arm, lockable, limits=False).workspace
+    params = np.zeros(sd.N_PARAMS)
+    params[[sk.P_TRACE, sd.P_PIVOT, sk.P_ALPHA]] = 1e6, 1e-4, cw.alpha
+    params[[sk.P_RCN_MAX, sk.P_LOCK]] = 1e8, -1
+    ws = np.zeros(sk.workspace_size(arm.m, arm.n))
+    sk.set_scenarios(ws, arm.m, arm.n, cw.fw)
+    return params, ws
+
+
 def test_plain_python_kernel_matches_the_compiled_one():
     """The kernel is valid Python without numba: same row from ``py_func``; rates as ft.resolve."""
     from fault_tolerance.simulation.setup import HISTORIES, _allocate
@@ -296,15 +307,14 @@ def test_plain_python_kernel_matches_the_compiled_one():
     m, n = J.shape
     xd = np.array([0.1, 0.0, 0.05])
     cols, w = np.array([0, 1, 2], dtype=np.int64), np.ones(3)
-    params = np.zeros(sd.N_PARAMS)
-    params[[sk.P_TRACE, sd.P_PIVOT, sk.P_WSUM, sk.P_RCN_MAX, sk.P_LOCK]] = 1e6, 1e-4, 3.0, 1e8, -1
+    params, ws = _kernel_tables(arm, [0, 1, 2])
     params[[sk.P_DT, sk.P_DECAY, sk.P_ACCEL]] = 1e-3, -1.0, np.inf
     rows = []
     for fn in (sk.compiled_sample_kernel(), sk.compiled_sample_kernel().py_func):
         rec = _allocate(1, n, m, 3, 1e-3)
         flag = fn(J, xd, np.zeros(n), np.zeros(n), q.copy(), np.zeros(n), np.zeros(m),
                   np.zeros(m), np.zeros(m), cols, w, np.full(n, np.inf), params, sk.JVJA, 0,
-                  rec["_table"], rec["_offsets"], np.zeros(sk.workspace_size(m, n)),
+                  rec["_table"], rec["_offsets"], ws.copy(),
                   np.zeros((3, n)), np.zeros(3), np.zeros((4, n)))  # fmt: skip
         assert flag == 0
         rows.append(rec)
@@ -313,6 +323,47 @@ def test_plain_python_kernel_matches_the_compiled_one():
     ref = ft.resolve("jvja", J, xd, lockable=[0, 1, 2])
     np.testing.assert_allclose(rows[0]["qd_cmd"][0], ref, rtol=1e-10, atol=1e-14)
     np.testing.assert_allclose(rows[0]["rcn"][0], ft.rcn(J, [0, 1, 2]), rtol=1e-10)
+
+
+@pytest.mark.parametrize("weights", [None, [1.0, 3.0, 0.5, 2.0]])
+def test_sample_rates_are_the_compiled_steps(weights):
+    """The sample's JVJA rates are the Controller's compiled step's, bit for bit (one compiled
+    copy of eq. G2: the sample calls the step's kernels); its LNVA rates J⁺ẋ agree to 1e-12."""
+    from fault_tolerance.control.fast.step import step_kernel, workspace
+    from fault_tolerance.control.lapack_steps import TRACE_MAX
+    from fault_tolerance.simulation.setup import _allocate
+
+    arm, lockable = ft.load_arm("panda", task="position"), [0, 1, 3, 5]
+    cw = ft.Controller(arm, lockable, weights=weights, limits=False).workspace
+    rng = np.random.default_rng(5)
+    for _ in range(20):
+        q = arm.random_q(rng)
+        J = np.ascontiguousarray(arm.jacobian(q))
+        m, n = J.shape
+        xd = rng.normal(size=m)
+        params = np.zeros(sd.N_PARAMS)
+        params[[sk.P_TRACE, sd.P_PIVOT, sd.P_RANK, sk.P_ALPHA]] = (
+            TRACE_MAX, cw.pivot_threshold, cw.rank_coef, cw.alpha)  # fmt: skip
+        params[[sk.P_RCN_MAX, sk.P_LOCK, sk.P_DT, sk.P_DECAY, sk.P_ACCEL]] = (
+            1e8, -1, 1e-3, -1.0, np.inf)  # fmt: skip
+        for method, jvja in ((sk.JVJA, 1), (sk.LNVA, 0)):
+            ws = np.zeros(sk.workspace_size(m, n))
+            sk.set_scenarios(ws, m, n, cw.fw)
+            rec = _allocate(1, n, m, len(lockable), 1e-3)
+            cols = np.array(lockable, dtype=np.int64)
+            flag = sk.compiled_sample_kernel()(
+                J, xd, np.zeros(n), np.zeros(n), q.copy(), np.zeros(n), np.zeros(m), np.zeros(m),
+                np.zeros(m), cols, np.ones(len(cols)), np.full(n, np.inf), params, method, 0,
+                rec["_table"], rec["_offsets"], ws, np.zeros((3, n)), np.zeros(3),
+                np.zeros((4, n)))  # fmt: skip
+            _, (p4, fw, G, B, c) = workspace(cw)
+            out = np.empty(n)
+            status = step_kernel(J, xd, out, G, B, c, fw, p4, jvja)
+            assert flag >= 0 and status == 0  # generic configurations: both certified
+            if jvja:
+                assert np.array_equal(rec["qd_cmd"][0], out)
+            else:
+                np.testing.assert_allclose(rec["qd_cmd"][0], out, rtol=1e-12, atol=1e-15)
 
 
 def test_kernel_under_limits_checks_the_rate_box():
@@ -327,8 +378,7 @@ def test_kernel_under_limits_checks_the_rate_box():
     m, n = J.shape
     xd = np.array([0.1, 0.0, 0.05])
     cols, w = np.array([0, 1, 2], dtype=np.int64), np.ones(3)
-    params = np.zeros(sd.N_PARAMS)
-    params[[sk.P_TRACE, sd.P_PIVOT, sk.P_WSUM, sk.P_RCN_MAX, sk.P_LOCK]] = 1e6, 1e-4, 3.0, 1e8, -1
+    params, ws = _kernel_tables(arm, [0, 1, 2])
     params[[sk.P_DT, sk.P_DECAY, sk.P_ACCEL, sk.P_BOUNDED]] = 1e-3, -1.0, np.inf, 1.0
     rates = ft.resolve("jvja", J, xd, lockable=[0, 1, 2])
     for fn in (sk.compiled_sample_kernel(), sk.compiled_sample_kernel().py_func):
@@ -337,7 +387,7 @@ def test_kernel_under_limits_checks_the_rate_box():
             rec, buf = _allocate(1, n, m, 3, 1e-3), np.zeros((4, n))
             flag = fn(J, xd, np.zeros(n), np.zeros(n), q.copy(), np.zeros(n), np.zeros(m),
                       np.zeros(m), np.zeros(m), cols, w, np.full(n, np.inf), params, sk.JVJA, 0,
-                      rec["_table"], rec["_offsets"], np.zeros(sk.workspace_size(m, n)), lim,
+                      rec["_table"], rec["_offsets"], ws.copy(), lim,
                       np.array([1 / 0.05, 0.0, -1.0]), buf)  # fmt: skip
             assert flag == expect
             lo, hi = rate_box(q, lim[0], lim[1], lim[2], 0.05)

@@ -43,6 +43,13 @@ from fault_tolerance.numerics.fast.dense import (
 )
 from fault_tolerance.numerics.fast.rank_one_eigen import eigenpairs, highest_root, lowest_root
 from fault_tolerance.numerics.fast.small_eigen import njit
+
+try:  # inlined into its callers at numba's IR level (no call of a compiled function per step)
+    import numba
+
+    _inline = numba.njit(cache=True, nogil=True, error_model="numpy", inline="always")
+except ImportError:  # pragma: no cover - numba is a core dependency
+    _inline = njit
 from fault_tolerance.resolution.indices import RCN_MAX, RCN_SINGULAR
 
 __all__ = [
@@ -454,6 +461,30 @@ def gradient_view(F: np.ndarray, m: int, n: int) -> np.ndarray:
     return F[o : o + n]
 
 
+# The MDA null step of eq. (15)'s gradient, capped as resolution.mda.mda caps it.
+@_inline
+def null_step(Y, a, out, grad, u, gain, max_step, n) -> None:  # pragma: no cover - numba
+    """``out = a − s α N ∇K`` (``grad ← α N ∇K``, ``N = I − YᵀY``; ``out`` may be ``a``).
+
+    ``s = min(1, max_step / ‖α N ∇K‖)``, 0 when that norm is not finite (no usable direction, as
+    :func:`fault_tolerance.resolution.mda.mda`); ``u`` (m) scratch. Shared by :func:`mda_kernel`
+    and the simulated sample (:mod:`fault_tolerance.simulation.fast.sample`).
+    """
+    null_apply(Y, grad, u, n)  # ∇K ← N ∇K
+    size = 0.0
+    for c in range(n):
+        grad[c] *= gain
+        size += grad[c] * grad[c]
+    size = math.sqrt(size)
+    scale = 1.0
+    if not size < _INF:  # ∇K overflowed: no usable direction (as mda.mda)
+        scale = 0.0
+    elif size > max_step:
+        scale = max_step / size
+    for c in range(n):
+        out[c] = a[c] - grad[c] * scale if scale != 0.0 else a[c]
+
+
 @njit
 def mda_kernel(Jf, xdot, out, F, Iw) -> int:  # pragma: no cover - numba
     """MDA rates ``a − α N ∇K`` (the step capped at ``max_step``) into ``out``; a status.
@@ -489,22 +520,9 @@ def mda_kernel(Jf, xdot, out, F, Iw) -> int:  # pragma: no cover - numba
     status = rcn_gradient_kernel(Jf, J, G, Iw, params, scratch, grad)
     if status:
         return status
-    null_apply(Y, grad, zm, n)  # ∇K ← N ∇K
-    size = 0.0
-    gain = params[P_GAIN]
-    for c in range(n):
-        grad[c] *= gain
-        size += grad[c] * grad[c]
-    size = math.sqrt(size)
-    scale = 1.0
-    if not size < _INF:  # ∇K overflowed: no usable direction (as mda.mda)
-        scale = 0.0
-    elif size > params[P_MAXSTEP]:
-        scale = params[P_MAXSTEP] / size
+    null_step(Y, out, out, grad, zm, params[P_GAIN], params[P_MAXSTEP], n)
     s2 = 0.0
     for c in range(n):
-        if scale != 0.0:
-            out[c] -= grad[c] * scale
         s2 += out[c] * out[c]
     return OK if s2 < _INF else UNCERTIFIED
 

@@ -88,41 +88,66 @@ def _lnva(J, xdot, out, G, c) -> int:  # pragma: no cover - numba
 
 
 @_inline
-def _pivots(Y, a, c, fw, threshold, n) -> bool:  # pragma: no cover - numba
-    """``N_ii = 1 − ‖Y_i‖²`` (``Y_i`` column i) and ``c_i = (w_i/W) a_i / N_ii``; True if a pivot is low.
+def _pivots(Y, a, c, d, fw, threshold, n) -> bool:  # pragma: no cover - numba
+    """``d_i = N_ii = 1 − ‖Y_i‖²`` (``Y_i`` column i), ``c_i = (w_i/W) a_i / N_ii``; True if a pivot is low.
 
     ``fw[0]``: 0 on lockable columns, +inf elsewhere (then ``N_ii = inf``, ``c_i = 0``). The
     squares are taken off row by row of ``Y`` (vectorised), in the order of a sum per column.
+    ``d`` may be ``c`` (the step keeps no pivots; the simulated sample does, for its jumps).
     """
     m = Y.shape[0]
     for i in range(n):
-        c[i] = 1.0 + fw[0, i]
+        d[i] = 1.0 + fw[0, i]
     for r in range(m):
         for i in range(n):
-            c[i] -= Y[r, i] * Y[r, i]
+            d[i] -= Y[r, i] * Y[r, i]
     low = False
     for i in range(n):
-        d = c[i]
-        low |= d < threshold
-        c[i] = a[i] / d * fw[1, i]
+        di = d[i]
+        low |= di < threshold
+        c[i] = a[i] / di * fw[1, i]
     return low
+
+
+# Eq. (G2), first half: the factors of the closed-form JVJA step.
+@_inline
+def jvja_factors(J, xdot, a, L, Y, c, d, fw, params, tr) -> int:  # pragma: no cover - numba
+    """``Y = L⁻¹J`` (in ``Y``), ``a = J⁺ẋ = Yᵀ(L⁻¹ẋ)``, the rank certificate, pivots and ratios.
+
+    ``L`` the Cholesky factor of ``J Jᵀ`` and ``tr = trace((J Jᵀ)⁻¹)``; ``c`` (≥ n) gets the ratios
+    ``c_i = (w_i/W) a_i / N_ii``, ``d`` (≥ n, may be ``c``) the pivots ``N_ii``. Status 0; 1: no
+    rank certificate; 2: a pivot below ``params[1]``. Shared by :func:`step_kernel` and the
+    simulated sample (:mod:`fault_tolerance.simulation.fast.sample`).
+    """
+    n = J.shape[1]
+    least_norm(J, xdot, L, Y, c, a)  # Y = L⁻¹ J (in Y) and z = L⁻¹ ẋ (in c): a = Yᵀ z
+    if not rank_ok(J, tr, params[2]):  # rank certificate (linalg.RANK_RTOL), arms without a bound
+        return 1
+    if _pivots(Y, a, c, d, fw, params[1], n):
+        return 2
+    return 0
+
+
+# Eq. (G2), second half: a + alpha N c, N = I − YᵀY never formed.
+@_inline
+def jvja_rates(Y, a, out, c, u, alpha, n) -> int:  # pragma: no cover - numba
+    """``out = a + alpha N c`` (``c ← N c``, ``u`` (m) scratch; ``out`` may be ``a``); 0, or 1 if not finite."""
+    null_apply(Y, c, u, n)
+    s2 = 0.0
+    for i in range(n):
+        out[i] = a[i] + alpha * c[i]
+        s2 += out[i] * out[i]
+    return 0 if s2 < _INF else 1
 
 
 @_inline
 def _jvja(J, xdot, out, G, B, c, fw, params, tr) -> int:  # pragma: no cover - numba
     """JVJA (G2): ``out = a + alpha N c``, ``c_i = (w_i/W) a_i / N_ii`` on lockable columns."""
-    n = J.shape[1]
-    least_norm(J, xdot, G, B, c, out)  # Y = L⁻¹ J (in B) and z = L⁻¹ ẋ (in c): a = Yᵀ z
-    if not rank_ok(J, tr, params[2]):  # rank certificate (linalg.RANK_RTOL), arms without a bound
-        return 1
-    if _pivots(B, out, c, fw, params[1], n):
-        return 2
-    null_apply(B, c, G[0], n)  # c ← N c (the factor is no longer needed: its row 0 is scratch)
-    alpha, s2 = params[3], 0.0
-    for i in range(n):
-        out[i] += alpha * c[i]
-        s2 += out[i] * out[i]
-    return 0 if s2 < _INF else 1
+    status = jvja_factors(J, xdot, out, G, B, c, c, fw, params, tr)
+    if status:
+        return status
+    # c ← N c (the factor is no longer needed: its row 0 is scratch)
+    return jvja_rates(B, out, out, c, G[0], params[3], J.shape[1])
 
 
 @_njit

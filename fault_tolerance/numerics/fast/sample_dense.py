@@ -1,9 +1,11 @@
-"""The small dense linear algebra of one simulated sample, compiled: Cholesky, solves, ``N v``.
+"""The small dense linear algebra of one simulated sample, compiled: Cholesky, downdates, ``k_S``.
 
-Used by :func:`fault_tolerance.simulation.fast.sample.sample_kernel`. ``G = J Jᵀ`` is factored once
-(``G = L Lᵀ``), ``B = G⁻¹J`` is kept, and the projector ``N = I - JᵀB`` is never formed: only its
-pivots ``N_ii`` and its products with vectors. Plain Python loops, valid without numba; compiled
-by numba when it is installed (cached on disk).
+Used by :func:`fault_tolerance.simulation.fast.sample.sample_kernel`: the Cholesky factor of ``G =
+J Jᵀ`` (``G`` kept), the reduced Gram matrices ``G − J_i J_iᵀ`` and their extreme eigenvalues
+(eq. 15). The sample's rates, pivots ``N_ii`` and products ``N v`` are not here: they are the
+Controller's compiled step's own kernels (``Y = L⁻¹J``, ``N = I − YᵀY`` never formed,
+:mod:`fault_tolerance.control.fast.step`). Plain Python loops, valid without numba; compiled by
+numba when it is installed (cached on disk).
 """
 
 from __future__ import annotations
@@ -12,7 +14,7 @@ import math
 
 import numpy as np
 
-from fault_tolerance.numerics.fast.dense import chol_solve, cholesky_into, rank_ok, trace_inverse
+from fault_tolerance.numerics.fast.dense import cholesky_into, trace_inverse
 from fault_tolerance.numerics.fast.rank_one_eigen import downdate_extremes, eigenpairs
 from fault_tolerance.numerics.fast.small_eigen import extreme_eigenvalues
 
@@ -27,30 +29,16 @@ except ImportError:  # pragma: no cover - numba is a core dependency
         return fn
 
 
-#: Indices into ``params`` (shared with :mod:`fault_tolerance.simulation.fast.sample`).
-P_TRACE, P_PIVOT, P_RANK, P_WSUM, P_GAIN, P_MAXSTEP, P_RCN_MAX, P_CONT, P_LOCK = range(9)
+#: Indices into ``params`` (shared with :mod:`fault_tolerance.simulation.fast.sample`); the first
+#: four are laid out as the Controller's compiled step's (``[TRACE_MAX, pivot threshold, rank
+#: coefficient, alpha]``, :func:`fault_tolerance.control.fast.step.step_kernel`).
+P_TRACE, P_PIVOT, P_RANK, P_ALPHA, P_GAIN, P_MAXSTEP, P_RCN_MAX, P_CONT, P_LOCK = range(9)
 P_DT, P_DECAY, P_ACCEL, P_BOUNDED = 9, 10, 11, 12
 N_PARAMS = 13
 
 
 _cholesky = cholesky_into  # G = L Lᵀ into L, G kept (compiled_linalg)
 _trace_inverse = trace_inverse
-
-
-@njit
-def _null_times(J, B, v, out, y) -> None:  # pragma: no cover - numba
-    """``out = N v = v - Jᵀ (B v)``, ``B = G⁻¹J``: O(mn), N never formed."""
-    m, n = J.shape
-    for i in range(m):
-        s = 0.0
-        for j in range(n):
-            s += B[i, j] * v[j]
-        y[i] = s
-    for j in range(n):
-        s = v[j]
-        for i in range(m):
-            s -= J[i, j] * y[i]
-        out[j] = s
 
 
 @njit
@@ -129,39 +117,3 @@ def _spectra(G, J, cols, ks, W, rcn_max, scratch):  # pragma: no cover - numba
         K += ks[s] * ks[s]
     smin = math.sqrt(max(d[0], 0.0)) if basis else _sigma_min(G, W, t)
     return K, smin
-
-
-@njit
-def _factor(J, xd, cols, params, G, L, B, a, piv, y, z) -> bool:  # pragma: no cover - numba
-    """Cholesky of ``G = J Jᵀ`` with its certificate, ``B = G⁻¹J``, ``a = J⁺ẋ``, pivots ``N_ii``.
-
-    False when the reference must do the sample (no certificate, or a pivot below PIVOT_EPS).
-    """
-    m, n = J.shape
-    if not _cholesky(G, L, m):
-        return False
-    tr = _trace_inverse(L, z, m)
-    if not tr <= params[P_TRACE]:
-        return False
-    if not rank_ok(J, tr, params[P_RANK]):
-        return False
-    for c in range(n):  # B = G⁻¹ J column by column
-        for i in range(m):
-            y[i] = J[i, c]
-        chol_solve(L, m, y)
-        for i in range(m):
-            B[i, c] = y[i]
-    for c in range(n):
-        s = 0.0
-        for i in range(m):
-            s += B[i, c] * xd[i]
-        a[c] = s
-    for k in range(cols.shape[0]):  # pivots N_ii = 1 - J_iᵀ B_i of the lockable columns
-        i = cols[k]
-        d = 1.0
-        for r in range(m):
-            d -= J[r, i] * B[r, i]
-        if not d >= params[P_PIVOT]:
-            return False
-        piv[k] = d
-    return True

@@ -2,13 +2,16 @@
 
 :func:`sample_kernel` is what :func:`fault_tolerance.simulation.simulate.simulate` runs at every sample
 (through :class:`fault_tolerance.simulation.fast.sampler.Sampler`): from the task Jacobian ``J`` and the commanded
-task velocity it computes, with one Cholesky factorisation of ``G = J Jᵀ`` and never the n x n
-projector ``N`` itself (only its diagonal and its products with vectors, ``N v = v - Jᵀ(G⁻¹ J v)``,
-:mod:`fault_tolerance.numerics.fast.sample_dense`):
+task velocity it computes, with one Cholesky factorisation ``G = J Jᵀ = L Lᵀ`` and never the n x n
+projector ``N`` itself (only ``Y = L⁻¹J``, ``N = I − YᵀY``: its diagonal and its products with
+vectors ``N v = v − Yᵀ(Y v)``):
 
-* the rates: LNVA ``a = J⁺ẋ``; JVJA in closed form (G2) ``a - N c / W``; MDA ``a - α N ∇K``
-  (``∇K`` given, the step capped as in :func:`fault_tolerance.resolution.resolvers.mda`); rates given by the
-  caller; or, after a lock, the least-norm rates of the remaining joints;
+* the rates, by the Controller's compiled steps' own kernels (inlined, one compiled copy of each
+  formula): LNVA ``a = J⁺ẋ`` and JVJA in closed form (G2) ``a + alpha N c``
+  (:func:`fault_tolerance.control.fast.step.jvja_factors`, :func:`~fault_tolerance.control.fast.step.jvja_rates`);
+  MDA ``a - α N ∇K`` (``∇K`` given, the step capped,
+  :func:`fault_tolerance.control.fast.mda_step.null_step`); rates given by the caller; or, after a
+  lock, the least-norm rates of the remaining joints (the step's ``_lnva``);
 * the jump each scenario would cause now, ``w_S ‖ˢq̇' − q̇‖²`` (eqs. 9/10; ``ˢq̇'`` by G1, least-norm or
   continuation response, G3);
 * the reduced condition numbers ``k_S`` (eq. 15) from the extreme eigenvalues of ``J_S J_Sᵀ = G −
@@ -37,9 +40,12 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 
-from fault_tolerance.numerics.fast.dense import chol_solve, gram_into
+from fault_tolerance.control.fast.mda_step import null_step
+from fault_tolerance.control.fast.step import _lnva, jvja_factors, jvja_rates
+from fault_tolerance.numerics.fast.dense import gram_into
 from fault_tolerance.numerics.fast.sample_dense import (
     P_ACCEL,
+    P_ALPHA,
     P_BOUNDED,
     P_CONT,
     P_DECAY,
@@ -49,17 +55,13 @@ from fault_tolerance.numerics.fast.sample_dense import (
     P_MAXSTEP,
     P_RCN_MAX,
     P_TRACE,
-    P_WSUM,
     _cholesky,
     _downdate,
-    _factor,
-    _null_times,
     _spectra,
     _trace_inverse,
     njit,
 )
-from fault_tolerance.resolution.box_qp import BOX_TOL
-from fault_tolerance.simulation.fast.sample_limits import _in_box, _servo_clip
+from fault_tolerance.simulation.fast.sample_limits import _in_box, _servo_clip, g1_post
 
 #: ``method`` codes of :func:`sample_kernel`.
 LNVA, JVJA, MDA, GIVEN, LOCKED = 0, 1, 2, 3, 4
@@ -75,69 +77,53 @@ _FLAG_LOCKED, _FLAG_STEP_LIMITED, _FLAG_OVER_SPEED = 4, 8, 16
 
 
 @njit
-def _planned(
-    J, B, a, piv, cols, w, params, method, qd_in, grad, qd, v, Nv, y
-) -> int:  # pragma: no cover - numba
-    """The rates of ``method`` into ``qd``; returns FLAG_STEP_LIMITED or 0."""
-    n = J.shape[1]
+def _planned(Y, a, c, params, method, qd_in, grad, qd, Nv, u) -> int:  # pragma: no cover - numba
+    """The rates of ``method`` into ``qd``; returns FLAG_STEP_LIMITED or 0.
+
+    JVJA and MDA by the Controller's compiled steps' own kernels (:func:`.step.jvja_rates`,
+    :func:`.mda_step.null_step`) from the factors of :func:`.step.jvja_factors` (``Y = L⁻¹J``,
+    ``a``, the pivot ratios ``c``).
+    """
+    n = Y.shape[1]
     if method == LNVA:
-        for c in range(n):
-            qd[c] = a[c]
-    elif method == JVJA:  # (G2): a - N c / W, c_i = w_i a_i / N_ii
-        for c in range(n):
-            v[c] = 0.0
-        for k in range(cols.shape[0]):
-            v[cols[k]] += w[k] * a[cols[k]] / piv[k]
-        _null_times(J, B, v, Nv, y)
-        for c in range(n):
-            qd[c] = a[c] - Nv[c] / params[P_WSUM]
+        for i in range(n):
+            qd[i] = a[i]
+    elif method == JVJA:  # (G2): a + alpha N c, c_i = (w_i/W) a_i / N_ii
+        jvja_rates(Y, a, qd, c, u, params[P_ALPHA], n)
     elif method == MDA:  # a - α N ∇K, the step capped at max_step (planner.mda)
-        _null_times(J, B, grad, Nv, y)
-        size = 0.0
-        for c in range(n):
-            Nv[c] *= params[P_GAIN]
-            size += Nv[c] * Nv[c]
-        size = math.sqrt(size)
-        scale = 1.0
-        if not size < math.inf:
-            scale = 0.0
-        elif size > params[P_MAXSTEP]:
-            scale = params[P_MAXSTEP] / size
+        for i in range(n):
+            Nv[i] = grad[i]
+        null_step(Y, a, qd, Nv, u, params[P_GAIN], params[P_MAXSTEP], n)
         t = 0.0
-        for c in range(n):
-            qd[c] = a[c] - Nv[c] * scale if scale != 0.0 else a[c]
-            t += (qd[c] - a[c]) * (qd[c] - a[c])
+        for i in range(n):
+            t += (qd[i] - a[i]) * (qd[i] - a[i])
         if math.sqrt(t) >= 0.999 * params[P_MAXSTEP]:
             return _FLAG_STEP_LIMITED
     else:
-        for c in range(n):
-            qd[c] = qd_in[c]
+        for i in range(n):
+            qd[i] = qd_in[i]
     return 0
 
 
 @njit
-def _jumps(J, B, a, qd, piv, cols, w, cont, parts, lo, hi, bounded) -> float:  # pragma: no cover
+def _jumps(Y, a, qd, piv, cols, w, cont, parts, box, row) -> float:  # pragma: no cover - numba
     """``w_S ‖ˢq̇' − q̇‖²`` of every scenario into ``parts`` (eqs. 9/10, G1/G3); their sum.
 
-    ``bounded``: each ``ˢq̇'`` is checked against the box ``[lo, hi]`` (L4) and clipped into it as
+    ``ˢq̇'`` by :func:`.sample_limits.g1_post` (``N = I − YᵀY``, ``Y = L⁻¹J``, ``piv`` its
+    diagonal by column) into ``row`` (n, scratch). ``box = (lo, hi, bounded)``: with ``bounded``
+    each ``ˢq̇'`` is checked against the box ``[lo, hi]`` (L4) and clipped into it as
     ``bounded.reduced_bounded``; -1.0 when one leaves it (the reduced robot meets a bound).
     """
-    m, n = J.shape
+    n = Y.shape[1]
+    lo, hi, bounded = box
+    base = qd if cont else a
     total = 0.0
     for k in range(cols.shape[0]):
-        i = cols[k]
-        t = (qd[i] if cont else a[i]) / piv[k]
+        if not g1_post(Y, Y, base, piv, cols[k], lo, hi, row, bounded):
+            return -1.0
         acc = 0.0
         for c in range(n):
-            ncol = 1.0 if c == i else 0.0
-            for r in range(m):
-                ncol -= J[r, c] * B[r, i]
-            post = 0.0 if c == i else (qd[c] if cont else a[c]) - t * ncol
-            if bounded:
-                if post < lo[c] - BOX_TOL or post > hi[c] + BOX_TOL:
-                    return -1.0
-                post = min(max(post, lo[c]), hi[c])
-            e = post - qd[c]
+            e = row[c] - qd[c]
             acc += e * e
         parts[k] = w[k] * acc
         total += parts[k]
@@ -146,21 +132,18 @@ def _jumps(J, B, a, qd, piv, cols, w, cont, parts, lo, hi, bounded) -> float:  #
 
 @njit
 def _locked(J, xd, G, params, Wm, L, y, z, qd) -> bool:  # pragma: no cover - numba
-    """Least-norm rates of the joints left after the lock, ``G_r = G − J_l J_lᵀ``; False: reference."""
-    m, n = J.shape
+    """Least-norm rates of the joints left after the lock, ``G_r = G − J_l J_lᵀ``; False: reference.
+
+    The rates by the Controller's compiled LNVA (:func:`.step._lnva`: ``J_rᵀ G_r⁻¹ ẋ``; the
+    locked column's rate is then 0).
+    """
+    m = J.shape[0]
     lock = int(params[P_LOCK])
     _downdate(G, J, lock, Wm)  # G_r = J_r J_rᵀ, the joints left
     if not _cholesky(Wm, L, m) or not _trace_inverse(L, z, m) <= params[P_TRACE]:
         return False
-    for i in range(m):
-        y[i] = xd[i]
-    chol_solve(L, m, y)
-    for c in range(n):
-        s = 0.0
-        if c != lock:
-            for i in range(m):
-                s += J[i, c] * y[i]
-        qd[c] = s
+    _lnva(J, xd, qd, L, y)
+    qd[lock] = 0.0
     return True
 
 
@@ -203,7 +186,7 @@ def _rates(
     G, L, Wm, B, a, v, Nv, piv, qd, y, z = _views(ws, m, n)
     lim, prm, buf = box
     bounded = params[P_BOUNDED] > 0.0
-    _gram(J, G)
+    _gram(J, G)  # kept (the indices' eigenbasis, the lock's downdate); its factor in L
     if method == LOCKED:
         if not _locked(J, xd, G, params, Wm, L, y, z, qd):
             return REFERENCE
@@ -215,14 +198,18 @@ def _rates(
             parts[i] = 0.0
         ws[-1] = 0.0
         return _FLAG_LOCKED
-    if not _factor(J, xd, cols, params, G, L, B, a, piv, y, z):
+    if not _cholesky(G, L, m):  # G = L Lᵀ, certified by trace(G⁻¹) ≤ TRACE_MAX as the steps
         return REFERENCE
-    flag = _planned(J, B, a, piv, cols, w, params, method, qd_in, grad, qd, v, Nv, y)
+    tr = _trace_inverse(L, z, m)
+    # the Controller's JVJA step's factors: Y = L⁻¹J (in B), a, pivots N_ii (piv), ratios (v)
+    if not tr <= params[P_TRACE] or jvja_factors(J, xd, a, L, B, v, piv, _fw(ws, m, n), params, tr):
+        return REFERENCE
+    flag = _planned(B, a, v, params, method, qd_in, grad, qd, Nv, y)
     ws[-3], ws[-2] = flag, 0.0
-    if bounded and not _in_box(q, lim, prm, buf, qd, J, B, v, cols, False):
+    if bounded and not _in_box(q, lim, prm, buf, qd, B, B, v, cols, False):
         return BOUNDED
     ws[-2] = 1.0
-    jv = _jumps(J, B, a, qd, piv, cols, w, params[P_CONT] > 0.0, parts, buf[0], buf[1], bounded)
+    jv = _jumps(B, a, qd, piv, cols, w, params[P_CONT] > 0.0, parts, (buf[0], buf[1], bounded), Nv)
     if jv < 0.0:
         return BOUNDED
     ws[-1] = jv
@@ -249,6 +236,13 @@ def _eigen_scratch(ws, m, n):  # pragma: no cover - numba
     """The ``m² + 5 m`` numbers of ``ws`` after :func:`_views`' that ``_spectra`` works in."""
     o = 3 * m * m + m * n + 5 * n + 2 * m
     return ws[o : o + m * m + 5 * m]
+
+
+@njit
+def _fw(ws, m, n):  # pragma: no cover - numba
+    """The Controller's scenario table ``fw`` (2, n) in ``ws`` (:func:`set_scenarios`)."""
+    o = 4 * m * m + m * n + 5 * n + 7 * m
+    return ws[o : o + 2 * n].reshape((2, n))
 
 
 @njit
@@ -372,7 +366,17 @@ W_FLAG, W_INSIDE, W_JUMP = -3, -2, -1
 
 def workspace_size(m: int, n: int) -> int:
     """Length of the float workspace ``ws`` of :func:`sample_kernel` (see ``W_*``)."""
-    return 4 * m * m + m * n + 5 * n + 7 * m + 3
+    return 4 * m * m + m * n + 7 * n + 7 * m + 3
+
+
+def set_scenarios(ws, m: int, n: int, fw) -> None:
+    """Put a Controller workspace's scenario table ``fw`` into ``ws``.
+
+    ``ControllerWorkspace.fw``: 0 on lockable columns and +inf elsewhere, the weights ``w_i/W``
+    or 1; ``params[P_ALPHA]`` takes its ``alpha``. The JVJA rates are then the Controller's
+    compiled step's, number for number.
+    """
+    getattr(_fw, "py_func", _fw)(ws, m, n)[:] = fw
 
 
 def compiled_sample_kernel() -> Callable:

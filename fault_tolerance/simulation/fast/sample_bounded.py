@@ -132,7 +132,7 @@ def _posts(J, xd, ws, cols, buf, qcmd, cont, F, Iw, tabs) -> bool:  # pragma: no
     base = qcmd if cont else a
     for t in range(f):
         scales[t] = 1.0
-    if g1_posts(J, B, base, piv, cols, buf[0], buf[1], post, inside) == 0:
+    if g1_posts(B, B, base, piv, cols, buf[0], buf[1], post, inside) == 0:
         return True
     nt = 0
     for t in range(f):

@@ -9,6 +9,13 @@ clipped at the position limits over one time step as ``reference_step._clip_to_l
 from __future__ import annotations
 
 from fault_tolerance.numerics.fast.sample_dense import njit
+
+try:  # inlined into its callers at numba's IR level (no compiled call per scenario)
+    import numba
+
+    _inline = numba.njit(cache=True, nogil=True, error_model="numpy", inline="always")
+except ImportError:  # pragma: no cover - numba is a core dependency
+    _inline = njit
 from fault_tolerance.resolution.box_qp import BOX_TOL
 
 try:  # the rate box check of the Controller's bounded step, compiled by numba
@@ -23,7 +30,7 @@ _FLAG_SERVO_CLIPPED = 256
 
 
 @njit
-def _in_box(q, lim, prm, buf, qd, J, B, v, cols, locked) -> bool:  # pragma: no cover - numba
+def _in_box(q, lim, prm, buf, qd, P, Q, v, cols, locked) -> bool:  # pragma: no cover - numba
     """Box (L1) at ``q`` into ``buf[0], buf[1]`` (``box_status``); whether ``qd`` is inside it.
 
     Inside, ``qd`` is clipped into the box (``bounded.resolve_bounded`` does so). After a lock the
@@ -31,7 +38,7 @@ def _in_box(q, lim, prm, buf, qd, J, B, v, cols, locked) -> bool:  # pragma: no 
     """
     n = qd.shape[0]
     lock = int(prm[2]) if locked else -1
-    if _box_status(q, lim, prm, buf, qd, J, B, v, cols, False) != 0:
+    if _box_status(q, lim, prm, buf, qd, P, Q, v, cols, False) != 0:
         if lock < 0:
             return False
         for c in range(n):  # the locked joint's own bound does not count
@@ -58,27 +65,41 @@ def _servo_clip(q, lim, dt, qd) -> int:  # pragma: no cover - numba
     return flag
 
 
-# Eqn. (G1) / (G3) of every reduced robot from the kernel's factors, checked against the box.
+# Eqn. (G1) / (G3): one reduced robot's rates from the kernel's factors.
+@_inline
+def g1_post(P, Q, base, piv, c, lo, hi, row, box) -> bool:  # pragma: no cover - numba
+    """``row = base − (base_c / N_cc) N[c, :]`` (``N = I − PᵀQ``; ``row_c = 0``).
+
+    The sample passes ``P = Q = Y = L⁻¹J`` (the Controller's compiled step's factor) and ``piv``
+    its pivots ``N_cc`` by column. ``box``: returns whether ``row`` is inside ``[lo, hi]`` (to
+    ``BOX_TOL``) and clips it into the box; else True, nothing clipped. The one copy of these
+    rates in the compiled sample (its jumps and :func:`g1_posts`).
+    """
+    m, n = P.shape
+    ratio = base[c] / piv[c]
+    ok = True
+    for j in range(n):
+        s = 0.0
+        for i in range(m):
+            s += Q[i, c] * P[i, j]
+        v = 0.0 if j == c else base[j] - ratio * (-s)
+        if box:
+            ok = ok and lo[j] - BOX_TOL <= v <= hi[j] + BOX_TOL
+            v = min(max(v, lo[j]), hi[j])
+        row[j] = v
+    return ok
+
+
 @njit
-def g1_posts(J, B, base, piv, cols, lo, hi, post, inside) -> int:  # pragma: no cover - numba
-    """``post[t] = base − (base_c / N_cc) N[c, :]`` (``c = cols[t]``, ``N = I − JᵀB``), clipped.
+def g1_posts(P, Q, base, piv, cols, lo, hi, post, inside) -> int:  # pragma: no cover - numba
+    """Every reduced robot's :func:`g1_post` into the rows of ``post``, clipped into the box.
 
     ``inside[t]`` gets 1 when row ``t`` was inside the box ``[lo, hi]`` (to ``BOX_TOL``) before
     the clip, else 0; returns how many were not (they need the bounded solve (L4)).
     """
-    m, n = J.shape
     out = 0
     for t in range(cols.shape[0]):
-        c = cols[t]
-        ratio = base[c] / piv[t]
-        ok = True
-        for j in range(n):
-            s = 0.0
-            for i in range(m):
-                s += B[i, c] * J[i, j]
-            v = 0.0 if j == c else base[j] - ratio * (-s)
-            ok = ok and lo[j] - BOX_TOL <= v <= hi[j] + BOX_TOL
-            post[t, j] = min(max(v, lo[j]), hi[j])
+        ok = g1_post(P, Q, base, piv, cols[t], lo, hi, post[t], True)
         inside[t] = 1 if ok else 0
         out += 0 if ok else 1
     return out

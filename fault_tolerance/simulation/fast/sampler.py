@@ -129,7 +129,7 @@ class Sampler:
         self.params = np.zeros(sd.N_PARAMS)
         p = self.params
         p[sk.P_TRACE], p[sd.P_PIVOT], p[sd.P_RANK] = TRACE_MAX, PIVOT_EPS, self.cw.rank_coef
-        p[sk.P_WSUM], p[sk.P_GAIN], p[sk.P_MAXSTEP] = float(sc.weights.sum()), s.gain, s.max_step
+        p[sk.P_ALPHA], p[sk.P_GAIN], p[sk.P_MAXSTEP] = self.cw.alpha, s.gain, s.max_step
         p[sk.P_RCN_MAX], p[sk.P_CONT] = RCN_MAX, 1.0 if self.continuation else 0.0
         p[sk.P_LOCK] = -1 if s.lock_col is None else s.lock_col
         p[sk.P_DT] = s.dt
@@ -138,6 +138,7 @@ class Sampler:
         p[sk.P_BOUNDED] = 1.0 if s.limits else 0.0
         self.lim, self.prm, self.buf = _box_tables(arm, s)
         self.ws = np.zeros(sk.workspace_size(arm.m, arm.n))
+        sk.set_scenarios(self.ws, arm.m, arm.n, self.cw.fw)  # JVJA's weights, as the step's
         self.zeros = np.zeros(arm.n)
         self.table, self.off = rec["_table"], rec["_offsets"]
         self.qd_rows = rec["qd"]
@@ -342,11 +343,11 @@ class Sampler:
         m, n = J.shape
         cols, f = self.cols, len(self.cols)
         o = 3 * m * m
-        B = self.ws[o : o + m * n].reshape(m, n)
-        piv = self.ws[o + m * n + 3 * n : o + m * n + 3 * n + f]
+        Y = self.ws[o : o + m * n].reshape(m, n)  # L⁻¹J, N = I − YᵀY
+        piv = self.ws[o + m * n + 3 * n : o + m * n + 4 * n]  # N_ii by column
         base = qd_cmd if self.continuation else self.a_ws
         post, inside, scales = np.empty((f, n)), np.empty(f, dtype=np.int64), np.ones(f)
-        if self.g1_posts(J, B, base, piv, cols, lo, hi, post, inside) == 0:  # (G1) / (G3), clipped
+        if self.g1_posts(Y, Y, base, piv, cols, lo, hi, post, inside) == 0:  # (G1) / (G3), clipped
             return post, scales
         todo = np.flatnonzero(inside == 0)
         target = qd_cmd if self.continuation else None
