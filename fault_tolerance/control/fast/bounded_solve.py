@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from fault_tolerance.control.fast.bounded_free import free_kernel, free_shape
+from fault_tolerance.control.fast.bounded_free import _free, free_shape
 from fault_tolerance.control.fast.box_check import compiled_box_status
 from fault_tolerance.control.fast.multi_step import multi_kernel
 from fault_tolerance.control.fast.step import compiled_kernel
@@ -333,13 +333,13 @@ def free_then_bounded(J, q, xdot, out, F, Iw):  # pragma: no cover - numba
     unbounded step or the solve; the reference route).
     """
     n, m, mode = Iw[0], Iw[1], Iw[4]
-    if J.shape[0] != m or J.shape[1] != n or mode < 0 or mode > 1:
+    if mode < 0 or mode > 1:  # other sizes of J, q, ẋ, out: the free kernel's status 2
         return 3
     rows, width = free_shape(m, n)
     o = Iw[_HEAD + _FREE] + mode * rows * width
     W = F[o : o + rows * width].reshape((rows, width))
     state = _fv(F, Iw, _STATE, n + 2)
-    st = free_kernel(J, q, xdot, out, W, state)
+    st = _free(J, q, xdot, out, W, state)  # free_kernel, inlined
     if st != 1:
         return 0 if st == 0 else 3
     h = 4 + 2 * m
