@@ -64,3 +64,41 @@ def test_controller_bounded_step_counts_and_state():
     assert ctrl.bounded_steps == 1 and ctrl.last_scale < 1.0 and ctrl.last_active.any()
     ctrl.jvja(q, np.array([1e-3, 0.0]))
     assert ctrl.bounded_steps == 1 and ctrl.last_scale == 1.0 and not ctrl.last_active.any()
+
+
+@pytest.mark.parametrize("k", range(3))
+@pytest.mark.parametrize("method", ["jvja", "lnva"])
+def test_one_call_step_equals_free_kernel_then_bounded_after(k, method):
+    """free_then_bounded's status and rates are the free kernel's, then bounded_after's, bit for bit."""
+    from fault_tolerance.control.fast.bounded_solve import free_then_bounded
+
+    arm, lockable = _arms()[k]
+    ctrl = Controller(arm, lockable, method=method, backend="numba", limits=True)
+    cw = ctrl.workspace
+    F, I0, views = cw.box_tables
+    Iw = I0.copy()
+    Iw[4] = 1 if method == "jvja" else 0
+    W = free_workspace(cw.n, cw.m, views["p4"], views["fw"], views["lim"], views["prm"],
+                       int(Iw[4]), views["cols"])  # fmt: skip
+    np.testing.assert_array_equal(views["free"][Iw[4]], W)  # the Controller's step filled it
+    rng = np.random.default_rng(11 + k)
+    seen = set()
+    for _ in range(200):
+        q = rng.uniform(arm.lower, arm.upper) * 0.98
+        xd = rng.standard_normal(arm.m) * rng.choice([0.01, 0.1, 1.0, 10.0])
+        J = ctrl.jacobian(q).copy()
+        o1, o2 = np.empty(arm.n), np.empty(arm.n)
+        s1 = free_kernel(J, q, xd, o1, W, views["state"])
+        if s1 == 1:
+            s1 = {0: 2, 1: 1, 3: 3}[bounded_after(J, q, xd, o1, F, Iw)]
+        elif s1 == 2:
+            s1 = 3
+        state1 = views["state"].copy()
+        s2 = free_then_bounded(J, q, xd, o2, F, Iw)
+        seen.add(s2)
+        assert s1 == s2
+        if s2 != 3:
+            np.testing.assert_array_equal(o1, o2)
+            np.testing.assert_array_equal(state1, views["state"])
+    assert {0, 1} <= seen
+    assert free_then_bounded(J, q[:-1], xd, o2, F, Iw) == 3  # sizes: the reference route

@@ -80,6 +80,30 @@ def test_nearest_point_on_the_rates_equals_boxqp():
     assert seen == {"empty", "scaled", "active", "free"}
 
 
+def test_one_active_row_equals_nearest_rates_bit_for_bit():
+    """The one-row shortcut of solve_box_rates decides only what nearest_rates decides, alike."""
+    rng = np.random.default_rng(3)
+    taken = declined = 0
+    for _ in range(400):
+        m, n = [(2, 4), (3, 7), (1, 3), (3, 5)][rng.integers(4)]
+        J, xd, lo, hi = random_problem(rng, m, n, rng.choice([0.2, 0.5, 0.9, 3.0]))
+        proj = ft.projection(J)
+        Z = np.ascontiguousarray(bounded._null_basis(proj.N))
+        mask = (rng.uniform(size=n) > 0.15).astype(np.int64)
+        ws1, ws2 = np.zeros((8, n + 1)), np.zeros((8, n + 1))
+        ws1[6, :n] = ws2[6, :n] = proj.Jpinv @ xd
+        wsi, gram = np.zeros((2, n + 1), dtype=np.int64), np.zeros((n + 1, n + 1))
+        p = boxkernel._one_row_rates(Z, Z.shape[1], lo, hi, mask, ws1)
+        code = boxkernel.nearest_rates(Z, Z.shape[1], lo, hi, mask, ws2, wsi[0], wsi[1], gram)
+        if p < 0:
+            declined += 1
+            continue
+        taken += 1
+        assert code == 0 and wsi[1, 0] == 1 and wsi[0, 0] == p
+        np.testing.assert_array_equal(ws1[7, :n], ws2[7, :n])  # the motion Z u, bit for bit
+    assert taken >= 10 and declined >= 10  # both branches seen
+
+
 @pytest.mark.parametrize("weights", [None, "random"])
 @pytest.mark.parametrize("tight", [None, 0.9, 0.5, 0.2])
 @pytest.mark.parametrize("m,n", [(2, 3), (2, 4), (3, 7), (1, 4), (3, 5)])

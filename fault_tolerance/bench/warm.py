@@ -165,6 +165,7 @@ KERNELS: dict[str, tuple[tuple[str, str], ...]] = {
         ("fault_tolerance.control.fast.bounded_solve", "bounded_kernel"),
         ("fault_tolerance.control.fast.bounded_solve", "bounded_after"),
         ("fault_tolerance.control.fast.bounded_free", "free_kernel"),
+        ("fault_tolerance.control.fast.bounded_solve", "free_then_bounded"),
     ),
     "simulate": (
         ("fault_tolerance.simulation.fast.sample", "sample_kernel"),

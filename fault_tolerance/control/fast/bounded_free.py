@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from fault_tolerance.control.fast.step import N_PARAMS, compiled_kernel
+from fault_tolerance.control.fast.step import N_PARAMS, _inline, compiled_kernel
 from fault_tolerance.resolution.box_qp import BOX_TOL
 from fault_tolerance.resolution.fast.box_qp import _njit
 
@@ -46,6 +46,12 @@ def free_kernel(J, q, xdot, out, W, state):  # pragma: no cover - numba
     operations in the same order) on the rows of ``W`` indexed in place: no views, whose
     reference counts cost more than the check of a small arm.
     """
+    return _free(J, q, xdot, out, W, state)
+
+
+@_inline
+def _free(J, q, xdot, out, W, state):  # pragma: no cover - numba
+    """:func:`free_kernel`'s body, inlined into the one-call bounded step too."""
     m, n = J.shape
     rows, width = free_shape(m, n)
     if xdot.shape[0] != m or out.shape[0] != n or q.shape[0] != n or state.shape[0] != n + 2:

@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from fault_tolerance.control.fast.bounded_free import _free, free_shape
 from fault_tolerance.control.fast.box_check import compiled_box_status
 from fault_tolerance.control.fast.multi_step import multi_kernel
 from fault_tolerance.control.fast.step import compiled_kernel
@@ -50,13 +51,17 @@ _FLOAT = (("G", "mm"), ("B", "mn"), ("fw", "2n"), ("lim", "3n"), ("buf", "4n"), 
           ("p4", "4"), ("prm", "2"), ("state", "n+2"), ("p3", "3"), ("Zm", "nn"), ("V", "7n"),
           ("Lm", "mm"), ("Y", "mn"), ("z", "m"), ("NSS", "ss"), ("ys", "s"), ("wsf", "8(n+1)"),
           ("gram", "(n+1)(n+1)"), ("wrel", "f"), ("mws", "multi"), ("QA", "nm"), ("hb", "m"),
-          ("Zs", "nn"), ("posts", "fn"), ("pscale", "f"), ("psolved", "f"))  # fmt: skip
+          ("Zs", "nn"), ("posts", "fn"), ("pscale", "f"), ("psolved", "f"),
+          ("free", "free"))  # fmt: skip
 _INT = (("cols", "k"), ("sets", "fs"), ("wsi", "2(n+1)"), ("mask", "n"))
 (_G, _B, _FW, _LIM, _BUF, _C, _P4, _PRM, _STATE, _P3, _ZM, _V, _LM, _Y, _Z, _NSS, _YS, _WSF, _GRAM,
- _WREL, _MWS, _QA, _HB, _ZS, _POSTS, _PSCALE, _PSOLVED) = range(27)  # fmt: skip
+ _WREL, _MWS, _QA, _HB, _ZS, _POSTS, _PSCALE, _PSOLVED, _FREE) = range(28)  # fmt: skip
 _COLS, _SETS, _WSI, _MASK = range(4)
 _HEAD = 8
 _NF = len(_FLOAT)
+
+
+_free_dims = getattr(free_shape, "py_func", free_shape)  # plain Python without numba
 
 
 def _shapes(n, m, f, s, k) -> dict[str, tuple[int, ...]]:
@@ -66,7 +71,7 @@ def _shapes(n, m, f, s, k) -> dict[str, tuple[int, ...]]:
             "2": (2,), "4n": (4, n), "n+2": (n + 2,), "3": (3,), "nn": (n, n), "7n": (7, n),
             "m": (m,), "ss": (s, s), "s": (s,), "8(n+1)": (8, n1), "(n+1)(n+1)": (n1, n1),
             "f": (f,), "multi": (multi,), "k": (k,), "fs": (f, s), "2(n+1)": (2, n1), "nm": (n, m),
-            "fn": (f, n)}  # fmt: skip
+            "fn": (f, n), "free": (2, *_free_dims(m, n))}  # fmt: skip
 
 
 def workspace(n: int, m: int, sets: np.ndarray, cols: np.ndarray, mode: int):
@@ -313,6 +318,38 @@ def bounded_after(J, q, xdot, out, F, Iw):  # pragma: no cover - numba
     if bounded_solve(J, xdot, out, mode, F, Iw):
         return 3
     return 1 if _fv(F, Iw, _STATE, n + 2)[1] != 0.0 else 0
+
+
+@_njit
+def free_then_bounded(J, q, xdot, out, F, Iw):  # pragma: no cover - numba
+    """LNVA or single-joint JVJA under the box in one call: the free kernel, then the solve.
+
+    :func:`fault_tolerance.control.fast.bounded_free.free_kernel` on its workspace, the section
+    ``free[Iw[4]]`` of ``F`` (:func:`fault_tolerance.control.fast.bounded_free.free_workspace`),
+    and, only when a bound is met, :func:`bounded_solve` in the box that kernel computed (the
+    numbers :func:`bounded_after` computes again). One call where the free kernel and
+    :func:`bounded_after` are two, the same functions on the same numbers. Returns 0 (no bound
+    met, ``out`` final), 1 (solved, a bound met), 2 (solved, none met) or 3 (refused: sizes, the
+    unbounded step or the solve; the reference route).
+    """
+    n, m, mode = Iw[0], Iw[1], Iw[4]
+    if mode < 0 or mode > 1:  # other sizes of J, q, ẋ, out: the free kernel's status 2
+        return 3
+    rows, width = free_shape(m, n)
+    o = Iw[_HEAD + _FREE] + mode * rows * width
+    W = F[o : o + rows * width].reshape((rows, width))
+    state = _fv(F, Iw, _STATE, n + 2)
+    st = _free(J, q, xdot, out, W, state)  # free_kernel, inlined
+    if st != 1:
+        return 0 if st == 0 else 3
+    h = 4 + 2 * m
+    buf = _fm(F, Iw, _BUF, 4, n)
+    for j in range(n):  # the box (L1) the free kernel computed: bounded_after's numbers
+        buf[0, j] = W[h + 3, j]
+        buf[1, j] = W[h + 4, j]
+    if bounded_solve(J, xdot, out, mode, F, Iw):
+        return 3
+    return 1 if state[1] != 0.0 else 2
 
 
 # Eqn. (L4) for chosen reduced robots (the simulated sample's jump under the box).

@@ -123,46 +123,42 @@ def compiled_bounded_step(
 
 
 def _free_step(cw: ControllerWorkspace, name: str, retrying, reference, tables, J0) -> Callable:
-    """LNVA and single-joint JVJA: the lean kernel (step and box check), the solve when a bound is met.
+    """LNVA and single-joint JVJA: one call, the lean kernel and, when a bound is met, the solve.
 
-    :func:`fault_tolerance.control.fast.bounded_free.free_kernel` in the unbounded step's layout, then, only
-    when a bound is met, :func:`fault_tolerance.control.fast.bounded_solve.bounded_after` from its rates.
-    ``retrying = (retry, target)``: ``retry`` converts other types once and calls ``target[0]``,
-    this step, again; ``reference`` is the reference route.
+    :func:`fault_tolerance.control.fast.bounded_solve.free_then_bounded`: the unbounded step and
+    the box check of :func:`fault_tolerance.control.fast.bounded_free.free_kernel` (its
+    workspace a section of the bounded workspace), then, only when a bound is met, the bounded
+    solve from its rates. ``retrying = (retry, target)``: ``retry`` converts other types once and
+    calls ``target[0]``, this step, again; ``reference`` is the reference route.
     """
-    from fault_tolerance.control.fast.bounded_free import free_kernel, free_workspace
-    from fault_tolerance.control.fast.bounded_solve import bounded_after
+    from fault_tolerance.control.fast.bounded_free import free_workspace
+    from fault_tolerance.control.fast.bounded_solve import free_then_bounded as kernel
 
     F, Iw, views = tables
     retry, target = retrying
     n, m, counts = cw.n, cw.m, cw.counts
-    W = free_workspace(n, m, views["p4"], views["fw"], views["lim"], views["prm"], int(Iw[4]),
-                       views["cols"])  # fmt: skip
-    state = views["state"]
+    views["free"][int(Iw[4])] = free_workspace(n, m, views["p4"], views["fw"], views["lim"],
+                                               views["prm"], int(Iw[4]), views["cols"])  # fmt: skip
     model, data, fid, rows = cw.model, cw.data, cw.frame_id, cw.rows
     cfj, empty = pin.computeFrameJacobian, np.empty
-    for kernel, args in ((free_kernel, (W, state)), (bounded_after, (F, Iw))):
-        kernel.disable_compile(False)  # compiled for this layout here, then frozen (see above)
-        kernel(J0, np.zeros(n + 1), np.zeros(m), np.zeros(n), *args)  # refused: sizes
-        kernel.disable_compile(True)
+    kernel.disable_compile(False)  # compiled for this layout here, then frozen (see above)
+    kernel(J0, np.zeros(n + 1), np.zeros(m), np.zeros(n), F, Iw)  # refused: sizes
+    kernel.disable_compile(True)
 
     def step(q: np.ndarray, xdot: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
         if out is None:
             out = empty(n)
-        try:  # the kernels check the sizes (status 2, 3), numba the types and layouts (TypeError)
-            J = cfj(model, data, q, fid, _LWA)[rows]
-            status = free_kernel(J, q, xdot, out, W, state)
-            if status == 1:
-                status = bounded_after(J, q, xdot, out, F, Iw)
-                if status == 1:
-                    counts[BOUNDED_STEPS] += 1
-                    return out
+        try:  # the kernel checks the sizes (status 3), numba the types and layouts (TypeError)
+            status = kernel(cfj(model, data, q, fid, _LWA)[rows], q, xdot, out, F, Iw)
         except FaultToleranceError:
             raise
         except _ERRORS:
             return retry(q, xdot, out)
         if status:
-            return reference(q, xdot, out)
+            if status == 1:
+                counts[BOUNDED_STEPS] += 1
+            elif status == 3:
+                return reference(q, xdot, out)
         return out
 
     target.append(step)

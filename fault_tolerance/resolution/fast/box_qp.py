@@ -242,6 +242,65 @@ def _certificate_root(p0, d, lo, hi, rows, ws, k, n):  # pragma: no cover - numb
     return g0, g1
 
 
+@_njit
+def _violated_row(ws, lo, hi, mask, n) -> int:  # pragma: no cover - numba
+    """The only row with a normalised slack below ``−BOX_TOL``; −1 if none, two or a flat one.
+
+    With one such row it is the row :func:`_most_violated` picks, and :func:`_flat_row` finds
+    none (a flat violated row, ``ws[_NORM] < ROW_EPS``, gives −1 too). ``ws[_NORM]`` set.
+    """
+    p = -1
+    for k in range(2 * n):
+        j = k if k < n else k - n
+        b = hi[j] if k < n else lo[j]
+        if not mask[j] or not math.isfinite(b):
+            continue
+        if ws[_NORM, j] < ROW_EPS:
+            e = ws[_X, j] - hi[j] if k < n else lo[j] - ws[_X, j]
+            if e > BOX_TOL:
+                return -1
+            continue
+        if _slack(k, n, ws, lo, hi) / ws[_NORM, j] < -BOX_TOL:
+            if p >= 0:
+                return -1
+            p = k
+    return p
+
+
+# Eqn. (L7) with one active row: the first step of nearest_rates, when it is also the last.
+@_njit
+def _one_row_rates(Z, r, lo, hi, mask, ws) -> int:  # pragma: no cover - numba
+    """:func:`nearest_rates` when one row is violated and its step leaves none: that row, else −1.
+
+    The same operations as the first iteration of :func:`nearest_rates` (``ws[7] = Z u`` as
+    there), without its general machinery; −1 (nothing decided) in every other case, which
+    :func:`nearest_rates` then solves from the start.
+    """
+    n = lo.shape[0]
+    for j in range(n):
+        ws[_DELTA, j] = 0.0
+        ws[_NORM, j] = math.sqrt(_dot_rows(Z, r, j, j))
+    p = _violated_row(ws, lo, hi, mask, n)
+    if p < 0 or r < 1:
+        return -1
+    jp = p if p < n else p - n
+    rp = -1.0 if p < n else 1.0
+    zz = 0.0
+    for c in range(r):
+        ws[_ZV, c] = rp * Z[jp, c]
+    for c in range(r):
+        zz += ws[_ZV, c] * ws[_ZV, c]
+    if not zz > 1e-14 * ws[_NORM, jp] * ws[_NORM, jp]:
+        return -1
+    t = -_slack(p, n, ws, lo, hi) / zz
+    for i in range(n):
+        d = 0.0
+        for c in range(r):
+            d += Z[i, c] * ws[_ZV, c]
+        ws[_DELTA, i] += t * d
+    return p if _most_violated(ws, lo, hi, mask, n) < 0 else -1
+
+
 # (L2) with (L3): boxqp.solve_box in scalar loops.
 @_njit
 def solve_box_rates(
@@ -266,7 +325,11 @@ def solve_box_rates(
                 act[j] = 0.0
             out[0], out[1] = 1.0, 0.0
             return 0
-        st = nearest_rates(Z, r, lo, hi, mask, ws, rows, info, gram)
+        p = _one_row_rates(Z, r, lo, hi, mask, ws)  # the common case, decided without the loop
+        if p >= 0:
+            rows[0], info[0], st = p, 1, 0
+        else:
+            st = nearest_rates(Z, r, lo, hi, mask, ws, rows, info, gram)
         if st == 0:
             for j in range(n):
                 v = ws[_X, j] + ws[_DELTA, j]
