@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from fault_tolerance.control.fast.box_check import g1_column_into
 from fault_tolerance.control.fast.step import N_PARAMS, _inline, compiled_kernel
 from fault_tolerance.resolution.box_qp import BOX_TOL
 from fault_tolerance.resolution.fast.box_qp import _njit
@@ -92,7 +93,8 @@ def _outside(q, out, W, h, n) -> bool:  # pragma: no cover - numba
     return bad
 
 
-# Eqn. (G1) in the box: every reduced robot's rates a − (a_i / N_ii) N[:, i], N = I − YᵀY.
+# Eqn. (G1) in the box: every reduced robot's rates a − (a_i / N_ii) N[:, i], N = I − YᵀY
+# (the column and the pivot by box_check.g1_column_into).
 @_njit
 def _reduced_outside(out, W, h, m, n) -> bool:  # pragma: no cover - numba
     """True when a reduced robot's (G1) rates leave the box (``box_status``'s status 2).
@@ -115,21 +117,12 @@ def _reduced_outside(out, W, h, m, n) -> bool:  # pragma: no cover - numba
             W[a, j] -= W[3 + r, j] * yr
     for j in range(n):
         W[a, j] = out[j] - alpha * W[a, j]
+    Y, col = W[3 : 3 + m], W[y]
     for t in range(k):
         i = int(W[h + 8, t])
-        nii = 1.0
-        for r in range(m):
-            nii -= W[3 + r, i] * W[3 + r, i]
-        ratio = W[a, i] / nii
-        q0 = W[3, i]
-        for j in range(n):  # N[j, i] = -Y_jᵀ Y_i, row by row of Y as box_status sums it
-            W[y, j] = 0.0 - W[3, j] * q0
-        for r in range(1, m):
-            qri = W[3 + r, i]
-            for j in range(n):
-                W[y, j] -= W[3 + r, j] * qri
+        ratio = W[a, i] / g1_column_into(Y, Y, m, n, col, i)
         for j in range(n):
-            p = W[a, j] - ratio * W[y, j]
+            p = W[a, j] - ratio * col[j]
             if j != i and (p < W[lo, j] - BOX_TOL or p > W[hi, j] + BOX_TOL):
                 return True
     return False

@@ -13,6 +13,37 @@ import numpy as np
 
 from fault_tolerance.resolution.box_qp import BOX_TOL
 
+try:  # inlined into its callers at numba's IR level
+    import numba
+
+    _inline = numba.njit(cache=True, nogil=True, error_model="numpy", inline="always")
+except ImportError:  # pragma: no cover - numba is a core dependency
+
+    def _inline(f):
+        return f
+
+
+# Eqn. (G1): the column N[:, i] of N = I - PᵀQ (never formed) that reduced robot i's rates
+# a - (a_i / N_ii) N[:, i] need; the one copy of it in the compiled kernels.
+@_inline
+def g1_column_into(P, Q, m, n, col, i):  # pragma: no cover - numba
+    """``col[j] = N[j, i]`` for ``j != i`` (``col[i]`` is ``N_ii - 1``); returns the pivot ``N_ii``.
+
+    Summed row by row of ``P`` (the loops over ``j`` vectorise); with ``P = Q = Y`` the sums
+    are those of ``N[i, j]`` entry by entry, bit for bit.
+    """
+    nii = 1.0
+    for r in range(m):
+        nii -= P[r, i] * Q[r, i]
+    q0 = Q[0, i]
+    for j in range(n):
+        col[j] = 0.0 - P[0, j] * q0
+    for r in range(1, m):
+        qri = Q[r, i]
+        for j in range(n):
+            col[j] -= P[r, j] * qri
+    return nii
+
 
 def box_status(q, lim, prm, buf, out, P, Q, c, cols, jv):  # pragma: no cover - numba
     """Box (L1) at ``q`` into ``buf[0], buf[1]``; 0 when ``out`` (and, ``jv``, each (G1) rate) is inside.
@@ -55,29 +86,14 @@ def box_status(q, lim, prm, buf, out, P, Q, c, cols, jv):  # pragma: no cover - 
             a[j] -= P[r, j] * yr
     for j in range(n):
         a[j] = out[j] - alpha * a[j]
-    col = y  # y is spent: N[:, i] of each scenario, accumulated along the rows of P
     for t in range(cols.shape[0]):
         i = int(cols[t])  # int, or a float holding one (the free kernel's workspace row)
-        nii = 1.0
-        for r in range(m):
-            nii -= P[r, i] * Q[r, i]
+        nii = g1_column_into(P, Q, m, n, y, i)  # y is spent: N[:, i]
         ratio = a[i] / nii
-        q0 = Q[0, i]
-        for j in range(n):  # N[j, i] = -P_jᵀ Q_i: the same sum as entry by entry, row by row of P
-            col[j] = 0.0 - P[0, j] * q0
-        for r in range(1, m):
-            qri = Q[r, i]
-            for j in range(n):
-                col[j] -= P[r, j] * qri
-        out_of_box = False  # all j first (vectorised), then without j = i if that fails
         for j in range(n):
-            p = a[j] - ratio * col[j]
-            out_of_box |= (p < lo[j] - BOX_TOL) | (p > hi[j] + BOX_TOL)
-        if out_of_box:
-            for j in range(n):
-                p = a[j] - ratio * col[j]
-                if j != i and (p < lo[j] - BOX_TOL or p > hi[j] + BOX_TOL):
-                    return 2
+            p = a[j] - ratio * y[j]
+            if j != i and (p < lo[j] - BOX_TOL or p > hi[j] + BOX_TOL):
+                return 2
     return 0
 
 
@@ -121,4 +137,4 @@ def compiled_box_status() -> Callable:
     return _COMPILED["box"]
 
 
-__all__ = ["box_status", "box_status_numpy", "compiled_box_status"]
+__all__ = ["box_status", "box_status_numpy", "compiled_box_status", "g1_column_into"]

@@ -16,6 +16,7 @@ try:  # inlined into its callers at numba's IR level (no compiled call per scena
     _inline = numba.njit(cache=True, nogil=True, error_model="numpy", inline="always")
 except ImportError:  # pragma: no cover - numba is a core dependency
     _inline = njit
+from fault_tolerance.control.fast.box_check import g1_column_into
 from fault_tolerance.resolution.box_qp import BOX_TOL
 
 try:  # the rate box check of the Controller's bounded step, compiled by numba
@@ -77,12 +78,10 @@ def g1_post(P, Q, base, piv, c, lo, hi, row, box) -> bool:  # pragma: no cover -
     """
     m, n = P.shape
     ratio = base[c] / piv[c]
+    g1_column_into(P, Q, m, n, row, c)  # row[j] = N[j, c]
     ok = True
     for j in range(n):
-        s = 0.0
-        for i in range(m):
-            s += Q[i, c] * P[i, j]
-        v = 0.0 if j == c else base[j] - ratio * (-s)
+        v = 0.0 if j == c else base[j] - ratio * row[j]
         if box:
             ok = ok and lo[j] - BOX_TOL <= v <= hi[j] + BOX_TOL
             v = min(max(v, lo[j]), hi[j])
