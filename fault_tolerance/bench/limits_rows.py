@@ -6,7 +6,10 @@
   box allowing 30 % of their unbounded rate (the task still reached, ``s = 1``): the bounded
   problem (L2) with the reduced robots' (L4), whose bounds meet the box too;
 * ``jvja_bounded_2_qp``: that problem handed to quadprog: each reduced robot's bounded least-norm
-  QP, then the bounded JVJA QP.
+  QP, then the bounded JVJA QP;
+* ``jvja_unbounded_limits``: the unbounded JVJA step (the ``jvja`` row) timed again in this group's
+  rounds, the denominator of the bounded rows' targets: both sides of a ratio are timed in the same
+  rounds, so a change of the machine's speed between groups does not enter the ratio.
 """
 
 from __future__ import annotations
@@ -22,6 +25,7 @@ DESCRIPTIONS = {
     "jvja_bounded_free": "JVJA step with joint limits on, no bound active (fast step + box check)",
     "jvja_bounded_2": "JVJA step with joint limits on, two joints at a binding bound (bounded QPs)",
     "jvja_bounded_2_qp": "the same bounded JVJA problem by quadprog (f reduced QPs + 1)",
+    "jvja_unbounded_limits": "the unbounded JVJA step, timed in the rounds of the joint-limit rows",
 }
 
 
@@ -120,6 +124,8 @@ def limits_rows(case) -> dict:
     free, two = _pools(case, ctrl)
     out = case.out
     rows: dict[str, tuple[Callable[..., np.ndarray], list[tuple]]] = {}
+    if free or two:
+        rows["jvja_unbounded_limits"] = (case.ctrl.jvja, case.qxo)
     if free:
         rows["jvja_bounded_free"] = (ctrl.jvja, [(q, xd, out) for q, xd in free])
     if two:

@@ -126,9 +126,10 @@ def _overhead_targets(key: str, med, jv) -> list[dict]:
 
 
 def _limit_targets(key, jv, med) -> list[dict]:
-    """Bounded JVJA step against the unbounded step and against quadprog on the same problem."""
+    """Bounded JVJA step against the unbounded step (timed in the same rounds) and against quadprog."""
     out = []
     free, two, qp = med("jvja_bounded_free"), med("jvja_bounded_2"), med("jvja_bounded_2_qp")
+    jv = med("jvja_unbounded_limits") or jv  # timed in the same rounds as the bounded rows
     if jv and free:
         out.append(_at_most(key, "bounded_free_over_jvja", "bounded JVJA, no bound active / JVJA",
                             free / jv, MAX_BOUNDED_FREE_OVER_JVJA))  # fmt: skip
