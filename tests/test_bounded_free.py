@@ -17,10 +17,8 @@ def _arms():
             (synthetic_chain(14), "all")]  # fmt: skip
 
 
-@pytest.mark.parametrize("k", range(3))
-@pytest.mark.parametrize("method", ["jvja", "lnva"])
-def test_free_kernel_status_and_rates_equal_bounded_kernel(k, method):
-    """Status, box and rates of the free kernel equal bounded_kernel's on random steps and boxes."""
+def _free_setup(k, method):
+    """Arm ``k``, its bounded Controller, the box tables and the free kernel's workspace."""
     arm, lockable = _arms()[k]
     ctrl = Controller(arm, lockable, method=method, backend="numba", limits=True)
     cw = ctrl.workspace
@@ -29,6 +27,14 @@ def test_free_kernel_status_and_rates_equal_bounded_kernel(k, method):
     Iw[4] = 1 if method == "jvja" else 0
     W = free_workspace(cw.n, cw.m, views["p4"], views["fw"], views["lim"], views["prm"],
                        int(Iw[4]), views["cols"])  # fmt: skip
+    return arm, ctrl, F, Iw, views, W
+
+
+@pytest.mark.parametrize("k", range(3))
+@pytest.mark.parametrize("method", ["jvja", "lnva"])
+def test_free_kernel_status_and_rates_equal_bounded_kernel(k, method):
+    """Status, box and rates of the free kernel equal bounded_kernel's on random steps and boxes."""
+    arm, ctrl, F, Iw, views, W = _free_setup(k, method)
     rng = np.random.default_rng(7 + k)
     seen = set()
     for _ in range(200):
@@ -50,7 +56,7 @@ def test_free_kernel_status_and_rates_equal_bounded_kernel(k, method):
             if s1 != 3:
                 np.testing.assert_array_equal(o1, o2)
         if s2 != 2:
-            h = 4 + 2 * cw.m
+            h = 4 + 2 * ctrl.workspace.m
             np.testing.assert_array_equal(W[h + 3 : h + 5, : arm.n], box)
     assert {0, 1} <= seen
 
@@ -72,14 +78,7 @@ def test_one_call_step_equals_free_kernel_then_bounded_after(k, method):
     """free_then_bounded's status and rates are the free kernel's, then bounded_after's, bit for bit."""
     from fault_tolerance.control.fast.bounded_solve import free_then_bounded
 
-    arm, lockable = _arms()[k]
-    ctrl = Controller(arm, lockable, method=method, backend="numba", limits=True)
-    cw = ctrl.workspace
-    F, I0, views = cw.box_tables
-    Iw = I0.copy()
-    Iw[4] = 1 if method == "jvja" else 0
-    W = free_workspace(cw.n, cw.m, views["p4"], views["fw"], views["lim"], views["prm"],
-                       int(Iw[4]), views["cols"])  # fmt: skip
+    arm, ctrl, F, Iw, views, W = _free_setup(k, method)
     np.testing.assert_array_equal(views["free"][Iw[4]], W)  # the Controller's step filled it
     rng = np.random.default_rng(11 + k)
     seen = set()

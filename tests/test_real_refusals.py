@@ -49,6 +49,18 @@ def _urdf(tool: bool) -> str:
     return "\n".join(parts)
 
 
+def _assert_tip_at_wrist_centre(model, tip, seed):
+    """Independent Pinocchio check: joints 5, 6 move ``tip`` by < 1e-3 m/rad, joint 4 by > 5 mm/rad."""
+    data = model.createData()
+    frame = model.getFrameId(tip)
+    rng = np.random.default_rng(seed)
+    for _ in range(20):
+        q = rng.uniform(model.lowerPositionLimit, model.upperPositionLimit)
+        jac = pin.computeFrameJacobian(model, data, q, frame, pin.LOCAL_WORLD_ALIGNED)[:3]
+        assert np.linalg.norm(jac[:, 4:], axis=0).max() < 1e-3
+        assert np.linalg.norm(jac[:, 3]) > 5e-3  # joint 4 by the 5.263 mm wrist offset
+
+
 def test_lwa4p_with_a_tool_frame_gets_a_default_start(tmp_path):
     urdf = tmp_path / "lwa4p.urdf"
     urdf.write_text(_urdf(tool=True))
@@ -75,14 +87,7 @@ def test_lwa4p_tip_at_the_wrist_centre_is_refused_with_that_cause(tmp_path, caps
     # Independent check: the tip sits at the wrist centre, so the wrist joints 5, 6 barely move it
     # and the position task rests on joints 1-4 only (no real redundancy left).
     model = pin.buildModelFromXML(_urdf(tool=False))
-    data = model.createData()
-    frame = model.getFrameId("lwa4p_link6")
-    rng = np.random.default_rng(0)
-    for _ in range(20):
-        q = rng.uniform(model.lowerPositionLimit, model.upperPositionLimit)
-        jac = pin.computeFrameJacobian(model, data, q, frame, pin.LOCAL_WORLD_ALIGNED)[:3]
-        assert np.linalg.norm(jac[:, 4:], axis=0).max() < 1e-3
-        assert np.linalg.norm(jac[:, 3]) > 5e-3  # joint 4 by the 5.263 mm wrist offset
+    _assert_tip_at_wrist_centre(model, "lwa4p_link6", seed=0)
 
 
 def test_lwa4p_tip_at_the_wrist_centre_gets_a_tried_tip_past_the_wrist(tmp_path, capsys):
@@ -129,15 +134,7 @@ def test_upstream_lwa4p_with_every_joint_lockable_is_refused_as_a_tip_at_the_wri
     assert "the tip lies at the wrist centre: arm_5_joint, arm_6_joint do not move it" in err
     assert "a start passes with --lockable arm_4_joint,arm_5_joint,arm_6_joint" in err
     assert "no --tip to propose" in err
-    arm = load("lwa4p")
-    model, data = arm.model, arm.model.createData()
-    frame = model.getFrameId("arm_6_link")
-    rng = np.random.default_rng(1)
-    for _ in range(20):
-        q = rng.uniform(model.lowerPositionLimit, model.upperPositionLimit)
-        jac = pin.computeFrameJacobian(model, data, q, frame, pin.LOCAL_WORLD_ALIGNED)[:3]
-        assert np.linalg.norm(jac[:, 4:], axis=0).max() < 1e-3
-        assert np.linalg.norm(jac[:, 3]) > 5e-3  # joint 4 by the 5.263 mm wrist offset
+    _assert_tip_at_wrist_centre(load("lwa4p").model, "arm_6_link", seed=1)
 
 
 _STRETCH_LIKE = """<?xml version="1.0"?>
