@@ -228,12 +228,16 @@ def test_controller_compiled_step_equals_reference(robot, task, lockable, weight
     assert checked > trials // 2 and compiled > 0, (checked, ctrl.bounded_steps)
 
 
-def test_near_singular_reduced_robots_left_to_the_exact_reference():
-    """A reduced Jacobian near its singularity: the compiled solve refuses, the exact reference solves."""
+def test_near_singular_reduced_robots_solved_exactly():
+    """A reduced Jacobian near its singularity: the compiled step equals the exact reference.
+
+    The compiled solve either follows the reduced robot's path (L8, undamped) or refuses and
+    leaves the step to the exact reference; both give the reference's rates and scale.
+    """
     arm = ft.load_arm("panda")
     ctrl = Controller(arm, [0, 2, 4, 6], backend="numba")
     rng = np.random.default_rng(4)
-    refused = 0
+    near = 0
     for trial in range(120):
         q = arm.random_q(rng)
         if trial % 2:
@@ -245,17 +249,16 @@ def test_near_singular_reduced_robots_left_to_the_exact_reference():
             ref = ft.resolve_bounded("jvja", J, xd, ctrl.scenarios, bounds=arm.rate_bounds(q))
         except ft.FaultToleranceError:
             continue
-        before, bounded_before = ctrl.bounded_reference_steps, ctrl.bounded_steps
+        bounded_before = ctrl.bounded_steps
         qd = ctrl.step(q, xd)
         assert np.allclose(qd, ref.qd, atol=1e-8 * max(1.0, np.abs(ref.qd).max()))
         assert ctrl.last_scale == pytest.approx(ref.scale, rel=REL)
         smin = min(
             np.linalg.svd(np.delete(J, S, 1), compute_uv=False)[-1] for S in ctrl.scenarios.sets
         )
-        to_reference = ctrl.bounded_reference_steps > before and ctrl.bounded_steps > bounded_before
-        if to_reference and smin < 1e-3:
-            refused += 1
-    assert refused >= 5
+        if ctrl.bounded_steps > bounded_before and smin < 1e-3:
+            near += 1
+    assert near >= 5
 
 
 def test_reference_route_is_taken_and_counted():

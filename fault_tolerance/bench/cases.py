@@ -48,6 +48,8 @@ DESCRIPTIONS = {
     "sim_jvja": "one simulated JVJA sample: rates, λ parts, k_S, K, σ_min, flags, record",
     "sim_lnva": "one simulated LNVA sample: rates, λ parts, k_S, K, σ_min, flags, record",
     "sim_jvja_lim": "one simulated JVJA sample under joint limits (rate box checked; default)",
+    "jvja_bounded_run": "bounded JVJA step (Controller, limits on) at the samples of the sim_jvja_lim "
+    "run",
     "sim_mda": "one simulated MDA sample (∇K compiled): rates, λ parts, k_S, K, σ_min, flags",
     "lnva": "LNVA step, fast path (Jacobian included)",
     "jvja": "JVJA step, closed form G2, fast path (Jacobian included)",
@@ -219,7 +221,26 @@ def simulated_rows(case: Case) -> dict[str, Row]:
                 sim._step(s, state, k, rec, X[k], XD[k])
 
         rows[f"sim_{alg}" + ("_lim" if limits else "")] = (sample, [(k,) for k in range(K1)])
+        if limits:
+            rows["jvja_bounded_run"] = _bounded_run_row(case, s, sample, rec, XD)
     return rows
+
+
+def _bounded_run_row(case: Case, s, sample, rec, XD) -> Row:
+    """The Controller's bounded JVJA step at the samples of the run under limits (its denominator).
+
+    One pass of the run records its configurations; the step is then timed at each ``(q_k, ẋ_k)``
+    (the run has no task feedback: ``ẋ_cmd = ẋ_des``), so both sides meet the same bounds.
+    """
+    from fault_tolerance.control.controller import Controller
+
+    K1 = len(XD)
+    for k in range(K1):
+        sample(k)
+    ctrl = Controller(case.arm, case.sc, method="jvja", tolerate=True, backend=case.ctrl.backend,
+                      limits=True, horizon=s.horizon)  # fmt: skip
+    qs = rec["q"].copy()
+    return ctrl.jvja, [(qs[k], XD[k], case.out) for k in range(K1)]
 
 
 def dynamics_rows(case: Case) -> dict[str, Row]:

@@ -115,10 +115,13 @@ def _overhead_targets(key: str, med, jv) -> list[dict]:
     if jv and sim:
         out.append(_at_most(key, "sim_over_jvja", "simulated JVJA sample / JVJA step", sim / jv,
                             MAX_SIM_OVER_STEP))  # fmt: skip
-    lim, free = med("sim_jvja_lim"), med("jvja_bounded_free")
-    if free and lim:
+    lim, run, free = med("sim_jvja_lim"), med("jvja_bounded_run"), med("jvja_bounded_free")
+    if run and lim:  # the step at the run's own samples: both sides meet the same bounds
         out.append(_at_most(key, "sim_lim_over_bounded", "simulated JVJA sample under limits / "
-                            "bounded JVJA step", lim / free, MAX_SIM_OVER_STEP))  # fmt: skip
+                            "bounded JVJA step, same samples", lim / run, MAX_SIM_OVER_STEP))  # fmt: skip
+    if free and lim:
+        out.append(_item(key, "sim_lim_over_bounded_free", "simulated JVJA sample under limits / "
+                         "bounded JVJA step, no bound active", lim / free, None, None, None))  # fmt: skip
     if jv and multi:
         out.append(_at_most(key, "multi_over_single", "two-joint JVJA / single-joint JVJA",
                             multi / jv, MAX_MULTI_OVER_SINGLE))  # fmt: skip

@@ -37,6 +37,7 @@ from fault_tolerance.resolution.fast.box_basis import (
     undamped,
 )
 from fault_tolerance.resolution.fast.box_qp import _njit, solve_box_rates
+from fault_tolerance.resolution.fast.least_norm_path import least_norm_path
 
 _step_kernel = compiled_kernel("step")
 _box_status = compiled_box_status()
@@ -129,6 +130,26 @@ def _iv(F, Iw, t, r):  # pragma: no cover - numba
 
 
 @_njit
+def _reduced_box(
+    J, Z, r, S, k, bound, params, W, p0, d, lo, hi, qd, act, res
+):  # pragma: no cover - numba
+    """A reduced robot's rates ``p₀ + s d + Z_S u`` under the box by the dual active set (L6, L7).
+
+    Where :func:`~fault_tolerance.resolution.fast.least_norm_path.least_norm_path` did not
+    decide. Returns a code of the module doc (3: near ``J_S``'s singularity, left to the reference).
+    """
+    Zs, Gs, mask, ws, wsi, gram = W[0], W[3], W[4], W[5], W[6], W[7]
+    if undamped(J, S, k, bound, params, Gs) != 0.0:  # near J_S's singularity, or undecided
+        return 3
+    rs = reduced_basis(Z, r, S, k, Zs, p0)
+    if rs < 0:
+        return 3
+    for j in range(Z.shape[0]):
+        p0[j] = 0.0
+    return solve_box_rates(p0, d, Zs, rs, lo, hi, mask, qd, act, ws, wsi, gram, res)
+
+
+@_njit
 def _jvja_target(
     J, xdot, Z, r, V, tr, lo, hi, sets, wrel, params, W, res
 ):  # pragma: no cover - numba
@@ -161,20 +182,16 @@ def _jvja_target(
                 cbar[j] += wrel[sc] * P[sc, j]
             ps[sc], pb[sc] = 1.0, 0.0
             continue
-        mu2 = undamped(J, S, k, tr * trinv, params, Gs)
-        if mu2 != 0.0:  # undecided, or near J_S's singularity: the reference solves it exactly
-            return 3
-        rs = reduced_basis(Z, r, S, k, Zs, zr)
-        if rs < 0:
-            return 3
         for j in range(n):
             mask[j] = 1
             V[3, j] = 0.0
         for t in range(k):
             mask[S[t]] = 0
-        st = solve_box_rates(V[3], post, Zs, rs, lo, hi, mask, V[4], act, ws, wsi, gram, res)
-        if st:
-            return st
+        if least_norm_path(J, xdot, lo, hi, mask, V[4], act, ws, wsi, Gs, res):
+            st = _reduced_box(J, Z, r, S, k, tr * trinv, params, W, V[3], post, lo, hi, V[4], act,
+                              res)  # fmt: skip
+            if st:
+                return st
         for t in range(k):
             V[4, S[t]] = 0.0
         for j in range(n):
@@ -252,7 +269,11 @@ def bounded_solve(J, xdot, out, mode, F, Iw):  # pragma: no cover - numba
     bounded = res[1]
     for j in range(n):
         mask[j] = 1
-    st = solve_box_rates(p0, a, Z, r, lo, hi, mask, qd, state[2:], ws, wsi, gram, res)
+    st = 6  # LNVA along its path first (L8); what the path leaves undecided, by the dual active set
+    if mode == 0:
+        st = least_norm_path(J, xdot, lo, hi, mask, qd, state[2:], ws, wsi, Gs, res)
+    if st:
+        st = solve_box_rates(p0, a, Z, r, lo, hi, mask, qd, state[2:], ws, wsi, gram, res)
     if st:
         return st
     res[1] = max(res[1], bounded)
@@ -378,6 +399,9 @@ def reduced_solve(J, xdot, target, todo, post, scales, codes, F, Iw):  # pragma:
     gram, Zs = _fm(F, Iw, _GRAM, n + 1, n + 1), _fm(F, Iw, _ZS, n, n)
     NSS, ys, sets = _fm(F, Iw, _NSS, s, s), _fv(F, Iw, _YS, s), _im(F, Iw, _SETS, f, s)
     res = state[:2]
+    least_norm = True  # a zero target: the least-norm response, whose rates the path gives
+    for j in range(n):
+        least_norm = least_norm and target[j] == 0.0
     for i in range(todo.shape[0]):
         S = sets[todo[i]]
         k = 0
@@ -386,6 +410,16 @@ def reduced_solve(J, xdot, target, todo, post, scales, codes, F, Iw):  # pragma:
         trinv = reduced_rates(Z, r, a, S, k, d, NSS, ys, p3[1], zr)  # (G1): J_S⁺ẋ
         if trinv < 0.0:
             codes[i] = 2
+            continue
+        for j in range(n):
+            mask[j] = 1
+        for t in range(k):
+            mask[S[t]] = 0
+        if least_norm and not least_norm_path(J, xdot, lo, hi, mask, qd, act, ws, wsi, Gs, res):
+            codes[i] = 0  # along the path (L8)
+            for j in range(n):
+                post[i, j] = qd[j]
+            scales[i] = res[0]
             continue
         mu2 = undamped(J, S, k, tr * trinv, p3, Gs)
         if mu2 != 0.0:  # near J_S's singularity the reference solves it exactly (undamped)
@@ -405,9 +439,7 @@ def reduced_solve(J, xdot, target, todo, post, scales, codes, F, Iw):  # pragma:
             for c in range(rs):
                 t += Zs[j, c] * zr[c]
             p0[j] = t
-            mask[j] = 1
         for t in range(k):
-            mask[S[t]] = 0
             p0[S[t]] = 0.0
         st = solve_box_rates(p0, d, Zs, rs, lo, hi, mask, qd, act, ws, wsi, gram, res)
         codes[i] = st

@@ -173,3 +173,33 @@ def chol_solve(L, k, b) -> None:  # pragma: no cover - numba
         for j in range(i + 1, k):
             t -= L[j, i] * b[j]
         b[i] = t / L[i, i]
+
+
+@njit
+def lu_solve(A, k, b) -> bool:  # pragma: no cover - numba
+    """``b ← A[:k, :k]⁻¹ b`` by Gaussian elimination with partial pivoting (``A`` overwritten).
+
+    False when a pivot is zero (``A`` singular).
+    """
+    for c in range(k):
+        p, big = c, abs(A[c, c])
+        for i in range(c + 1, k):
+            if abs(A[i, c]) > big:
+                p, big = i, abs(A[i, c])
+        if not big > 0.0:
+            return False
+        if p != c:
+            for j in range(k):
+                A[c, j], A[p, j] = A[p, j], A[c, j]
+            b[c], b[p] = b[p], b[c]
+        for i in range(c + 1, k):
+            f = A[i, c] / A[c, c]
+            for j in range(c + 1, k):
+                A[i, j] -= f * A[c, j]
+            b[i] -= f * b[c]
+    for i in range(k - 1, -1, -1):
+        t = b[i]
+        for j in range(i + 1, k):
+            t -= A[i, j] * b[j]
+        b[i] = t / A[i, i]
+    return True
