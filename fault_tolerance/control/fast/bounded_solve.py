@@ -221,11 +221,17 @@ def bounded_solve(J, xdot, out, mode, F, Iw):  # pragma: no cover - numba
     st, tr = factor(J, xdot, Gs, _fm(F, Iw, _Y, m, n), _fv(F, Iw, _Z, m), a, p3)
     if st:
         return 1
-    r = null_basis(J, Z, _fm(F, Iw, _QA, n, m), _fv(F, Iw, _HB, m))
     mask, ws, wsi = _iv(F, Iw, _MASK, n), _fm(F, Iw, _WSF, 8, n + 1), _im(F, Iw, _WSI, 2, n + 1)
     gram = _fm(F, Iw, _GRAM, n + 1, n + 1)
     res = state[:2]
     res[1] = 0.0
+    for j in range(n):
+        mask[j] = 1
+    if mode == 0 and not least_norm_path(J, xdot, lo, hi, mask, qd, state[2:], ws, wsi, Gs, res):
+        for j in range(n):  # LNVA along its path (L8): no null-space basis needed
+            out[j] = qd[j]
+        return 0
+    r = null_basis(J, Z, _fm(F, Iw, _QA, n, m), _fv(F, Iw, _HB, m))
     if mode == 1:
         W = (_fm(F, Iw, _ZS, n, n), _fm(F, Iw, _NSS, s, s), _fv(F, Iw, _YS, s), Gs, mask, ws, wsi,
              gram, _fm(F, Iw, _POSTS, f, n), _fv(F, Iw, _PSCALE, f), _fv(F, Iw, _PSOLVED, f))  # fmt: skip
@@ -269,11 +275,7 @@ def bounded_solve(J, xdot, out, mode, F, Iw):  # pragma: no cover - numba
     bounded = res[1]
     for j in range(n):
         mask[j] = 1
-    st = 6  # LNVA along its path first (L8); what the path leaves undecided, by the dual active set
-    if mode == 0:
-        st = least_norm_path(J, xdot, lo, hi, mask, qd, state[2:], ws, wsi, Gs, res)
-    if st:
-        st = solve_box_rates(p0, a, Z, r, lo, hi, mask, qd, state[2:], ws, wsi, gram, res)
+    st = solve_box_rates(p0, a, Z, r, lo, hi, mask, qd, state[2:], ws, wsi, gram, res)
     if st:
         return st
     res[1] = max(res[1], bounded)

@@ -203,3 +203,22 @@ def lu_solve(A, k, b) -> bool:  # pragma: no cover - numba
             t -= A[i, j] * b[j]
         b[i] = t / A[i, i]
     return True
+
+
+@njit
+def chol_rank_one(L, m, x, sign) -> bool:  # pragma: no cover - numba
+    """``L Lᵀ ± x xᵀ`` refactored in place (``sign`` +1.0 or −1.0) in ``O(m²)``; ``x`` destroyed.
+
+    False when a downdate leaves the matrix not positive definite (``L`` then undefined).
+    """
+    for k in range(m):
+        d = L[k, k] * L[k, k] + sign * x[k] * x[k]
+        if not d > 0.0:
+            return False
+        r = math.sqrt(d)
+        c, s = r / L[k, k], x[k] / L[k, k]
+        L[k, k] = r
+        for i in range(k + 1, m):
+            L[i, k] = (L[i, k] + sign * s * x[i]) / c
+            x[i] = c * x[i] - s * L[i, k]
+    return True

@@ -21,7 +21,7 @@ Compiled by numba (plain Python without it, and tested so); scratch is the calle
 
 from __future__ import annotations
 
-from fault_tolerance.numerics.fast.dense import chol_solve, cholesky, lu_solve
+from fault_tolerance.numerics.fast.dense import chol_rank_one, chol_solve, cholesky, lu_solve
 from fault_tolerance.resolution.box_qp import BOX_TOL
 from fault_tolerance.resolution.fast.box_qp import _njit
 
@@ -41,17 +41,18 @@ SIGN_TOL = 1e-9
 STATE_TOL = 1e-11
 #: Joint states of the path.
 _FREE, _LOWER, _UPPER, _OFF = 0, 1, 2, 3
-# Scratch rows of ``ws`` (8, n + 1): g₀, g₁ (``Jᵀλ = g₀ + s g₁``), λ₀, λ₁, w, bound values, λ(s).
-_G0, _G1, _L0, _L1, _W, _B, _LS = range(7)
+# Scratch rows of ``ws`` (8, n + 1): g₀, g₁ (``Jᵀλ = g₀ + s g₁``), λ₀, λ₁, w, bound values, λ(s)
+# (or a column to update the factor with), ``r₀ = −J_B b``.
+_G0, _G1, _L0, _L1, _W, _B, _LS, _R0 = range(8)
 
 
 @_njit
 def _factor(J, state, ws, L) -> bool:  # pragma: no cover - numba
-    """``J_F J_Fᵀ`` factored into ``L``; ``λ₀ = −(J_F J_Fᵀ)⁻¹ J_B b``; False unless positive definite."""
+    """``J_F J_Fᵀ`` factored into ``L`` from scratch, ``r₀ = −J_B b``; False unless positive definite."""
     m, n = J.shape
-    lam0 = ws[_L0]
+    r0 = ws[_R0]
     for i in range(m):
-        lam0[i] = 0.0
+        r0[i] = 0.0
         for k in range(i + 1):
             L[i, k] = 0.0
     for j in range(n):
@@ -61,28 +62,48 @@ def _factor(J, state, ws, L) -> bool:  # pragma: no cover - numba
                     L[i, k] += J[i, j] * J[k, j]
         elif state[j] != _OFF:
             for i in range(m):
-                lam0[i] -= J[i, j] * ws[_B, j]
-    if not cholesky(L, m):
-        return False
-    chol_solve(L, m, lam0)
-    return True
+                r0[i] -= J[i, j] * ws[_B, j]
+    return cholesky(L, m)
+
+
+@_njit
+def _toggle(J, state, ws, L, j, new, free) -> bool:  # pragma: no cover - numba
+    """Joint ``j`` to state ``new``: ``r₀`` and the factor updated (``O(m²)``); False unless PD.
+
+    With few free joints left (``≤ 2m``, where the factor matters most and costs least) it is
+    rebuilt from scratch instead of downdated.
+    """
+    m = J.shape[0]
+    held = new != _FREE
+    sign = -1.0 if held else 1.0
+    for i in range(m):
+        ws[_R0, i] += sign * J[i, j] * ws[_B, j]
+    state[j] = new
+    if held and free <= 2 * m:
+        return _factor(J, state, ws, L)
+    x = ws[_LS]
+    for i in range(m):
+        x[i] = J[i, j]
+    return chol_rank_one(L, m, x, sign) or _factor(J, state, ws, L)
 
 
 @_njit
 def _slopes(J, xdot, L, ws) -> None:  # pragma: no cover - numba
-    """``λ₁ = G⁻¹ ẋ`` and ``g₀ = Jᵀλ₀``, ``g₁ = Jᵀλ₁`` for every joint."""
+    """``λ₀ = G⁻¹ r₀``, ``λ₁ = G⁻¹ ẋ`` and ``g₀ = Jᵀλ₀``, ``g₁ = Jᵀλ₁`` for every joint."""
     m, n = J.shape
-    lam1 = ws[_L1]
+    lam0, lam1 = ws[_L0], ws[_L1]
     for i in range(m):
-        lam1[i] = xdot[i]
+        lam0[i], lam1[i] = ws[_R0, i], xdot[i]
+    chol_solve(L, m, lam0)
     chol_solve(L, m, lam1)
+    g0, g1 = ws[_G0], ws[_G1]
     for j in range(n):
-        a = 0.0
-        b = 0.0
-        for i in range(m):
-            a += J[i, j] * ws[_L0, i]
-            b += J[i, j] * lam1[i]
-        ws[_G0, j], ws[_G1, j] = a, b
+        g0[j], g1[j] = 0.0, 0.0
+    for i in range(m):  # along the rows of J: contiguous, vectorised
+        a, b = lam0[i], lam1[i]
+        for j in range(n):
+            g0[j] += J[i, j] * a
+            g1[j] += J[i, j] * b
 
 
 @_njit
@@ -260,7 +281,7 @@ def least_norm_path(J, xdot, lo, hi, mask, qd, act, ws, wsi, L, out):  # pragma:
 
     ``act`` (n,) gets 1.0 on joints held at a bound; ``out[1]`` is 1.0 when a bound was met.
     ``ws`` (8, n + 1), ``wsi`` (2, n + 1) int and ``L`` (m, m) are scratch. Returns 0, or
-    :data:`UNDECIDED` (``qd``, ``act``, ``out`` then untouched).
+    :data:`UNDECIDED` (``out`` then untouched; ``qd`` and ``act`` may hold partial values).
     """
     m, n = J.shape
     state = wsi[0]
@@ -271,10 +292,13 @@ def least_norm_path(J, xdot, lo, hi, mask, qd, act, ws, wsi, L, out):  # pragma:
             return UNDECIDED  # rest is outside the box: the path has no start
         else:
             state[j] = _FREE
+    free = 0
+    for j in range(n):
+        free += state[j] == _FREE
+    if not _factor(J, state, ws, L):
+        return UNDECIDED
     s = 0.0
     for _ in range(4 * n + 8):
-        if not _factor(J, state, ws, L):
-            return UNDECIDED
         _slopes(J, xdot, L, ws)
         t, j = _next_event(state, lo, hi, ws, s)
         if t >= 1.0:
@@ -285,7 +309,9 @@ def least_norm_path(J, xdot, lo, hi, mask, qd, act, ws, wsi, L, out):  # pragma:
             return 0
         s = t
         if state[j] != _FREE:  # its multiplier vanished: the joint leaves its bound
-            state[j] = _FREE
+            free += 1
+            if not _toggle(J, state, ws, L, j, _FREE, free):
+                return UNDECIDED
             continue
         w = ws[_W]
         for i in range(m):
@@ -296,29 +322,26 @@ def least_norm_path(J, xdot, lo, hi, mask, qd, act, ws, wsi, L, out):  # pragma:
             rho -= J[i, j] * w[i]
         v = ws[_G0, j] + s * ws[_G1, j]
         upper = v - lo[j] > hi[j] - v or (v - lo[j] == hi[j] - v and ws[_G1, j] > 0.0)
-        bound = hi[j] if upper else lo[j]
-        free = 0
-        for i in range(n):
-            free += state[i] == _FREE
+        ws[_B, j] = hi[j] if upper else lo[j]
         if free > m and RANK_EPS < rho < RANK_UNSURE:
             return UNDECIDED
         if free > m and rho > RANK_EPS:
-            state[j] = _UPPER if upper else _LOWER
-            ws[_B, j] = bound
+            free -= 1
+            if not _toggle(J, state, ws, L, j, _UPPER if upper else _LOWER, free):
+                return UNDECIDED
             continue
         # Holding j leaves the free columns rank-deficient: the largest scale, if certified.
-        _rates(
-            J, xdot, state, lo, hi, ws, L, s, qd, act
-        )  # the rates at s (joint j exactly at its bound)
+        _rates(J, xdot, state, lo, hi, ws, L, s, qd, act)  # at s (joint j exactly at its bound)
         state[j] = _UPPER if upper else _LOWER
-        ws[_B, j] = bound
         k = _release(J, xdot, state, ws)
         if k < -1:
             return UNDECIDED
         if k >= 0:  # a held joint can still raise s: free it and go on (an LP pivot)
             state[k] = _FREE
+            if not _factor(J, state, ws, L):
+                return UNDECIDED
             continue
-        qd[j], act[j] = bound, 1.0
+        qd[j], act[j] = ws[_B, j], 1.0
         s = _vertex(J, xdot, state, lo, hi, ws, L, s, qd)
         if not _on_task(J, xdot, qd, s):
             return UNDECIDED
