@@ -37,7 +37,7 @@ from fault_tolerance.resolution.fast.box_basis import (
     undamped,
 )
 from fault_tolerance.resolution.fast.box_qp import _njit, solve_box_rates
-from fault_tolerance.resolution.fast.least_norm_path import least_norm_path
+from fault_tolerance.resolution.fast.least_norm_path import least_norm_path, pays_off
 
 _step_kernel = compiled_kernel("step")
 _box_status = compiled_box_status()
@@ -187,7 +187,10 @@ def _jvja_target(
             V[3, j] = 0.0
         for t in range(k):
             mask[S[t]] = 0
-        if least_norm_path(J, xdot, lo, hi, mask, V[4], act, ws, wsi, Gs, res):
+        solved = False  # along the path (L8) when it pays off, else (or undecided) by (L7)
+        if pays_off(post, lo, hi, mask):
+            solved = least_norm_path(J, xdot, lo, hi, mask, V[4], act, ws, wsi, Gs, res) == 0
+        if not solved:
             st = _reduced_box(J, Z, r, S, k, tr * trinv, params, W, V[3], post, lo, hi, V[4], act,
                               res)  # fmt: skip
             if st:
@@ -227,7 +230,11 @@ def bounded_solve(J, xdot, out, mode, F, Iw):  # pragma: no cover - numba
     res[1] = 0.0
     for j in range(n):
         mask[j] = 1
-    if mode == 0 and not least_norm_path(J, xdot, lo, hi, mask, qd, state[2:], ws, wsi, Gs, res):
+    if (
+        mode == 0
+        and pays_off(a, lo, hi, mask)
+        and not least_norm_path(J, xdot, lo, hi, mask, qd, state[2:], ws, wsi, Gs, res)
+    ):
         for j in range(n):  # LNVA along its path (L8): no null-space basis needed
             out[j] = qd[j]
         return 0
@@ -417,7 +424,11 @@ def reduced_solve(J, xdot, target, todo, post, scales, codes, F, Iw):  # pragma:
             mask[j] = 1
         for t in range(k):
             mask[S[t]] = 0
-        if least_norm and not least_norm_path(J, xdot, lo, hi, mask, qd, act, ws, wsi, Gs, res):
+        if (
+            least_norm
+            and pays_off(d, lo, hi, mask)
+            and not least_norm_path(J, xdot, lo, hi, mask, qd, act, ws, wsi, Gs, res)
+        ):
             codes[i] = 0  # along the path (L8)
             for j in range(n):
                 post[i, j] = qd[j]

@@ -39,11 +39,25 @@ SIGN_TOL = 1e-9
 #: A joint's value past its bound by more than this (times ``1 + |lo| + |hi| + |g₀| + |s g₁|``)
 #: is on the wrong side.
 STATE_TOL = 1e-11
+#: The path is taken when more joints than this leave the box at the unbounded rates: it pays
+#: off when most joints end held (a scaled task, a long chain); with a few the dual active set of
+#: :mod:`.box_qp`, started from the unbounded rates, needs a step or two (both are exact).
+PATH_MIN_OUTSIDE = 3
 #: Joint states of the path.
 _FREE, _LOWER, _UPPER, _OFF = 0, 1, 2, 3
 # Scratch rows of ``ws`` (8, n + 1): g₀, g₁ (``Jᵀλ = g₀ + s g₁``), λ₀, λ₁, w, bound values, λ(s)
 # (or a column to update the factor with), ``r₀ = −J_B b``.
 _G0, _G1, _L0, _L1, _W, _B, _LS, _R0 = range(8)
+
+
+@_njit
+def pays_off(v, lo, hi, mask) -> bool:  # pragma: no cover - numba
+    """Whether more than :data:`PATH_MIN_OUTSIDE` joints on ``mask`` have rates ``v`` off the box."""
+    outside = 0
+    for j in range(v.shape[0]):
+        if mask[j] and not lo[j] - BOX_TOL <= v[j] <= hi[j] + BOX_TOL:
+            outside += 1
+    return outside > PATH_MIN_OUTSIDE
 
 
 @_njit
