@@ -131,21 +131,34 @@ def _iv(F, Iw, t, r):  # pragma: no cover - numba
 
 @_njit
 def _reduced_box(
-    J, Z, r, S, k, bound, params, W, p0, d, lo, hi, qd, act, res
+    J, Z, r, S, k, bound, params, W, target, p0, d, zr, lo, hi, qd, act, res
 ):  # pragma: no cover - numba
-    """A reduced robot's rates ``p₀ + s d + Z_S u`` under the box by the dual active set (L6, L7).
+    """A reduced robot's rates nearest ``target`` under the box, by the dual active set (L6, L7).
 
-    Where :func:`~fault_tolerance.resolution.fast.least_norm_path.least_norm_path` did not
-    decide. Returns a code of the module doc (3: near ``J_S``'s singularity, left to the reference).
+    ``p₀ = Z_S Z_Sᵀ target`` (0: the least-norm response) and the rates ``p₀ + s d + Z_S u``,
+    ``d`` its (G1) rates. Where :func:`~fault_tolerance.resolution.fast.least_norm_path.least_norm_path`
+    does not decide, or does not pay off. Returns a code of the module doc (3: near ``J_S``'s
+    singularity, left to the reference). ``target`` and ``p₀`` may be one array; ``zr`` (r,) scratch.
     """
     Zs, Gs, mask, ws, wsi, gram = W[0], W[3], W[4], W[5], W[6], W[7]
     if undamped(J, S, k, bound, params, Gs) != 0.0:  # near J_S's singularity, or undecided
         return 3
-    rs = reduced_basis(Z, r, S, k, Zs, p0)
+    rs = reduced_basis(Z, r, S, k, Zs, zr)
     if rs < 0:
         return 3
-    for j in range(Z.shape[0]):
-        p0[j] = 0.0
+    n = Z.shape[0]
+    for c in range(rs):  # p₀ = N_S c = Z_S (Z_Sᵀ c)
+        t = 0.0
+        for j in range(n):
+            t += Zs[j, c] * target[j]
+        zr[c] = t
+    for j in range(n):
+        t = 0.0
+        for c in range(rs):
+            t += Zs[j, c] * zr[c]
+        p0[j] = t
+    for t in range(k):
+        p0[S[t]] = 0.0
     return solve_box_rates(p0, d, Zs, rs, lo, hi, mask, qd, act, ws, wsi, gram, res)
 
 
@@ -191,8 +204,8 @@ def _jvja_target(
         if pays_off(post, lo, hi, mask):
             solved = least_norm_path(J, xdot, lo, hi, mask, V[4], act, ws, wsi, Gs, res) == 0
         if not solved:
-            st = _reduced_box(J, Z, r, S, k, tr * trinv, params, W, V[3], post, lo, hi, V[4], act,
-                              res)  # fmt: skip
+            st = _reduced_box(J, Z, r, S, k, tr * trinv, params, W, V[3], V[3], post, zr, lo, hi,
+                              V[4], act, res)  # fmt: skip
             if st:
                 return st
         for t in range(k):
@@ -407,6 +420,7 @@ def reduced_solve(J, xdot, target, todo, post, scales, codes, F, Iw):  # pragma:
     mask, ws, wsi = _iv(F, Iw, _MASK, n), _fm(F, Iw, _WSF, 8, n + 1), _im(F, Iw, _WSI, 2, n + 1)
     gram, Zs = _fm(F, Iw, _GRAM, n + 1, n + 1), _fm(F, Iw, _ZS, n, n)
     NSS, ys, sets = _fm(F, Iw, _NSS, s, s), _fv(F, Iw, _YS, s), _im(F, Iw, _SETS, f, s)
+    W = (Zs, NSS, ys, Gs, mask, ws, wsi, gram)
     res = state[:2]
     least_norm = True  # a zero target: the least-norm response, whose rates the path gives
     for j in range(n):
@@ -434,27 +448,8 @@ def reduced_solve(J, xdot, target, todo, post, scales, codes, F, Iw):  # pragma:
                 post[i, j] = qd[j]
             scales[i] = res[0]
             continue
-        mu2 = undamped(J, S, k, tr * trinv, p3, Gs)
-        if mu2 != 0.0:  # near J_S's singularity the reference solves it exactly (undamped)
-            codes[i] = 3
-            continue
-        rs = reduced_basis(Z, r, S, k, Zs, zr)
-        if rs < 0:
-            codes[i] = 3
-            continue
-        for c in range(rs):  # p₀ = N_S c = Z_S (Z_Sᵀ c)
-            t = 0.0
-            for j in range(n):
-                t += Zs[j, c] * target[j]
-            zr[c] = t
-        for j in range(n):
-            t = 0.0
-            for c in range(rs):
-                t += Zs[j, c] * zr[c]
-            p0[j] = t
-        for t in range(k):
-            p0[S[t]] = 0.0
-        st = solve_box_rates(p0, d, Zs, rs, lo, hi, mask, qd, act, ws, wsi, gram, res)
+        st = _reduced_box(J, Z, r, S, k, tr * trinv, p3, W, target, p0, d, zr, lo, hi, qd, act,
+                          res)  # fmt: skip
         codes[i] = st
         if st:
             continue
