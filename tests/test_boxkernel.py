@@ -63,7 +63,7 @@ def test_nearest_point_on_the_rates_equals_boxqp():
         )
         mask = np.ones(n, dtype=np.int64)
         code = boxkernel.solve_box_rates(np.zeros(n), a, np.ascontiguousarray(Z), Z.shape[1], lo,
-                                         hi, mask, qd, act, ws, wsi, gram, out)  # fmt: skip
+                                         hi, mask, qd, act, ws, wsi, gram, out, 1.0)  # fmt: skip
         try:
             ref = boxqp.solve_box(np.zeros(n), a, Z, lo, hi)
         except InfeasibleBounds:

@@ -159,7 +159,7 @@ def _reduced_box(
         p0[j] = t
     for t in range(k):
         p0[S[t]] = 0.0
-    return solve_box_rates(p0, d, Zs, rs, lo, hi, mask, qd, act, ws, wsi, gram, res)
+    return solve_box_rates(p0, d, Zs, rs, lo, hi, mask, qd, act, ws, wsi, gram, res, 1.0)
 
 
 @_njit
@@ -295,7 +295,11 @@ def bounded_solve(J, xdot, out, mode, F, Iw):  # pragma: no cover - numba
     bounded = res[1]
     for j in range(n):
         mask[j] = 1
-    st = solve_box_rates(p0, a, Z, r, lo, hi, mask, qd, state[2:], ws, wsi, gram, res)
+    s0 = 1.0  # a task far out of reach: its largest scale from LNVA's path (L8), for any objective
+    if mode != 0 and pays_off(a, lo, hi, mask):
+        if not least_norm_path(J, xdot, lo, hi, mask, qd, state[2:], ws, wsi, Gs, res):
+            s0 = res[0]
+    st = solve_box_rates(p0, a, Z, r, lo, hi, mask, qd, state[2:], ws, wsi, gram, res, s0)
     if st:
         return st
     res[1] = max(res[1], bounded)

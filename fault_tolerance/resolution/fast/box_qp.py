@@ -304,9 +304,12 @@ def _one_row_rates(Z, r, lo, hi, mask, ws) -> int:  # pragma: no cover - numba
 # (L2) with (L3): boxqp.solve_box in scalar loops.
 @_njit
 def solve_box_rates(
-    p0, d, Z, r, lo, hi, mask, qd, act, ws, wsi, gram, out
+    p0, d, Z, r, lo, hi, mask, qd, act, ws, wsi, gram, out, s0
 ):  # pragma: no cover - numba
-    """Rates ``p₀ + s d + Z u`` in the box on ``mask``, ``s ≤ 1`` largest; ``out[0] = s``.
+    """Rates ``p₀ + s d + Z u`` in the box on ``mask``, ``s ≤ s₀`` largest; ``out[0] = s``.
+
+    ``s₀ = 1`` unless the largest scale is known (the least-norm path's, L8): the scale does not
+    depend on the objective, so the rounds of the task scaling (L3) then start there.
 
     ``act`` (n,) gets 1.0 on joints held at a bound; ``out[1]`` is 1 when a bound was met. Joints
     off ``mask`` get ``p₀ + s d + Z u`` unclipped. Returns 0, 4 (no ``s ≥ 0`` reachable) or 5.
@@ -314,7 +317,7 @@ def solve_box_rates(
     """
     n = p0.shape[0]
     rows, info = wsi[0], wsi[1]
-    s = 1.0
+    s = s0
     for _ in range(MAX_SCALE_ROUNDS):
         for j in range(n):
             ws[_X, j] = p0[j] + s * d[j]
