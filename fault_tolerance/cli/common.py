@@ -221,13 +221,26 @@ def joint_ranges(text: str, what: str, arm, deg: bool = False) -> np.ndarray:
 
 
 def task_values(text: str, what: str, arm, deg: bool = False) -> np.ndarray:
-    """Task coordinates of option ``what`` [m, rad]; ``deg``: the rows rx, ry, rz in degrees."""
+    """Task coordinates of option ``what`` [m, rad]; ``deg``: the rows rx, ry, rz in degrees.
+
+    An orientation row beyond a full turn (|value| > 2π rad) is refused, with the degrees hint
+    when ``deg`` is off.
+    """
+    from fault_tolerance.model.joint_limits import DEGREES_OPTION_HINT
+
     v = floats(text, what)
     if len(v) != arm.m:
         raise InvalidInput(f"{what} has {len(v)} numbers; task {'/'.join(arm.task)} needs {arm.m}")
+    ang = np.array([r.startswith("r") for r in arm.task], dtype=bool)
     if deg:
-        ang = np.array([r.startswith("r") for r in arm.task], dtype=bool)
         v[ang] = np.deg2rad(v[ang])
+    beyond = [i for i in np.flatnonzero(ang) if abs(v[i]) > 2 * np.pi]
+    if beyond:
+        rows = ", ".join(f"{arm.task[i]} = {v[i]:.6g} rad" for i in beyond)
+        hint = "" if deg else f"; {DEGREES_OPTION_HINT}"
+        raise InvalidInput(
+            f"{what} has orientation rows beyond a full turn (|value| > 2π rad): {rows}{hint}"
+        )
     return v
 
 
