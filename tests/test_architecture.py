@@ -225,7 +225,7 @@ def test_no_issue_numbers_outside_the_changelog():
     import re
 
     root = PKG.parent
-    pattern = re.compile(r"\(#\d+\)|\bissue \d+|#1[0-9]\b|#2[0-9]\b")
+    pattern = re.compile(r"\(#\d+\)|\bissue \d+|#1[0-9]\b|#2[0-9]\b", re.I)
     paths = [
         p
         for d in ("fault_tolerance", "tests", "scripts", "notebooks")

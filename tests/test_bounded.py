@@ -284,7 +284,7 @@ def max_scale(J, xdot, lo, hi, keep):
 
 
 def test_chain_14_near_dependent_bounds_are_not_infeasible():
-    """Issue 12, the bench's chain_14 pool: 0 is inside the box, yet the reduced robot of joint 8
+    """The bench's chain_14 pool: 0 is inside the box, yet the reduced robot of joint 8
     raised InfeasibleBounds ("not even zero"): seven nearly parallel bounds in its null space made
     the active-set step (normal equations, a tiny ``z`` when the active rows spanned R^r) huge and
     the Farkas certificate meaningless. Rates inside the box, J q̇ = s ẋ, s the largest."""

@@ -322,7 +322,7 @@ def test_mda_after_a_planner_fallback():
 
 
 def test_chain_14_full_active_set_compiled():
-    """Issue 12: the chain_14 configuration whose reduced robot of joint 8 returned 4 ("no s ≥ 0")
+    """The chain_14 configuration whose reduced robot of joint 8 returned 4 ("no s ≥ 0")
     with 0 inside the box: with r active rows the step direction is z = 0 exactly (its Gram solve
     left a tiny z and a huge step). The compiled step equals the reference, scaled task and all."""
     if "numba" not in available_backends():

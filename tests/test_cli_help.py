@@ -199,3 +199,69 @@ def test_design_help_names_only_the_task_it_accepts(tmp_path, capsys):
         == 2
     )
     assert "is not one of ['circle']" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize(
+    "argv, allowed",
+    [
+        (["simulate", "--robot", "planar_3r", "--dt", "0.01", "--dt", "0.02"],
+         "only --package-dir, --xacro-arg and --option may repeat"),
+        (["replay", "run", "--speed", "1", "--speed", "2"], "only --package-dir may repeat"),
+        (["bench", "--steps", "3", "--steps", "4"], "no option of this command may repeat"),
+    ],
+)  # fmt: skip
+def test_given_twice_names_every_option_that_may_repeat(argv, allowed, capsys):
+    """The "given twice" line lists the command's repeatable options, --option among them."""
+    from fault_tolerance.cli.runner import repeatable
+
+    with pytest.raises(SystemExit) as exc:
+        main(argv)
+    assert exc.value.code == 2
+    assert allowed in capsys.readouterr().err
+    sub = build_parser()._subparsers._group_actions[0].choices[argv[0]]
+    assert all(opt in allowed for opt in repeatable(sub))
+
+
+@pytest.mark.parametrize(
+    "extra, message",
+    [
+        (["--option", "gain=0.02", "--option", "gain=0.5"],
+         "--option gain given twice (gain=0.02 and 'gain=0.5'); give it once"),
+        (["--gain", "0.02", "--option", "gain=0.5"],
+         "--gain and --option 'gain=0.5' set the same option; give one of them"),
+        (["--response", "continuation", "--option", "response=least_norm"],
+         "--response and --option 'response=least_norm' set the same option"),
+    ],
+)  # fmt: skip
+def test_an_option_set_twice_through_option_is_refused(extra, message, tmp_path, capsys):
+    """The same resolver option twice (by --option, or by its flag and --option): exit 2."""
+    argv = ["simulate", "--robot", "planar_3r", "--algorithms", "mda,jvja", "--duration", "0.05",
+            "--no-progress", "--out", str(tmp_path / "s"), *extra]  # fmt: skip
+    assert main(argv) == 2
+    out, err = capsys.readouterr()
+    assert out == "" and err.count("\n") == 1 and message in err, err
+    assert not (tmp_path / "s").exists()
+
+
+def test_given_options_records_the_flags_given_not_the_defaults():
+    """given_options holds the destinations of the options on the command line only."""
+    args = build_parser().parse_args(["simulate", "--robot", "planar_3r", "--gain", "0.1"])
+    assert {"robot", "gain"} <= args.given_options
+    assert "response" not in args.given_options and args.response == "least_norm"
+
+
+def test_design_candidates_help_states_the_rounding(tmp_path, capsys):
+    """--candidates C with d varied parameters evaluates max(4, ceil(C/d))·d first designs."""
+    import json
+    import math
+
+    with pytest.raises(SystemExit):
+        main(["design", "--help"])
+    out = " ".join(capsys.readouterr().out.split())
+    assert "max(4, ceil(C/d))·d designs" in out
+    argv = ["design", "--robot", "planar_3r", "--candidates", "33", "--rounds", "0", "--grid",
+            "21", "--workers", "0", "--no-progress", "--out", str(tmp_path / "d")]  # fmt: skip
+    assert main(argv) == 0
+    d = 5  # the planar 3R's --vary limits: five free limits
+    evaluations = json.loads((tmp_path / "d" / "design.json").read_text())["evaluations"]
+    assert evaluations == max(4, math.ceil(33 / d)) * d == 35

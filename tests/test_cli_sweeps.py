@@ -19,7 +19,7 @@ def test_help_has_an_example(cmd, capsys):
 
 @pytest.mark.parametrize("cmd", ["workspace", "design"])
 def test_help_states_every_default(cmd, capsys):
-    """Issue 16 item 4: every option's help states its default, as numbers where it has one."""
+    """Every option's help states its default, as numbers where it has one."""
     with pytest.raises(SystemExit):
         main([cmd, "--help"])
     out = " ".join(capsys.readouterr().out.split())

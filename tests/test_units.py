@@ -20,6 +20,7 @@ from fault_tolerance.cli import main
 from fault_tolerance.cli.common import joint_ranges, joint_values, task_values
 from fault_tolerance.model.joint_limits import (
     DEGREES_HINT,
+    DEGREES_OPTION_HINT,
     TURN_LIMIT,
     angular_columns,
     check_start,
@@ -474,3 +475,98 @@ def test_a_start_read_modulo_a_turn_is_printed_where_the_run_starts(capsys):
         "limits)"
     )
     assert f"start: every method from the same q0 = [0.3, 1.2, {wrapped}] rad" in out
+
+
+# -- the degrees hint only where the values are degree-sized -----------------------------------
+
+
+def test_a_radian_start_a_little_past_a_limit_gets_no_degrees_hint(capsys):
+    """Panda joint2 at -1.77 rad, 0.007 past its limit: refused naming it, with no degrees hint."""
+    code, out, err = run_cli(
+        ["simulate", "--robot", "panda", "--q0=0,-1.77,0,-2,0,1.5,0.7", *SHORT], capsys
+    )
+    assert code == 2 and out == ""
+    assert "panda_joint2 = -1.77 rad (limits [-1.763, 1.763] rad)" in err
+    assert "degrees" not in err and "--deg" not in err
+
+
+def test_beyond_pi_but_outside_once_converted_gets_no_degrees_hint(panda):
+    """3.5 on panda_joint4 (limits [-3.07, -0.07]): 3.5° is outside too, so no degrees hint."""
+    q = PANDA_Q.copy()
+    q[3] = 3.5
+    with pytest.raises(ft.InvalidInput, match="panda_joint4 = 3.5 rad") as err:
+        check_start(panda, q)
+    assert "degrees" not in str(err.value)
+
+
+def test_a_start_found_for_x0_outside_the_limits_is_refused_without_a_degrees_hint(
+    monkeypatch, capsys
+):
+    """The minimum-RCN start at --x0 is the tool's, not the user's: no degrees hint."""
+    from fault_tolerance.planning import posture
+
+    arm = ft.load_arm("panda", task="position")
+    q = PANDA_Q.copy()
+    q[3] = -3.08  # just below panda_joint4's lower limit -3.0718
+    monkeypatch.setattr(posture, "initial_posture", lambda *a, **k: posture.Posture(q, 0.0))
+    x0 = ",".join(f"{v:.4f}" for v in arm.fk(PANDA_Q))
+    code, out, err = run_cli(
+        ["simulate", "--robot", "panda", "--task", "position", f"--x0={x0}", *SHORT], capsys
+    )
+    assert code == 2 and out == ""
+    assert "the start found for --x0 lies outside the joint limits: panda_joint4 = -3.08 rad" in err
+    assert "degrees" not in err
+
+
+def test_x0_orientation_rows_beyond_a_turn_are_refused_with_the_hint():
+    """rx = 90 without --deg is refused with the hint; 400° with --deg is refused without it."""
+    arm = ft.load_arm("spatial_4r", task="pose")
+    with pytest.raises(ft.InvalidInput, match="beyond a full turn.*rx = 90 rad") as err:
+        task_values("0.1,0.2,0.3,90,0,0", "--x0", arm)
+    assert str(err.value).endswith(DEGREES_OPTION_HINT)
+    with pytest.raises(ft.InvalidInput, match="beyond a full turn") as err:
+        task_values("0.1,0.2,0.3,400,0,0", "--x0", arm, deg=True)
+    assert "degrees" not in str(err.value)
+    np.testing.assert_allclose(task_values("0,0,0,6.2,0,-6.2", "--x0", arm)[3:], [6.2, 0, -6.2])
+
+
+def test_workspace_limits_in_degrees_get_the_hint(tmp_path, capsys):
+    """workspace --limits=-90:90,... without --deg: the range error says to pass --deg."""
+    argv = ["workspace", "--robot", "planar_3r", "--out", str(tmp_path / "w")]
+    code, out, err = run_cli([*argv, "--limits=-90:90,-90:90,-90:90"], capsys)
+    assert code == 2 and out == ""
+    assert "limits of joint1 [-90, 90] rad must be" in err and DEGREES_OPTION_HINT in err
+    code, _, err = run_cli([*argv, "--limits=-3.2:1,-1:1,-1:1"], capsys)
+    assert code == 2 and "limits of joint1 [-3.2, 1] rad" in err and "degrees" not in err
+
+
+def test_workspace_limits_deg_converts_before_the_range_check():
+    """parse_limits with deg=True: degrees inside the physical limits pass; no hint with deg on."""
+    from fault_tolerance.analysis.workspace.closed_form import parse_limits
+
+    arm = ft.load_arm("planar_3r")
+    lim = parse_limits(arm, "-90:90,-90:90,-90:90", deg=True)
+    np.testing.assert_allclose(lim, np.deg2rad([[-90, 90]] * 3))
+    with pytest.raises(ft.InvalidInput, match="within the physical") as err:
+        parse_limits(arm, "-400:90,-90:90,-90:90", deg=True)
+    assert "degrees" not in str(err.value)
+
+
+@pytest.mark.parametrize(
+    "params, message",
+    [
+        ("theta2:-45:45", "--params theta2 [-45.0, 45.0] rad: DH angles alpha, theta must be"),
+        ("upper2:30:170", "--params upper2 [30.0, 170.0] rad: revolute joint limits must be"),
+        ("alpha2:{0|90}", "--params alpha2 [0.0, 90.0] rad: DH angles alpha, theta must be"),
+    ],
+)
+def test_design_params_in_degrees_get_the_hint(params, message, tmp_path, capsys):
+    """design --vary dh --params with degree-sized angles and no --deg: refused with the hint."""
+    code, out, err = run_cli(
+        ["design", "--vary", "dh", "--params", params, "--popsize", "4", "--generations", "0",
+         "--rounds", "0", "--workers", "0", "--no-progress", "--out", str(tmp_path / "d")],
+        capsys,
+    )  # fmt: skip
+    assert code == 2 and out == ""
+    assert message in err and DEGREES_OPTION_HINT in err
+    assert not (tmp_path / "d" / "design.json").exists()

@@ -221,13 +221,26 @@ def joint_ranges(text: str, what: str, arm, deg: bool = False) -> np.ndarray:
 
 
 def task_values(text: str, what: str, arm, deg: bool = False) -> np.ndarray:
-    """Task coordinates of option ``what`` [m, rad]; ``deg``: the rows rx, ry, rz in degrees."""
+    """Task coordinates of option ``what`` [m, rad]; ``deg``: the rows rx, ry, rz in degrees.
+
+    An orientation row beyond a full turn (|value| > 2π rad) is refused, with the degrees hint
+    when ``deg`` is off.
+    """
+    from fault_tolerance.model.joint_limits import DEGREES_OPTION_HINT
+
     v = floats(text, what)
     if len(v) != arm.m:
         raise InvalidInput(f"{what} has {len(v)} numbers; task {'/'.join(arm.task)} needs {arm.m}")
+    ang = np.array([r.startswith("r") for r in arm.task], dtype=bool)
     if deg:
-        ang = np.array([r.startswith("r") for r in arm.task], dtype=bool)
         v[ang] = np.deg2rad(v[ang])
+    beyond = [i for i in np.flatnonzero(ang) if abs(v[i]) > 2 * np.pi]
+    if beyond:
+        rows = ", ".join(f"{arm.task[i]} = {v[i]:.6g} rad" for i in beyond)
+        hint = "" if deg else f"; {DEGREES_OPTION_HINT}"
+        raise InvalidInput(
+            f"{what} has orientation rows beyond a full turn (|value| > 2π rad): {rows}{hint}"
+        )
     return v
 
 
@@ -375,8 +388,26 @@ def _option_value(text: str):
         return text.strip()
 
 
+#: Resolver options that have a flag of their own (option name -> flag); --option refuses them
+#: when the flag is given too.
+OPTION_FLAGS = {"gain": "--gain", "response": "--response"}
+
+
+def _refuse_set_twice(args, name: str, item: str, given: dict) -> None:
+    """``--option NAME=...`` whose NAME was set before, by ``--option`` or by its own flag."""
+    if name in given:
+        raise InvalidInput(f"--option {name} given twice ({name}={given[name]!r} and {item!r}); "
+                           "give it once")  # fmt: skip
+    flag = OPTION_FLAGS.get(name)
+    if flag and flag.lstrip("-") in getattr(args, "given_options", ()):
+        raise InvalidInput(f"{flag} and --option {item!r} set the same option; give one of them")
+
+
 def resolver_options(args, algorithms) -> dict:
-    """``--option NAME=VALUE`` as a dict; an option none of ``algorithms`` takes is refused."""
+    """``--option NAME=VALUE`` as a dict; an option none of ``algorithms`` takes is refused.
+
+    So is a NAME given twice, or given with its own flag too (:data:`OPTION_FLAGS`).
+    """
     from fault_tolerance.simulation.simulate import option_names
 
     given: dict = {}
@@ -384,6 +415,7 @@ def resolver_options(args, algorithms) -> dict:
         name, eq, value = item.partition("=")
         if not eq or not name.strip():
             raise InvalidInput(f"--option {item!r}: write NAME=VALUE, e.g. --option gain=0.02")
+        _refuse_set_twice(args, name.strip(), item, given)
         given[name.strip()] = _option_value(value)
     taken = {k for a in algorithms for k in option_names(a)}
     unknown = sorted(set(given) - taken)

@@ -68,8 +68,9 @@ def add_parser(sub) -> argparse.ArgumentParser:
         "--candidates",
         type=int,
         default=None,
-        help="planar 3R: designs in the first population (quasi-random, the baseline first) "
-        "(default 128)",
+        help="planar 3R: designs asked of the first population (the baseline, then quasi-random "
+        "ones); with d varied parameters it holds max(4, ceil(C/d))·d designs, C rounded up to "
+        "a multiple of d and at least 4·d (default 128)",
     )
     s.add_argument("--rounds", type=int, default=4, help="pattern-search rounds (default 4)")
     s.add_argument(

@@ -98,6 +98,31 @@ def _task(args, template):
     return DHTask(x0, float(radius))
 
 
+def _check_angles(params, table, deg: bool) -> None:
+    """The angles of ``--params`` in range: θ, α within ±4π, revolute limits within a turn [rad].
+
+    A value out of range that is beyond 2π gets the degrees hint when ``deg`` is off.
+    """
+    from fault_tolerance.model.dh import MAX_ANGLE
+    from fault_tolerance.model.joint_limits import DEGREES_OPTION_HINT, TURN_LIMIT
+
+    for p in params:
+        kind = table.joints[p.joint - 1].kind if p.joint <= table.n else "prismatic"
+        if p.field in ("theta", "alpha"):
+            bound, what = MAX_ANGLE, "DH angles alpha, theta"
+        elif p.field in ("lower", "upper") and kind == "revolute":
+            bound, what = TURN_LIMIT, "revolute joint limits"
+        else:
+            continue
+        values = p.choices or (p.lo, p.hi)
+        if max(abs(v) for v in values) > bound:
+            hint = "" if deg else f"; {DEGREES_OPTION_HINT}"
+            raise InvalidInput(
+                f"--params {p.name} {[round(v, 6) for v in values]} rad: {what} must be within "
+                f"±{bound:.4g} rad{hint}"
+            )
+
+
 def _total(text: str, table) -> float | None:
     if text == "free":
         return None
@@ -138,6 +163,7 @@ def run_dh(args) -> int:
     params = parse_params(text)
     if args.deg:
         params = dh_params_from_degrees(params[:given], table, args.params or "") + params[given:]
+    _check_angles(params, table, args.deg)
     objective = args.objective or "mean-jvj"
     lockable = _lockable(args, table)
     spec = design_spec(

@@ -26,6 +26,23 @@ NEGATIVE_NUMBERS = re.compile(r"^-(\d|\.\d)[\d.eE+\-,:;]*$")
 
 #: Attribute of the parsed namespace that records the options given so far (by destination).
 GIVEN = "_options_given"
+#: Attribute of the parsed arguments: the destinations of the options given on the command line
+#: (``--gain`` → ``"gain"``), so a command can tell a value given from a default.
+GIVEN_OPTIONS = "given_options"
+
+
+def repeatable(parser: argparse.ArgumentParser) -> list[str]:
+    """The options of ``parser`` that may repeat (``action="append"``), e.g. ``--option``."""
+    return [a.option_strings[0] for a in parser._actions if isinstance(a, argparse._AppendAction)]
+
+
+def _may_repeat(parser: argparse.ArgumentParser) -> str:
+    """``only --package-dir, --xacro-arg and --option may repeat`` (or that none may)."""
+    opts = repeatable(parser)
+    if not opts:
+        return "no option of this command may repeat"
+    listed = opts[0] if len(opts) == 1 else f"{', '.join(opts[:-1])} and {opts[-1]}"
+    return f"only {listed} may repeat"
 
 
 def _refuse_repeat(parser: argparse.ArgumentParser, action: argparse.Action, namespace, used):
@@ -35,10 +52,7 @@ def _refuse_repeat(parser: argparse.ArgumentParser, action: argparse.Action, nam
     given = namespace.__dict__.setdefault(GIVEN, {})
     if action.dest in given:
         first = "" if given[action.dest] == used else f" (first as {given[action.dest]})"
-        parser.error(
-            f"{used} given twice{first}; give it once (only --package-dir and --xacro-arg "
-            "may repeat)"
-        )
+        parser.error(f"{used} given twice{first}; give it once ({_may_repeat(parser)})")
     given[action.dest] = used
 
 
@@ -66,7 +80,7 @@ class Parser(argparse.ArgumentParser):
     Every subcommand's parser is of this class (``add_subparsers`` uses the parent's class), so
     any option taking numbers accepts ``--opt -1,2`` as well as ``--opt=-1,2``. An option given
     twice is an error (exit 2, "given twice"), except those declared ``action="append"``
-    (``--package-dir``, ``--xacro-arg``), whose values merge.
+    (``--package-dir``, ``--xacro-arg``, ``--option``), whose values merge.
     """
 
     def __init__(self, *args, **kwargs) -> None:
@@ -77,9 +91,10 @@ class Parser(argparse.ArgumentParser):
         self.register("action", "store_true", StoreTrueOnce)
 
     def parse_known_args(self, args=None, namespace=None):
-        """Argparse's parse, without the record of the options given in the result."""
+        """Argparse's parse; the options given are in ``given_options`` (their destinations)."""
         ns, extra = super().parse_known_args(args, namespace)
-        ns.__dict__.pop(GIVEN, None)
+        given = ns.__dict__.pop(GIVEN, {})
+        setattr(ns, GIVEN_OPTIONS, frozenset(given) | getattr(ns, GIVEN_OPTIONS, frozenset()))
         return ns, extra
 
     def error(self, message: str) -> NoReturn:

@@ -72,6 +72,7 @@ def choose_start(
             path = circle(x0)
         if q0 is None:
             q0 = initial_posture(arm, path.x0, start_lockable).q
+            _check_found(args, arm, q0)
         elif np.linalg.norm(arm.task_error(path.x0, q0)) > 1e-6:
             raise InvalidInput(
                 f"--q0 puts the tool at {arm.fk(q0).round(4).tolist()}, not at the path's start "
@@ -95,6 +96,14 @@ def choose_start(
             args, arm, err, start_lockable, (algorithms, extra_lockable, sim_options)
         ) from None
     return choice.q0, circle(choice.x0), lockable, choice
+
+
+def _check_found(args, arm, q0) -> None:
+    """The minimum-RCN start at ``--x0`` (or at the first point of ``--csv``) inside the limits."""
+    from fault_tolerance.model.joint_limits import check_found_start
+
+    if not getattr(args, "no_limits", False):
+        check_found_start(arm, q0, "the first point of --csv" if args.csv else "--x0")
 
 
 def refusal_with_fixes(args, arm, err, lockable, rerun) -> NoStartFound:

@@ -152,11 +152,12 @@ def _run(args) -> int:
     keys = ("grid", "samples", "theta_samples", "chunks")
     opts = {k: getattr(args, k) for k in keys if getattr(args, k) is not None}
     t0 = time.perf_counter()
-    limits = None if args.limits is None else joint_ranges(args.limits, "--limits", arm, args.deg)
+    limits = None if args.limits is None else joint_ranges(args.limits, "--limits", arm)
     ws = failure_tolerant_workspace(
         arm,
         limits,
         singletons(lockable_of(args, arm)),
+        deg=args.deg,  # converted and checked there: a refusal then says whether --deg was on
         workers=args.workers or 0,
         scheduler=args.scheduler,
         folder=args.out,

@@ -92,8 +92,10 @@ def outside_limits(arm, q, tol: float = 1e-9) -> np.ndarray:
 #: A turning joint's start beyond this magnitude [rad] (a turn and 1 %) and outside its limits is
 #: refused: no start needs it, and it is what degrees read as radians look like (docs/units.md).
 TURN_LIMIT = 2 * np.pi * 1.01
+#: The hint of values given on the command line that look like degrees.
+DEGREES_OPTION_HINT = "looks like degrees: pass --deg"
 #: The hint of a start that looks like degrees (CLI and Python).
-DEGREES_HINT = "looks like degrees: pass --deg (in Python, np.deg2rad(q0))"
+DEGREES_HINT = f"{DEGREES_OPTION_HINT} (in Python, np.deg2rad(q0))"
 
 
 def _linear(joint) -> bool:
@@ -142,13 +144,23 @@ def _limited(bound: np.ndarray) -> np.ndarray:
     return np.abs(bound) < NO_LIMIT
 
 
-def _looks_like_degrees(arm, q, i: int) -> bool:
-    """Joint ``i`` of ``q``: beyond a turn, or outside its limits while its degrees are inside."""
-    lo, hi = arm.lower[i], arm.upper[i]
-    if abs(q[i]) > TURN_LIMIT:
+def _looks_like_degrees(arm, q, refused: list[int]) -> bool:
+    """True when the refused joints of ``q`` read as degrees: degree-sized and inside once converted.
+
+    Degree-sized: an angular joint beyond a turn (:data:`TURN_LIMIT`), or every refused angular
+    joint beyond π with the whole start inside the limits once its angles are read as degrees. A
+    radian start a little past a limit (|q| ≤ π) gets no hint.
+    """
+    ang = angular_columns(arm)
+    angles = [i for i in refused if ang[i]]
+    if not angles:
+        return False
+    if any(abs(q[i]) > TURN_LIMIT for i in angles):
         return True
-    r = np.deg2rad(q[i])
-    return bool((not _limited(lo) or r >= lo) and (not _limited(hi) or r <= hi))
+    if not all(abs(q[i]) > np.pi for i in angles):
+        return False
+    converted = wrap_into_limits(arm, degrees_to_radians(arm, q))
+    return not bool(outside_limits(arm, converted).any())
 
 
 def _describe(arm, q, i: int) -> str:
@@ -182,15 +194,14 @@ def check_start(arm, q0, limits: bool = True) -> np.ndarray:
 
     Refused (:class:`InvalidInput`, naming each joint, its value and its limits): an angle beyond
     a turn outside its limits (with limits on or off), and with ``limits`` on any joint outside
-    its position limits. When a refused value looks like degrees (beyond a turn, or inside the
-    limits once converted from degrees) the message says so (:data:`DEGREES_HINT`).
+    its position limits. When the refused values look like degrees (beyond a turn, or beyond π with the start
+    inside the limits once converted from degrees) the message says so (:data:`DEGREES_HINT`).
     """
     q = arm.check_q(q0, "q0")
     turn, out = start_problems(arm, q, limits)
     if not turn and not out:
         return q
-    ang = angular_columns(arm)
-    hint = any(ang[i] and _looks_like_degrees(arm, q, i) for i in turn + out)
+    hint = _looks_like_degrees(arm, q, turn + out)
     parts = []
     if turn:
         parts.append(
@@ -205,3 +216,20 @@ def check_start(arm, q0, limits: bool = True) -> np.ndarray:
     if not out:
         advice = "angles are in radians"
     raise InvalidInput("; ".join(parts) + (f"; {DEGREES_HINT}" if hint else "") + f"; {advice}")
+
+
+def check_found_start(arm, q0, where: str) -> None:
+    """A start the tool found (the minimum-RCN posture at ``where``) checked inside the limits.
+
+    Full-turn joints are wrapped into their limits first (:func:`wrap_into_limits`). Refused
+    (:class:`InvalidInput`) naming each joint outside, its value and its limits; no degrees hint
+    (the user did not give these values).
+    """
+    q = wrap_into_limits(arm, arm.check_q(q0, "q0"))
+    out = np.flatnonzero(outside_limits(arm, q))
+    if out.size:
+        raise InvalidInput(
+            f"the start found for {where} lies outside the joint limits: "
+            + ", ".join(_describe(arm, q, int(i)) for i in out)
+            + f"; move {where} inward, or run without limits (--no-limits)"
+        )

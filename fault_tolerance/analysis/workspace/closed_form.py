@@ -83,8 +83,19 @@ def parse_limits(arm, limits, deg: bool = False) -> np.ndarray:
         raise InvalidInput(
             f"limits of {arm.joint_names[j]} [{lim[j, 0]:.6g}, {lim[j, 1]:.6g}] rad must be "
             f"finite, lo <= hi and within the physical [{phys[j, 0]:.6g}, {phys[j, 1]:.6g}] rad"
+            + _degrees_hint(arm, lim, j, deg)
         )
     return lim
+
+
+def _degrees_hint(arm, lim: np.ndarray, j: int, deg: bool) -> str:
+    """The degrees hint of a refused angular joint ``j`` whose limits lie beyond a turn (> 2π)."""
+    from fault_tolerance.model.joint_limits import DEGREES_OPTION_HINT, angular_columns
+
+    degree_sized = np.isfinite(lim[j]).all() and np.abs(lim[j]).max() > 2 * np.pi
+    return (
+        f"; {DEGREES_OPTION_HINT}" if not deg and angular_columns(arm)[j] and degree_sized else ""
+    )
 
 
 def workspace_spec(arm, limits=None, lockable=None, *, grid=None, samples=None, **options) -> dict:
