@@ -26,7 +26,7 @@ import numpy as np
 from fault_tolerance.control.fast.bounded_free import _free, free_shape
 from fault_tolerance.control.fast.box_check import compiled_box_status
 from fault_tolerance.control.fast.multi_step import multi_kernel
-from fault_tolerance.control.fast.step import compiled_kernel
+from fault_tolerance.control.fast.step import _inline, compiled_kernel
 from fault_tolerance.numerics.linalg import RANK_RTOL
 from fault_tolerance.resolution.box_qp import BOX_TOL
 from fault_tolerance.resolution.fast.box_basis import (
@@ -129,7 +129,7 @@ def _iv(F, Iw, t, r):  # pragma: no cover - numba
     return Iw[o : o + r]
 
 
-@_njit
+@_inline
 def _reduced_box(
     J, Z, r, S, k, bound, params, W, target, p0, d, zr, lo, hi, qd, act, res
 ):  # pragma: no cover - numba
@@ -147,6 +147,13 @@ def _reduced_box(
     if rs < 0:
         return 3
     n = Z.shape[0]
+    least_norm = True
+    for j in range(n):
+        least_norm = least_norm and target[j] == 0.0
+    if least_norm:  # p₀ = 0
+        for j in range(n):
+            p0[j] = 0.0
+        return solve_box_rates(p0, d, Zs, rs, lo, hi, mask, qd, act, ws, wsi, gram, res, 1.0)
     for c in range(rs):  # p₀ = N_S c = Z_S (Z_Sᵀ c)
         t = 0.0
         for j in range(n):
