@@ -32,6 +32,7 @@ from fault_tolerance.resolution.box_qp import BOX_TOL
 from fault_tolerance.resolution.fast.box_basis import (
     factor,
     null_basis,
+    null_project,
     reduced_basis,
     reduced_rates,
     undamped,
@@ -154,16 +155,7 @@ def _reduced_box(
         for j in range(n):
             p0[j] = 0.0
         return solve_box_rates(p0, d, Zs, rs, lo, hi, mask, qd, act, ws, wsi, gram, res, 1.0)
-    for c in range(rs):  # p₀ = N_S c = Z_S (Z_Sᵀ c)
-        t = 0.0
-        for j in range(n):
-            t += Zs[j, c] * target[j]
-        zr[c] = t
-    for j in range(n):
-        t = 0.0
-        for c in range(rs):
-            t += Zs[j, c] * zr[c]
-        p0[j] = t
+    null_project(Zs, rs, target, zr, p0)  # p₀ = N_S c = Z_S (Z_Sᵀ c)
     for t in range(k):
         p0[S[t]] = 0.0
     return solve_box_rates(p0, d, Zs, rs, lo, hi, mask, qd, act, ws, wsi, gram, res, 1.0)
@@ -266,16 +258,7 @@ def bounded_solve(J, xdot, out, mode, F, Iw):  # pragma: no cover - numba
                           p3, W, res)  # fmt: skip
         if st:
             return st
-        for c in range(r):  # p₀ = N c = Z (Zᵀ c)
-            t = 0.0
-            for j in range(n):
-                t += Z[j, c] * V[2, j]
-            zr[c] = t
-        for j in range(n):
-            t = 0.0
-            for c in range(r):
-                t += Z[j, c] * zr[c]
-            p0[j] = t
+        null_project(Z, r, V[2], zr, p0)  # p₀ = N c = Z (Zᵀ c)
     elif mode == 2:  # as the reference: out itself when inside, else N (q̇ − a) as the target
         inside = True
         for j in range(n):

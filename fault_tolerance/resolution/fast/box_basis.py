@@ -244,3 +244,19 @@ def damped_rates(J, xdot, S, k, Gs, mu2, out, y) -> bool:  # pragma: no cover - 
     for u in range(k):
         out[S[u]] = 0.0
     return True
+
+
+@_njit
+def null_project(Z, r, c, zr, out) -> None:  # pragma: no cover - numba
+    """``out = Z[:, :r] Z[:, :r]ᵀ c`` (``N c`` for an orthonormal null basis); ``zr`` (r,) scratch."""
+    n = Z.shape[0]
+    for u in range(r):
+        t = 0.0
+        for j in range(n):
+            t += Z[j, u] * c[j]
+        zr[u] = t
+    for j in range(n):
+        t = 0.0
+        for u in range(r):
+            t += Z[j, u] * zr[u]
+        out[j] = t
