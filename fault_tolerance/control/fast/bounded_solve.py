@@ -269,16 +269,9 @@ def bounded_solve(J, xdot, out, mode, F, Iw):  # pragma: no cover - numba
                 state[2 + j] = 0.0
             state[0] = 1.0
             return 0
-        for c in range(r):
-            t = 0.0
-            for j in range(n):
-                t += Z[j, c] * (out[j] - a[j])
-            zr[c] = t
         for j in range(n):
-            t = 0.0
-            for c in range(r):
-                t += Z[j, c] * zr[c]
-            p0[j] = t
+            p0[j] = out[j] - a[j]
+        null_project(Z, r, p0, zr, p0)  # p₀ = N (q̇ − a); the target is read before p₀ is written
     else:
         for j in range(n):
             p0[j] = 0.0

@@ -248,7 +248,7 @@ def damped_rates(J, xdot, S, k, Gs, mu2, out, y) -> bool:  # pragma: no cover - 
 
 @_njit
 def null_project(Z, r, c, zr, out) -> None:  # pragma: no cover - numba
-    """``out = Z[:, :r] Z[:, :r]ᵀ c`` (``N c`` for an orthonormal null basis); ``zr`` (r,) scratch."""
+    """``out = Z[:, :r] Z[:, :r]ᵀ c`` (``N c`` for an orthonormal basis); ``c`` may be ``out``; ``zr`` scratch."""
     n = Z.shape[0]
     for u in range(r):
         t = 0.0
