@@ -112,7 +112,7 @@ def dh_design_figure(d):
     ax.plot(rec["rcn_max"], rec["mean_jvj"], "*", c=CHOSEN, ms=14, label="chosen")
     ax.set_xscale("log")
     ax.set_yscale("log")
-    ax.set_xlabel("largest reduced condition number k_S along the task [1]")
+    ax.set_xlabel(r"largest reduced condition number $k_S$ along the task [1]")
     ax.set_ylabel("mean square-sum jump λ [(rad/s)²]")
     names = ", ".join(f"{k} = {v:.3g}" for k, v in rec["parameters"].items())
     title = f"DH design ({rec['objective']}): {names}"

@@ -127,7 +127,7 @@ def workspace_figure(ws):
         _heatmap(fig, axs[r, 1], ws.jump[sl].T, ext, f"smallest mean JVJA jump{at}",
                  "jump per unit task speed [(rad/s)²/(m/s)²]")  # fmt: skip
         _heatmap(fig, axs[r, 2], ws.rcn[sl].T, ext, f"smallest square-sum RCN K{at}",
-                 "K = Σ k_S² [1]")  # fmt: skip
+                 r"$K=\sum_S k_S^2$ [1]")  # fmt: skip
         box = _limits(ws.pre[sl], x, y)  # zoom on W(A): the empty rest of the grid says nothing
         for ax in axs[r]:
             if box is not None:
