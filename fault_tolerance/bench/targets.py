@@ -84,6 +84,10 @@ def arm_targets(key: str, ops: dict) -> list[dict]:
     if jv and mda:
         out.append(_at_most(key, "mda_over_jvja", "MDA step / JVJA step", mda / jv,
                             MAX_MDA_OVER_JVJA))  # fmt: skip
+    grad = med("mda_gradient")
+    if jv and grad:  # what the MDA ratio is made of: ∇K alone against the whole JVJA step
+        out.append(_item(key, "mda_gradient_over_jvja", "Jacobian + ∇K alone / JVJA step",
+                         grad / jv, None, None, None))  # fmt: skip
     if jv and sim_mda:
         r = sim_mda / jv
         out.append(_item(key, "sim_mda_over_jvja", "simulated MDA sample / JVJA step", r,

@@ -1,0 +1,131 @@
+"""Where the compiled MDA step's time goes, part by part, on one benchmark arm.
+
+Times, in one process and on the benchmark's pool of configurations, the whole MDA and JVJA
+steps of the Controller, the Jacobian, and ∇K's parts inside compiled loops (no call overhead):
+the eigenpairs of ``G = J Jᵀ`` and the two secular roots of every scenario (eq. 15, H6). It
+explains the ``mda_over_jvja`` row of ``fault-tolerance bench`` (docs/mda.md)::
+
+    python scripts/mda_breakdown.py panda_pose panda_position spatial_4r
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+
+import numpy as np
+import pinocchio as pin
+
+from fault_tolerance.bench.cases import ARMS, make_case
+from fault_tolerance.numerics.fast.rank_one_eigen import eigenpairs, highest_root, lowest_root
+from fault_tolerance.numerics.fast.small_eigen import njit
+
+REPS = 20000
+
+
+def median_us(fn, args, reps=REPS) -> float:
+    """Median wall time of ``fn(*args[i])`` over ``reps`` calls [µs]."""
+    for a in args[:50]:
+        fn(*a)
+    ts = np.empty(reps)
+    for r in range(reps):
+        a = args[r % len(args)]
+        t = time.perf_counter()
+        fn(*a)
+        ts[r] = time.perf_counter() - t
+    return float(np.median(ts) * 1e6)
+
+
+@njit
+def _eigen_loop(Js, reps):  # pragma: no cover - numba
+    """``reps`` Gram matrices and their eigenpairs (the first part of ∇K), cycling over ``Js``."""
+    k, m, n = Js.shape
+    A, V, d, w = np.empty((m, m)), np.empty((m, m)), np.empty(m), np.empty(2 * m)
+    acc = 0.0
+    for t in range(reps):
+        J = Js[t % k]
+        for i in range(m):
+            for j in range(i + 1):
+                s = 0.0
+                for c in range(n):
+                    s += J[i, c] * J[j, c]
+                A[i, j] = s
+        eigenpairs(A, m, V, d, w)
+        acc += d[0]
+    return acc
+
+
+@njit
+def _roots_loop(Js, cols, reps):  # pragma: no cover - numba
+    """``reps`` times: ``u = Vᵀ J_i`` and both secular roots of every scenario (``G``'s eigenpairs given)."""
+    k, m, n = Js.shape
+    A, V, d, w, u2 = np.empty((m, m)), np.empty((m, m)), np.empty(m), np.empty(2 * m), np.empty(m)
+    Vs, ds = np.empty((k, m, m)), np.empty((k, m))
+    for t in range(k):
+        J = Js[t]
+        for i in range(m):
+            for j in range(i + 1):
+                s = 0.0
+                for c in range(n):
+                    s += J[i, c] * J[j, c]
+                A[i, j] = s
+        eigenpairs(A, m, V, d, w)
+        Vs[t], ds[t] = V, d
+    acc = 0.0
+    for t in range(reps):
+        J, V, d = Js[t % k], Vs[t % k], ds[t % k]
+        for i in cols:
+            total = 0.0
+            for a in range(m):
+                s = 0.0
+                for r in range(m):
+                    s += V[r, a] * J[r, i]
+                u2[a] = s * s
+                total += u2[a]
+            lo, _ = lowest_root(d, u2, m, total)
+            hi, _ = highest_root(d, u2, m)
+            acc += lo + hi
+    return acc
+
+
+def in_loop_us(fn, *args) -> float:
+    """Wall time of one iteration of a compiled loop [µs] (compiled first, median of 5 runs)."""
+    fn(*args[:-1], 10)
+    runs = []
+    for _ in range(5):
+        t = time.perf_counter()
+        fn(*args[:-1], args[-1])
+        runs.append((time.perf_counter() - t) / args[-1] * 1e6)
+    return float(np.median(runs))
+
+
+def breakdown(key: str) -> dict[str, float]:
+    """The parts of the MDA step of the bench arm ``key`` [µs]."""
+    case = make_case(key)
+    ctrl, cw = case.ctrl, case.ctrl.workspace
+    Js = np.array(
+        [pin.computeFrameJacobian(cw.model, cw.data, q, cw.frame_id, pin.LOCAL_WORLD_ALIGNED)[cw.rows]
+         for q in case.qs]
+    )  # fmt: skip
+    cols = np.asarray(cw.scenarios.columns, dtype=np.int64)
+    return {
+        "jacobian": median_us(ctrl.jacobian, [(q,) for q in case.qs]),
+        "jvja step": median_us(ctrl.jvja, case.qxo),
+        "mda step": median_us(ctrl.mda, case.qxo),
+        "eigenpairs of G (in a loop)": in_loop_us(_eigen_loop, Js, 20000),
+        f"{2 * len(cols)} secular roots (in a loop)": in_loop_us(_roots_loop, Js, cols, 20000),
+    }
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("arms", nargs="+", choices=sorted(ARMS), metavar="ARM",
+                        help="benchmark arms, e.g. panda_pose spatial_4r")  # fmt: skip
+    for key in parser.parse_args().arms:
+        parts = breakdown(key)
+        print(f"{key}: " + ", ".join(f"{k} {v:.2f} µs" for k, v in parts.items())
+              + f"; MDA / JVJA {parts['mda step'] / parts['jvja step']:.2f}")  # fmt: skip
+
+
+if __name__ == "__main__":
+    main()
