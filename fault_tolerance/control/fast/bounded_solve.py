@@ -38,7 +38,14 @@ from fault_tolerance.resolution.fast.box_basis import (
     undamped,
 )
 from fault_tolerance.resolution.fast.box_qp import _njit, solve_box_rates
-from fault_tolerance.resolution.fast.least_norm_path import least_norm_path, pays_off
+from fault_tolerance.resolution.fast.least_norm_path import (
+    UNDECIDED,
+    VERTEX,
+    least_norm_path,
+    pays_off,
+    vertex_state,
+)
+from fault_tolerance.resolution.fast.reduced_vertex import reduced_vertex
 
 _step_kernel = compiled_kernel("step")
 _box_status = compiled_box_status()
@@ -53,12 +60,12 @@ _FLOAT = (("G", "mm"), ("B", "mn"), ("fw", "2n"), ("lim", "3n"), ("buf", "4n"), 
           ("p4", "4"), ("prm", "2"), ("state", "n+2"), ("p3", "3"), ("Zm", "nn"), ("V", "7n"),
           ("Lm", "mm"), ("Y", "mn"), ("z", "m"), ("NSS", "ss"), ("ys", "s"), ("wsf", "8(n+1)"),
           ("gram", "(n+1)(n+1)"), ("wrel", "f"), ("mws", "multi"), ("QA", "nm"), ("hb", "m"),
-          ("Zs", "nn"), ("posts", "fn"), ("pscale", "f"), ("psolved", "f"),
-          ("free", "free"))  # fmt: skip
-_INT = (("cols", "k"), ("sets", "fs"), ("wsi", "2(n+1)"), ("mask", "n"))
+          ("Zs", "nn"), ("posts", "fn"), ("pscale", "f"), ("psolved", "f"), ("vx", "4n"),
+          ("vm", "2mm+m"), ("free", "free"))  # fmt: skip
+_INT = (("cols", "k"), ("sets", "fs"), ("wsi", "2(n+1)"), ("mask", "n"), ("vi", "2n+m"))
 (_G, _B, _FW, _LIM, _BUF, _C, _P4, _PRM, _STATE, _P3, _ZM, _V, _LM, _Y, _Z, _NSS, _YS, _WSF, _GRAM,
- _WREL, _MWS, _QA, _HB, _ZS, _POSTS, _PSCALE, _PSOLVED, _FREE) = range(28)  # fmt: skip
-_COLS, _SETS, _WSI, _MASK = range(4)
+ _WREL, _MWS, _QA, _HB, _ZS, _POSTS, _PSCALE, _PSOLVED, _VX, _VM, _FREE) = range(30)  # fmt: skip
+_COLS, _SETS, _WSI, _MASK, _VI = range(5)
 _HEAD = 8
 _NF = len(_FLOAT)
 
@@ -73,7 +80,8 @@ def _shapes(n, m, f, s, k) -> dict[str, tuple[int, ...]]:
             "2": (2,), "4n": (4, n), "n+2": (n + 2,), "3": (3,), "nn": (n, n), "7n": (7, n),
             "m": (m,), "ss": (s, s), "s": (s,), "8(n+1)": (8, n1), "(n+1)(n+1)": (n1, n1),
             "f": (f,), "multi": (multi,), "k": (k,), "fs": (f, s), "2(n+1)": (2, n1), "nm": (n, m),
-            "fn": (f, n), "free": (2, *_free_dims(m, n))}  # fmt: skip
+            "fn": (f, n), "free": (2, *_free_dims(m, n)), "2mm+m": (2 * m * m + m,),
+            "2n+m": (2 * n + m,)}  # fmt: skip
 
 
 def workspace(n: int, m: int, sets: np.ndarray, cols: np.ndarray, mode: int):
@@ -161,15 +169,28 @@ def _reduced_box(
     return solve_box_rates(p0, d, Zs, rs, lo, hi, mask, qd, act, ws, wsi, gram, res, 1.0)
 
 
+@_inline
+def _from_vertex(J, xdot, lo, hi, S, k, vtx, top, qd, act, res) -> bool:  # pragma: no cover - numba
+    """The reduced robot ``S[:k]``'s exact bounded rates from the whole arm's vertex (L9)."""
+    m, n = J.shape
+    vx, vm, vi = vtx
+    B, Bi = vm[0 : m * m].reshape((m, m)), vm[m * m : 2 * m * m].reshape((m, m))
+    return (
+        reduced_vertex(J, xdot, lo, hi, S, k, vi[0:n], vx[2], top, qd, act, vi[n : 2 * n], vx[3],
+                       vi[2 * n :], B, Bi, vm[2 * m * m :], res) == 0
+    )  # fmt: skip
+
+
 @_njit
 def _jvja_target(
-    J, xdot, Z, r, V, tr, lo, hi, sets, wrel, params, W, res
+    J, xdot, Z, r, V, tr, lo, hi, sets, wrel, params, W, res, vtx, top
 ):  # pragma: no cover - numba
     """``c = Σ_S (w_S/W) ˢq̇'_b`` (L4) into ``V[2]``; returns a code, ``res[1] = 1`` if a bound met.
 
     ``W = (Zs, NSS, ys, Gs, mask, ws, wsi, gram, P, ps, pb)``: scratch, and each ``ˢq̇'_b`` into
     row ``S`` of ``P``, its task scaling into ``ps`` and 1.0 into ``pb`` where it was solved under
-    the box (the simulated sample's jump reads them).
+    the box (the simulated sample's jump reads them). ``top < 1``: the whole arm's path ended at
+    the LP's vertex, kept in ``vtx = (vx, vm, vi)`` (:func:`_keep_vertex`), at that scale.
     """
     Zs, NSS, ys, Gs, mask, ws, wsi, gram, P, ps, pb = W
     n = Z.shape[0]
@@ -199,9 +220,13 @@ def _jvja_target(
             V[3, j] = 0.0
         for t in range(k):
             mask[S[t]] = 0
-        solved = False  # along the path (L8) when it pays off, else (or undecided) by (L7)
-        if pays_off(post, lo, hi, mask):
-            solved = least_norm_path(J, xdot, lo, hi, mask, V[4], act, ws, wsi, Gs, res) == 0
+        solved = False  # from the whole arm's vertex (L9), along the path (L8), else by (L7)
+        if top < 1.0:
+            solved = _from_vertex(J, xdot, lo, hi, S, k, vtx, top, V[4], act, res)
+        if not solved and pays_off(post, lo, hi, mask):
+            solved = (
+                least_norm_path(J, xdot, lo, hi, mask, V[4], act, ws, wsi, Gs, res) != UNDECIDED
+            )
         if not solved:
             st = _reduced_box(J, Z, r, S, k, tr * trinv, params, W, V[3], V[3], post, zr, lo, hi,
                               V[4], act, res)  # fmt: skip
@@ -216,6 +241,34 @@ def _jvja_target(
     return 0
 
 
+@_njit
+def _mda_inside(out, lo, hi, state) -> bool:  # pragma: no cover - numba
+    """MDA's own rates when they are inside the box (as the reference), clipped to it."""
+    n = out.shape[0]
+    for j in range(n):
+        if not lo[j] - BOX_TOL <= out[j] <= hi[j] + BOX_TOL:
+            return False
+    for j in range(n):
+        out[j] = min(max(out[j], lo[j]), hi[j])
+        state[2 + j] = 0.0
+    state[0] = 1.0
+    return True
+
+
+@_njit
+def _keep_vertex(F, Iw, qd, act, ws, wsi, restore) -> None:  # pragma: no cover - numba
+    """The whole arm's LP vertex (L8) into the ``vx``/``vi`` sections, or back into ``qd``, ``act``."""
+    n, m = Iw[0], Iw[1]
+    vx, vi = _fm(F, Iw, _VX, 4, n), _iv(F, Iw, _VI, 2 * n + m)
+    for j in range(n):
+        if restore:
+            qd[j], act[j] = vx[0, j], vx[1, j]
+        else:
+            vx[0, j], vx[1, j] = qd[j], act[j]
+    if not restore:
+        vertex_state(ws, wsi, vi[0:n], vx[2])
+
+
 # The Controller's bounded step after its unbounded rates: (L2)-(L4) for LNVA, JVJA and MDA.
 @_njit
 def bounded_solve(J, xdot, out, mode, F, Iw):  # pragma: no cover - numba
@@ -224,8 +277,11 @@ def bounded_solve(J, xdot, out, mode, F, Iw):  # pragma: no cover - numba
     The box is ``buf[0], buf[1]`` of the workspace (:func:`workspace`; the box check writes it).
     MDA: ``out`` holds its unbounded rates on entry (their null-space part ``N (q̇ − a)`` is
     kept as the target, as in the reference). ``state[0]`` gets the task scaling, ``state[1]`` 1 when a bound was met,
-    ``state[2:]`` 1.0 on joints held at a bound. Returns a code of the module doc (0: solved;
-    otherwise ``out`` is untouched).
+    ``state[2:]`` 1.0 on joints held at a bound. A task far out of reach (L8) takes LNVA's path
+    first: its largest scale starts the scaling rounds of every objective, and where it ends at
+    the LP's unique vertex those are the rates of every objective (JVJA's reduced robots then
+    start from that vertex, L9). Returns a code of the module doc (0: solved; otherwise ``out``
+    is untouched).
     """
     n, m, f, s = Iw[0], Iw[1], Iw[2], Iw[3]
     buf, state = _fm(F, Iw, _BUF, 4, n), _fv(F, Iw, _STATE, n + 2)
@@ -242,33 +298,36 @@ def bounded_solve(J, xdot, out, mode, F, Iw):  # pragma: no cover - numba
     res[1] = 0.0
     for j in range(n):
         mask[j] = 1
-    if (
-        mode == 0
-        and pays_off(a, lo, hi, mask)
-        and not least_norm_path(J, xdot, lo, hi, mask, qd, state[2:], ws, wsi, Gs, res)
-    ):
-        for j in range(n):  # LNVA along its path (L8): no null-space basis needed
-            out[j] = qd[j]
+    if mode == 2 and _mda_inside(out, lo, hi, state):
         return 0
+    s0, top = 1.0, 2.0  # LNVA's largest scale (L8); top < 1: the path ended at the LP's vertex
+    if pays_off(a, lo, hi, mask):
+        code = least_norm_path(J, xdot, lo, hi, mask, qd, state[2:], ws, wsi, Gs, res)
+        if code != UNDECIDED and (mode == 0 or code == VERTEX and mode == 2):
+            for j in range(n):  # LNVA along its path, MDA at the vertex: no null-space basis
+                out[j] = qd[j]
+            return 0
+        if code != UNDECIDED:
+            s0 = res[0]
+        if code == VERTEX:
+            top = s0
+            _keep_vertex(F, Iw, qd, state[2:], ws, wsi, False)
+        res[1] = 0.0
     r = null_basis(J, Z, _fm(F, Iw, _QA, n, m), _fv(F, Iw, _HB, m))
     if mode == 1:
         W = (_fm(F, Iw, _ZS, n, n), _fm(F, Iw, _NSS, s, s), _fv(F, Iw, _YS, s), Gs, mask, ws, wsi,
              gram, _fm(F, Iw, _POSTS, f, n), _fv(F, Iw, _PSCALE, f), _fv(F, Iw, _PSOLVED, f))  # fmt: skip
         st = _jvja_target(J, xdot, Z, r, V, tr, lo, hi, _im(F, Iw, _SETS, f, s), _fv(F, Iw, _WREL, f),
-                          p3, W, res)  # fmt: skip
+                          p3, W, res, (_fm(F, Iw, _VX, 4, n), _fv(F, Iw, _VM, 2 * m * m + m),
+                                       _iv(F, Iw, _VI, 2 * n + m)), top)  # fmt: skip
         if st:
             return st
-        null_project(Z, r, V[2], zr, p0)  # p₀ = N c = Z (Zᵀ c)
-    elif mode == 2:  # as the reference: out itself when inside, else N (q̇ − a) as the target
-        inside = True
-        for j in range(n):
-            inside = inside and lo[j] - BOX_TOL <= out[j] <= hi[j] + BOX_TOL
-        if inside:
-            for j in range(n):
-                out[j] = min(max(out[j], lo[j]), hi[j])
-                state[2 + j] = 0.0
-            state[0] = 1.0
+        if top < 1.0:  # the LP's unique vertex: every objective's rates, JVJA's too
+            _keep_vertex(F, Iw, out, state[2:], ws, wsi, True)
+            state[0], state[1] = top, 1.0
             return 0
+        null_project(Z, r, V[2], zr, p0)  # p₀ = N c = Z (Zᵀ c)
+    elif mode == 2:  # as the reference: N (q̇ − a) as the target
         for j in range(n):
             p0[j] = out[j] - a[j]
         null_project(Z, r, p0, zr, p0)  # p₀ = N (q̇ − a); the target is read before p₀ is written
@@ -278,10 +337,6 @@ def bounded_solve(J, xdot, out, mode, F, Iw):  # pragma: no cover - numba
     bounded = res[1]
     for j in range(n):
         mask[j] = 1
-    s0 = 1.0  # a task far out of reach: its largest scale from LNVA's path (L8), for any objective
-    if mode != 0 and pays_off(a, lo, hi, mask):
-        if not least_norm_path(J, xdot, lo, hi, mask, qd, state[2:], ws, wsi, Gs, res):
-            s0 = res[0]
     st = solve_box_rates(p0, a, Z, r, lo, hi, mask, qd, state[2:], ws, wsi, gram, res, s0)
     if st:
         return st
@@ -428,7 +483,7 @@ def reduced_solve(J, xdot, target, todo, post, scales, codes, F, Iw):  # pragma:
         if (
             least_norm
             and pays_off(d, lo, hi, mask)
-            and not least_norm_path(J, xdot, lo, hi, mask, qd, act, ws, wsi, Gs, res)
+            and least_norm_path(J, xdot, lo, hi, mask, qd, act, ws, wsi, Gs, res) != UNDECIDED
         ):
             codes[i] = 0  # along the path (L8)
             for j in range(n):

@@ -13,7 +13,9 @@ of (L3). Each event costs ``O(m n + m² |F|)``; a long chain with most joints he
 ``n − m`` events, where the dual active set of :mod:`.box_qp` restarts from scratch at every
 round of the scaling.
 
-Codes: 0 solved; 6 undecided (rest outside the box, a certificate with the wrong signs, a
+Codes: 0 solved; 1 solved at the LP's unique vertex (``s < 1``, the certificate of strict signs
+and the vertex solved: every objective has these rates there, and :func:`vertex_state` hands the
+vertex to :mod:`.reduced_vertex`); 6 undecided (rest outside the box, a certificate with the wrong signs, a
 degenerate event, or no convergence): the caller then solves the problem with
 :func:`fault_tolerance.resolution.fast.box_qp.solve_box_rates`, which decides every case.
 Compiled by numba (plain Python without it, and tested so); scratch is the caller's.
@@ -25,8 +27,9 @@ from fault_tolerance.numerics.fast.dense import chol_rank_one, chol_solve, chole
 from fault_tolerance.resolution.box_qp import BOX_TOL
 from fault_tolerance.resolution.fast.box_qp import _njit
 
-#: Code: the path could not decide the problem (the caller's dual active set does).
-UNDECIDED = 6
+#: Codes: solved; solved at the LP's unique vertex (s < 1); the path could not decide the
+#: problem (the caller's dual active set does).
+SOLVED, VERTEX, UNDECIDED = 0, 1, 6
 #: ``1 − J_jᵀ G⁻¹ J_j`` below this: holding joint ``j`` leaves the free columns rank-deficient;
 #: between it and :data:`RANK_UNSURE` the path does not decide (the free columns would be too
 #: ill-conditioned to follow it accurately).
@@ -232,12 +235,13 @@ def _rates(J, xdot, state, lo, hi, ws, L, s, qd, act) -> int:  # pragma: no cove
 
 
 @_njit
-def _vertex(J, xdot, state, lo, hi, ws, M, s, qd) -> float:  # pragma: no cover - numba
-    """The largest scale and the free rates solved at the LP's vertex itself; the scale.
+def _vertex(J, xdot, state, lo, hi, ws, M, s, qd):  # pragma: no cover - numba
+    """``(scale, solved)``: the largest scale and free rates solved at the LP's vertex itself.
 
     With ``m − 1`` free joints left, ``J_F v_F − s ẋ = −J_B b`` is square in ``(v_F, s)``: one
     solve gives both to rounding, where the path's values carry the rounding of its steep last
-    steps. Kept only when the solve succeeds inside the box (else ``s`` and ``qd`` are left).
+    steps. Kept only when the solve succeeds inside the box (else ``s`` and ``qd`` are left, and
+    ``solved`` is False).
     """
     m, n = J.shape
     z = ws[_LS]
@@ -248,7 +252,7 @@ def _vertex(J, xdot, state, lo, hi, ws, M, s, qd) -> float:  # pragma: no cover 
         st = state[j]
         if st == _FREE:
             if c == m - 1:
-                return s
+                return s, False
             for i in range(m):
                 M[i, c] = J[i, j]
             c += 1
@@ -256,23 +260,23 @@ def _vertex(J, xdot, state, lo, hi, ws, M, s, qd) -> float:  # pragma: no cover 
             for i in range(m):
                 z[i] -= J[i, j] * ws[_B, j]
     if c != m - 1:
-        return s
+        return s, False
     for i in range(m):
         M[i, m - 1] = -xdot[i]
     if not lu_solve(M, m, z) or not 0.0 <= z[m - 1] <= 1.0:
-        return s
+        return s, False
     c = 0
     for j in range(n):
         if state[j] == _FREE:
             if not lo[j] - BOX_TOL <= z[c] <= hi[j] + BOX_TOL:
-                return s
+                return s, False
             c += 1
     c = 0
     for j in range(n):
         if state[j] == _FREE:
             qd[j] = min(max(z[c], lo[j]), hi[j])
             c += 1
-    return z[m - 1]
+    return z[m - 1], True
 
 
 @_njit
@@ -356,9 +360,38 @@ def least_norm_path(J, xdot, lo, hi, mask, qd, act, ws, wsi, L, out):  # pragma:
                 return UNDECIDED
             continue
         qd[j], act[j] = ws[_B, j], 1.0
-        s = _vertex(J, xdot, state, lo, hi, ws, L, s, qd)
+        s, exact = _vertex(J, xdot, state, lo, hi, ws, L, s, qd)
         if not _on_task(J, xdot, qd, s):
             return UNDECIDED
         out[0], out[1] = s, 1.0
-        return 0
+        return VERTEX if exact and _strict(state, ws, n) else SOLVED
     return UNDECIDED
+
+
+@_njit
+def _strict(state, ws, n) -> bool:  # pragma: no cover - numba
+    """Whether the certificate ``g`` points strictly out of the box at every held joint.
+
+    ``g`` is the row ``g₁`` :func:`_release` left. Then the vertex is the LP's only optimum.
+    """
+    big = 0.0
+    for j in range(n):
+        if state[j] != _OFF:
+            big = max(big, abs(ws[_G1, j]))
+    for j in range(n):
+        g = ws[_G1, j]
+        if (state[j] == _UPPER and not g > SIGN_TOL * big) or (
+            state[j] == _LOWER and not g < -SIGN_TOL * big
+        ):
+            return False
+    return big > 0.0
+
+
+@_njit
+def vertex_state(ws, wsi, vst, vb) -> None:  # pragma: no cover - numba
+    """The states and held values of the vertex a :data:`VERTEX` path ended at, into ``vst``, ``vb``.
+
+    ``vst`` (n) int, ``vb`` (n); called before ``ws``, ``wsi`` are used again.
+    """
+    for j in range(vst.shape[0]):
+        vst[j], vb[j] = wsi[0, j], ws[_B, j]
