@@ -12,7 +12,7 @@ from fault_tolerance.resolution.fast.least_norm_path import (
     least_norm_path,
     vertex_state,
 )
-from fault_tolerance.resolution.fast.reduced_vertex import reduced_vertex
+from fault_tolerance.resolution.fast.reduced_vertex import reduced_vertex, whole_basis
 
 
 def whole_vertex(J, xd, lo, hi):
@@ -29,12 +29,15 @@ def whole_vertex(J, xd, lo, hi):
 def run_vertex(J, xd, lo, hi, S, vst, vb, top, plain=False):
     """``(code, qd, s, held)`` of :func:`reduced_vertex` for the locked joints ``S``."""
     m, n = J.shape
+    basic0, Binv0, r0 = np.zeros(m, dtype=np.int64), np.zeros((m, m)), np.zeros(m)
+    basis = whole_basis.py_func if plain else whole_basis
+    if not basis(J, xd, vst, vb, basic0, Binv0, np.zeros((m, m)), r0):
+        return UNDECIDED, None, None, None
+    vtx = (vst, vb, basic0, Binv0, r0, np.zeros(n, dtype=np.int64), np.zeros(n),
+           np.zeros(m, dtype=np.int64), np.zeros((m, m)), np.zeros(m), np.zeros(m), np.zeros(m))  # fmt: skip
     qd, act, out = np.zeros(n), np.zeros(n), np.zeros(2)
-    S = np.asarray(S, dtype=np.int64)
     fn = reduced_vertex.py_func if plain else reduced_vertex
-    code = fn(J, xd, lo, hi, S, len(S), vst, vb, top, qd, act, np.zeros(n, dtype=np.int64),
-              np.zeros(n), np.zeros(m, dtype=np.int64), np.zeros((m, m)), np.zeros((m, m)),
-              np.zeros(m), out)  # fmt: skip
+    code = fn(J, xd, lo, hi, np.asarray(S, dtype=np.int64), len(S), vtx, top, qd, act, out)
     return code, qd, out[0], act != 0.0
 
 
@@ -86,7 +89,7 @@ def test_plain_python_equals_compiled():
         for S in ([0], [5], [13], [2, 9]):
             a = run_vertex(J, xd, lo, hi, S, vst, vb, top)
             b = run_vertex(J, xd, lo, hi, S, vst, vb, top, plain=True)
-            assert a[0] == b[0] and a[2] == pytest.approx(b[2], abs=1e-12)
+            assert a[0] == b[0] == 0 and a[2] == pytest.approx(b[2], abs=1e-12)
             assert np.allclose(a[1], b[1], atol=1e-12)
 
 
@@ -98,3 +101,28 @@ def test_a_basis_that_is_not_the_vertex_is_undecided():
     bad = vst.copy()
     bad[np.flatnonzero(bad == 0)[0]] = 3  # one free joint switched off: m − 2 free columns
     assert run_vertex(J, xd, lo, hi, [6], bad, vb, top)[0] == UNDECIDED
+
+
+@pytest.mark.parametrize("n", [14, 30])
+def test_controller_reduced_robots_at_the_vertex_equal_the_exact_reference(n):
+    """The bounded JVJA step's reduced robots (the rows a simulated jump reads), task scaled."""
+    from fault_tolerance.control.controller import Controller
+
+    arm = synthetic_chain(n)
+    ctrl = Controller(arm, "all", backend="numba", limits=True)
+    views = ctrl.workspace.box_tables[2]
+    rng = np.random.default_rng(n + 1)
+    for _ in range(2):
+        q = arm.random_q(rng)
+        xd = rng.standard_normal(6)
+        xd *= 30.0 / np.linalg.norm(xd)
+        before = ctrl.bounded_reference_steps
+        ctrl.jvja(q, xd)
+        assert ctrl.bounded_reference_steps == before and ctrl.last_scale < 1.0
+        J, (lo, hi) = arm.jacobian(q), arm.rate_bounds(q, ctrl.horizon)
+        for k, S in enumerate(ctrl.scenarios.sets):
+            keep = np.setdiff1d(np.arange(n), S)
+            ref = exact_reduced_least_norm(J[:, keep], xd, lo[keep], hi[keep])
+            assert views["pscale"][k] == pytest.approx(ref.scale, abs=SCALE_ATOL)
+            assert views["psolved"][k] == 1.0 and np.all(views["posts"][k, list(S)] == 0.0)
+            assert np.abs(views["posts"][k, keep] - ref.qd).max() <= RATE_ATOL

@@ -33,6 +33,7 @@ from fault_tolerance.resolution.fast.box_basis import (
     factor,
     null_basis,
     null_project,
+    pivots_clear,
     reduced_basis,
     reduced_rates,
     undamped,
@@ -45,7 +46,7 @@ from fault_tolerance.resolution.fast.least_norm_path import (
     pays_off,
     vertex_state,
 )
-from fault_tolerance.resolution.fast.reduced_vertex import reduced_vertex
+from fault_tolerance.resolution.fast.reduced_vertex import reduced_vertex, whole_basis
 
 _step_kernel = compiled_kernel("step")
 _box_status = compiled_box_status()
@@ -61,8 +62,8 @@ _FLOAT = (("G", "mm"), ("B", "mn"), ("fw", "2n"), ("lim", "3n"), ("buf", "4n"), 
           ("Lm", "mm"), ("Y", "mn"), ("z", "m"), ("NSS", "ss"), ("ys", "s"), ("wsf", "8(n+1)"),
           ("gram", "(n+1)(n+1)"), ("wrel", "f"), ("mws", "multi"), ("QA", "nm"), ("hb", "m"),
           ("Zs", "nn"), ("posts", "fn"), ("pscale", "f"), ("psolved", "f"), ("vx", "4n"),
-          ("vm", "2mm+m"), ("free", "free"))  # fmt: skip
-_INT = (("cols", "k"), ("sets", "fs"), ("wsi", "2(n+1)"), ("mask", "n"), ("vi", "2n+m"))
+          ("vm", "3mm+4m"), ("free", "free"))  # fmt: skip
+_INT = (("cols", "k"), ("sets", "fs"), ("wsi", "2(n+1)"), ("mask", "n"), ("vi", "2n+2m"))
 (_G, _B, _FW, _LIM, _BUF, _C, _P4, _PRM, _STATE, _P3, _ZM, _V, _LM, _Y, _Z, _NSS, _YS, _WSF, _GRAM,
  _WREL, _MWS, _QA, _HB, _ZS, _POSTS, _PSCALE, _PSOLVED, _VX, _VM, _FREE) = range(30)  # fmt: skip
 _COLS, _SETS, _WSI, _MASK, _VI = range(5)
@@ -80,8 +81,8 @@ def _shapes(n, m, f, s, k) -> dict[str, tuple[int, ...]]:
             "2": (2,), "4n": (4, n), "n+2": (n + 2,), "3": (3,), "nn": (n, n), "7n": (7, n),
             "m": (m,), "ss": (s, s), "s": (s,), "8(n+1)": (8, n1), "(n+1)(n+1)": (n1, n1),
             "f": (f,), "multi": (multi,), "k": (k,), "fs": (f, s), "2(n+1)": (2, n1), "nm": (n, m),
-            "fn": (f, n), "free": (2, *_free_dims(m, n)), "2mm+m": (2 * m * m + m,),
-            "2n+m": (2 * n + m,)}  # fmt: skip
+            "fn": (f, n), "free": (2, *_free_dims(m, n)), "3mm+4m": (3 * m * m + 4 * m,),
+            "2n+2m": (2 * n + 2 * m,)}  # fmt: skip
 
 
 def workspace(n: int, m: int, sets: np.ndarray, cols: np.ndarray, mode: int):
@@ -169,28 +170,15 @@ def _reduced_box(
     return solve_box_rates(p0, d, Zs, rs, lo, hi, mask, qd, act, ws, wsi, gram, res, 1.0)
 
 
-@_inline
-def _from_vertex(J, xdot, lo, hi, S, k, vtx, top, qd, act, res) -> bool:  # pragma: no cover - numba
-    """The reduced robot ``S[:k]``'s exact bounded rates from the whole arm's vertex (L9)."""
-    m, n = J.shape
-    vx, vm, vi = vtx
-    B, Bi = vm[0 : m * m].reshape((m, m)), vm[m * m : 2 * m * m].reshape((m, m))
-    return (
-        reduced_vertex(J, xdot, lo, hi, S, k, vi[0:n], vx[2], top, qd, act, vi[n : 2 * n], vx[3],
-                       vi[2 * n :], B, Bi, vm[2 * m * m :], res) == 0
-    )  # fmt: skip
-
-
 @_njit
 def _jvja_target(
-    J, xdot, Z, r, V, tr, lo, hi, sets, wrel, params, W, res, vtx, top
+    J, xdot, Z, r, V, tr, lo, hi, sets, wrel, params, W, res
 ):  # pragma: no cover - numba
     """``c = Σ_S (w_S/W) ˢq̇'_b`` (L4) into ``V[2]``; returns a code, ``res[1] = 1`` if a bound met.
 
     ``W = (Zs, NSS, ys, Gs, mask, ws, wsi, gram, P, ps, pb)``: scratch, and each ``ˢq̇'_b`` into
     row ``S`` of ``P``, its task scaling into ``ps`` and 1.0 into ``pb`` where it was solved under
-    the box (the simulated sample's jump reads them). ``top < 1``: the whole arm's path ended at
-    the LP's vertex, kept in ``vtx = (vx, vm, vi)`` (:func:`_keep_vertex`), at that scale.
+    the box (the simulated sample's jump reads them).
     """
     Zs, NSS, ys, Gs, mask, ws, wsi, gram, P, ps, pb = W
     n = Z.shape[0]
@@ -220,10 +208,8 @@ def _jvja_target(
             V[3, j] = 0.0
         for t in range(k):
             mask[S[t]] = 0
-        solved = False  # from the whole arm's vertex (L9), along the path (L8), else by (L7)
-        if top < 1.0:
-            solved = _from_vertex(J, xdot, lo, hi, S, k, vtx, top, V[4], act, res)
-        if not solved and pays_off(post, lo, hi, mask):
+        solved = False  # along the path (L8) when it pays off, else (or undecided) by (L7)
+        if pays_off(post, lo, hi, mask):
             solved = (
                 least_norm_path(J, xdot, lo, hi, mask, V[4], act, ws, wsi, Gs, res) != UNDECIDED
             )
@@ -259,7 +245,7 @@ def _mda_inside(out, lo, hi, state) -> bool:  # pragma: no cover - numba
 def _keep_vertex(F, Iw, qd, act, ws, wsi, restore) -> None:  # pragma: no cover - numba
     """The whole arm's LP vertex (L8) into the ``vx``/``vi`` sections, or back into ``qd``, ``act``."""
     n, m = Iw[0], Iw[1]
-    vx, vi = _fm(F, Iw, _VX, 4, n), _iv(F, Iw, _VI, 2 * n + m)
+    vx, vi = _fm(F, Iw, _VX, 4, n), _iv(F, Iw, _VI, 2 * n + 2 * m)
     for j in range(n):
         if restore:
             qd[j], act[j] = vx[0, j], vx[1, j]
@@ -267,6 +253,98 @@ def _keep_vertex(F, Iw, qd, act, ws, wsi, restore) -> None:  # pragma: no cover 
             vx[0, j], vx[1, j] = qd[j], act[j]
     if not restore:
         vertex_state(ws, wsi, vi[0:n], vx[2])
+
+
+@_njit
+def _vertex_tables(F, Iw):  # pragma: no cover - numba
+    """``vtx`` of :func:`~fault_tolerance.resolution.fast.reduced_vertex.reduced_vertex` in the workspace."""
+    n, m = Iw[0], Iw[1]
+    vx, vi, vm = (
+        _fm(F, Iw, _VX, 4, n),
+        _iv(F, Iw, _VI, 2 * n + 2 * m),
+        _fv(F, Iw, _VM, 3 * m * m + 4 * m),
+    )
+    mm = m * m
+    return (vi[0:n], vx[2], vi[2 * n : 2 * n + m], vm[0:mm].reshape((m, m)), vm[3 * mm : 3 * mm + m],
+            vi[n : 2 * n], vx[3], vi[2 * n + m :], vm[mm : 2 * mm].reshape((m, m)),
+            vm[3 * mm + m : 3 * mm + 2 * m], vm[3 * mm + 2 * m : 3 * mm + 3 * m],
+            vm[3 * mm + 3 * m :])  # fmt: skip
+
+
+# Eqn. (L4) with (L9): JVJA's target when the whole arm's rates are the LP's unique vertex.
+@_njit
+def _vertex_target(J, xdot, lo, hi, V, p3, F, Iw, top, res) -> int:  # pragma: no cover - numba
+    """``c = Σ_S (w_S/W) ˢq̇'_b`` into ``V[2]``, every reduced robot from the vertex (L9).
+
+    As :func:`_jvja_target` (``P``, ``ps``, ``pb`` too), with the pivots checked from ``Y = L⁻¹J``
+    and no null-space basis: at the vertex no reduced robot's (G1) rates are inside the box (they
+    would reach ``s = 1 > top``). Returns 0, 2 (a pivot below the threshold) or 6 (undecided: the
+    caller takes :func:`_jvja_target`).
+    """
+    n, m, f, s = Iw[0], Iw[1], Iw[2], Iw[3]
+    vtx = _vertex_tables(F, Iw)
+    mm = m * m
+    if not whole_basis(
+        J,
+        xdot,
+        vtx[0],
+        vtx[1],
+        vtx[2],
+        vtx[3],
+        _fv(F, Iw, _VM, 3 * mm + 4 * m)[2 * mm : 3 * mm].reshape((m, m)),
+        vtx[4],
+    ):
+        return UNDECIDED  # fmt: skip
+    sets, wrel, Y = _im(F, Iw, _SETS, f, s), _fv(F, Iw, _WREL, f), _fm(F, Iw, _Y, m, n)
+    P, ps, pb = _fm(F, Iw, _POSTS, f, n), _fv(F, Iw, _PSCALE, f), _fv(F, Iw, _PSOLVED, f)
+    NSS, cbar, qd, act = _fm(F, Iw, _NSS, s, s), V[2], V[4], V[5]
+    for j in range(n):
+        cbar[j] = 0.0
+    for sc in range(f):
+        k = 0
+        while k < s and sets[sc, k] >= 0:
+            k += 1
+        S = sets[sc]
+        clear = pivots_clear(Y, S, k, p3[1], NSS)
+        if clear <= 0:
+            return 2 if clear < 0 else UNDECIDED
+        if reduced_vertex(J, xdot, lo, hi, S, k, vtx, top, qd, act, res):
+            return UNDECIDED
+        for t in range(k):
+            qd[S[t]] = 0.0
+        for j in range(n):
+            P[sc, j] = qd[j]
+            cbar[j] += wrel[sc] * qd[j]
+        ps[sc], pb[sc], res[1] = res[0], 1.0, 1.0
+    return 0
+
+
+@_njit
+def _path_first(
+    J, xdot, out, mode, a, lo, hi, mask, qd, state, Gs, F, Iw
+):  # pragma: no cover - numba
+    """LNVA's path (L8) when a task is far out of reach: ``(s₀, top)``, ``s₀ < 0`` when solved.
+
+    ``s₀`` the largest scale (1.0 when the path does not pay off or does not decide), ``top < 1``
+    the scale of the LP's unique vertex, kept by :func:`_keep_vertex` (2.0: none). LNVA's rates,
+    and MDA's at the vertex, go into ``out`` (then ``s₀ = −1``).
+    """
+    n = out.shape[0]
+    ws, wsi, res = _fm(F, Iw, _WSF, 8, n + 1), _im(F, Iw, _WSI, 2, n + 1), state[:2]
+    if not pays_off(a, lo, hi, mask):
+        return 1.0, 2.0
+    code = least_norm_path(J, xdot, lo, hi, mask, qd, state[2:], ws, wsi, Gs, res)
+    if code != UNDECIDED and (mode == 0 or code == VERTEX and mode == 2):
+        for j in range(n):
+            out[j] = qd[j]
+        return -1.0, 2.0
+    res[1] = 0.0
+    if code == UNDECIDED:
+        return 1.0, 2.0
+    if code == VERTEX:
+        _keep_vertex(F, Iw, qd, state[2:], ws, wsi, False)
+        return res[0], res[0]
+    return res[0], 2.0
 
 
 # The Controller's bounded step after its unbounded rates: (L2)-(L4) for LNVA, JVJA and MDA.
@@ -300,26 +378,24 @@ def bounded_solve(J, xdot, out, mode, F, Iw):  # pragma: no cover - numba
         mask[j] = 1
     if mode == 2 and _mda_inside(out, lo, hi, state):
         return 0
-    s0, top = 1.0, 2.0  # LNVA's largest scale (L8); top < 1: the path ended at the LP's vertex
-    if pays_off(a, lo, hi, mask):
-        code = least_norm_path(J, xdot, lo, hi, mask, qd, state[2:], ws, wsi, Gs, res)
-        if code != UNDECIDED and (mode == 0 or code == VERTEX and mode == 2):
-            for j in range(n):  # LNVA along its path, MDA at the vertex: no null-space basis
-                out[j] = qd[j]
+    s0, top = _path_first(J, xdot, out, mode, a, lo, hi, mask, qd, state, Gs, F, Iw)
+    if s0 < 0.0:  # LNVA along its path, MDA at the vertex: solved, no null-space basis
+        return 0
+    if top < 1.0 and mode == 1:  # every reduced robot from the vertex (L9): no basis needed
+        st = _vertex_target(J, xdot, lo, hi, V, p3, F, Iw, top, res)
+        if st == 0:
+            _keep_vertex(F, Iw, out, state[2:], ws, wsi, True)
+            state[0], state[1] = top, 1.0
             return 0
-        if code != UNDECIDED:
-            s0 = res[0]
-        if code == VERTEX:
-            top = s0
-            _keep_vertex(F, Iw, qd, state[2:], ws, wsi, False)
-        res[1] = 0.0
+        if st == 2:
+            return 2
+        res[1] = 0.0  # undecided: the reduced robots as below, from the basis
     r = null_basis(J, Z, _fm(F, Iw, _QA, n, m), _fv(F, Iw, _HB, m))
     if mode == 1:
         W = (_fm(F, Iw, _ZS, n, n), _fm(F, Iw, _NSS, s, s), _fv(F, Iw, _YS, s), Gs, mask, ws, wsi,
              gram, _fm(F, Iw, _POSTS, f, n), _fv(F, Iw, _PSCALE, f), _fv(F, Iw, _PSOLVED, f))  # fmt: skip
         st = _jvja_target(J, xdot, Z, r, V, tr, lo, hi, _im(F, Iw, _SETS, f, s), _fv(F, Iw, _WREL, f),
-                          p3, W, res, (_fm(F, Iw, _VX, 4, n), _fv(F, Iw, _VM, 2 * m * m + m),
-                                       _iv(F, Iw, _VI, 2 * n + m)), top)  # fmt: skip
+                          p3, W, res)  # fmt: skip
         if st:
             return st
         if top < 1.0:  # the LP's unique vertex: every objective's rates, JVJA's too

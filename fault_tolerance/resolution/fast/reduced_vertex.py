@@ -5,8 +5,10 @@ When the whole arm's least-norm path (:mod:`.least_norm_path`, L8) ends at the L
 every reduced robot's largest scale is below it too, and its exact bounded least-norm rates are
 its own LP vertex: ``max s`` s.t. ``J v = s ẋ``, ``lo ≤ v ≤ hi``, ``v_S = 0``. That vertex is a few
 pivots of the bounded dual simplex away from the whole arm's: locking the joints ``S`` changes the
-held values or removes basic columns, never the reduced costs' signs. Each pivot costs ``O(m³ + m
-n)``, where the path from ``s = 0`` needs about ``n − m`` events.
+held values or removes basic columns, never the reduced costs' signs. The whole arm's basis
+inverse is formed once (:func:`whole_basis`); each reduced robot starts from a copy and updates it
+in product form, ``O(m² + m n)`` a pivot, where the path from ``s = 0`` needs about ``n − m``
+events of ``O(m n + m² |F|)``.
 
 The result is accepted only when it is certified the same way as the path's: inside the box, on
 the task to ``RESIDUAL_RTOL``, at a nonsingular basis, with a dual certificate of strict signs
@@ -19,7 +21,7 @@ from __future__ import annotations
 
 from fault_tolerance.resolution.box_qp import BOX_TOL
 from fault_tolerance.resolution.fast.box_qp import _njit
-from fault_tolerance.resolution.fast.least_norm_path import (
+from fault_tolerance.resolution.fast.least_norm_path import (  # the path's states
     _FREE,
     _LOWER,
     _OFF,
@@ -66,27 +68,90 @@ def _invert(B, Binv, m) -> bool:  # pragma: no cover - numba
 
 
 @_njit
-def _basic_values(J, xdot, st, b, basic, B, Binv, x) -> bool:  # pragma: no cover - numba
-    """``x = B⁻¹ (−J_held b)`` for the basis ``basic`` (joint columns, ``n`` for ``s``); ``Binv`` kept."""
+def whole_basis(J, xdot, vst, vb, basic0, Binv0, B, r0) -> bool:  # pragma: no cover - numba
+    """The whole arm's vertex basis: ``basic0`` (free joints, then ``n`` for ``s``), ``B⁻¹``, ``r₀``.
+
+    ``r₀ = −J_held b``. Once per step, shared by every reduced robot; False unless the vertex has
+    ``m − 1`` free joints and a nonsingular basis. ``B`` (m, m) scratch.
+    """
     m, n = J.shape
-    for c in range(m):
-        col = basic[c]
-        for i in range(m):
-            B[i, c] = J[i, col] if col < n else -xdot[i]
-    if not _invert(B, Binv, m):
+    c = 0
+    for j in range(n):
+        if vst[j] == _FREE:
+            if c == m - 1:
+                return False
+            basic0[c] = j
+            c += 1
+    if c != m - 1:
         return False
-    for i in range(m):  # r = −J_held b into B's first column (B is scratch now)
-        t = 0.0
-        for j in range(n):
-            if st[j] == _LOWER or st[j] == _UPPER:
-                t -= J[i, j] * b[j]
-        B[i, 0] = t
+    basic0[m - 1] = n
     for i in range(m):
         t = 0.0
-        for k in range(m):
-            t += Binv[i, k] * B[k, 0]
-        x[i] = t
+        for j in range(n):
+            if vst[j] == _LOWER or vst[j] == _UPPER:
+                t -= J[i, j] * vb[j]
+        r0[i] = t
+        for c in range(m):
+            col = basic0[c]
+            B[i, c] = J[i, col] if col < n else -xdot[i]
+    return _invert(B, Binv0, m)
+
+
+@_njit
+def _start(
+    J, vst, vb, S, k, basic0, Binv0, r0, st, b, basic, Binv, r
+) -> None:  # pragma: no cover - numba
+    """The whole arm's basis with ``S`` locked: states, held values, basis, ``B⁻¹`` and ``r``."""
+    m, n = J.shape
+    for j in range(n):
+        st[j], b[j] = vst[j], vb[j]
+    for i in range(m):
+        r[i] = r0[i]
+        basic[i] = basic0[i]
+        for c in range(m):
+            Binv[i, c] = Binv0[i, c]
+    for t in range(k):
+        j = S[t]
+        if st[j] == _FREE:  # basic: it leaves at 0 first
+            st[j] = _FIXED
+        else:  # held at b_j: now at 0
+            if st[j] != _OFF:
+                for i in range(m):
+                    r[i] += J[i, j] * b[j]
+            st[j] = _OFF
+
+
+@_njit
+def _pivot(J, Binv, p, q, u) -> bool:  # pragma: no cover - numba
+    """``B⁻¹`` after column ``p`` of ``B`` becomes ``J_q`` (product form, ``O(m²)``); ``u`` scratch."""
+    m = J.shape[0]
+    for i in range(m):
+        t = 0.0
+        for c in range(m):
+            t += Binv[i, c] * J[c, q]
+        u[i] = t
+    if u[p] == 0.0:
+        return False
+    f = 1.0 / u[p]
+    for c in range(m):
+        Binv[p, c] *= f
+    for i in range(m):
+        if i != p and u[i] != 0.0:
+            g = u[i]
+            for c in range(m):
+                Binv[i, c] -= g * Binv[p, c]
     return True
+
+
+@_njit
+def _solve(Binv, r, x) -> None:  # pragma: no cover - numba
+    """``x = B⁻¹ r``."""
+    m = x.shape[0]
+    for i in range(m):
+        t = 0.0
+        for c in range(m):
+            t += Binv[i, c] * r[c]
+        x[i] = t
 
 
 @_njit
@@ -164,25 +229,6 @@ def _strict(J, st, Binv, sp) -> bool:  # pragma: no cover - numba
 
 
 @_njit
-def _start(vst, vb, S, k, st, b, basic, n) -> int:  # pragma: no cover - numba
-    """The whole arm's vertex with ``S`` locked into ``st``, ``b``, ``basic``; the basis size."""
-    for j in range(n):
-        st[j], b[j] = vst[j], vb[j]
-    for t in range(k):
-        j = S[t]
-        st[j] = _FIXED if st[j] == _FREE else _OFF
-    c = 0
-    for j in range(n):
-        if st[j] == _FREE or st[j] == _FIXED:
-            if c < basic.shape[0]:
-                basic[c] = j
-            c += 1
-    if c < basic.shape[0]:
-        basic[c] = n
-    return c + 1
-
-
-@_njit
 def _rates_at(st, b, basic, lo, hi, x, n, qd, act) -> float:  # pragma: no cover - numba
     """The vertex's rates into ``qd`` (held at their bound, free clipped), ``act``; its scale."""
     s = 0.0
@@ -204,39 +250,42 @@ def _rates_at(st, b, basic, lo, hi, x, n, qd, act) -> float:  # pragma: no cover
 
 # Eqn. (L9): the reduced robot's LP vertex by the dual simplex from the whole arm's.
 @_njit
-def reduced_vertex(
-    J, xdot, lo, hi, S, k, vst, vb, s_top, qd, act, st, b, basic, B, Binv, x, out
-):  # pragma: no cover - numba
+def reduced_vertex(J, xdot, lo, hi, S, k, vtx, top, qd, act, out):  # pragma: no cover - numba
     """Exact bounded least-norm rates of the reduced robot ``S[:k]`` (L9); ``out[0] = s``.
 
-    ``vst`` (n) int, ``vb`` (n): the whole arm's vertex (:func:`.least_norm_path.least_norm_path`
-    states and held values) at its scale ``s_top < 1``. ``st`` (n) int, ``b`` (n), ``basic`` (m)
-    int, ``B``, ``Binv`` (m, m) and ``x`` (m) are scratch. Returns 0, or
-    :data:`~.least_norm_path.UNDECIDED` (``qd``, ``act`` may then hold partial values).
+    ``vtx = (vst, vb, basic0, Binv0, r0, st, b, basic, Binv, x, r, u)``: the whole arm's vertex
+    (:func:`.least_norm_path.vertex_state`: states (n) int and held values (n)) and its basis
+    (:func:`whole_basis`: ``basic0`` (m) int, ``B⁻¹`` (m, m), ``r₀`` (m)), at its scale
+    ``top < 1``; then scratch: ``st`` (n) int, ``b`` (n), ``basic`` (m) int, ``Binv`` (m, m),
+    ``x``, ``r``, ``u`` (m). Returns 0, or :data:`~.least_norm_path.UNDECIDED` (``qd``, ``act``
+    may then hold partial values).
     """
     m, n = J.shape
-    if _start(vst, vb, S, k, st, b, basic, n) != m:
-        return UNDECIDED
+    vst, vb, basic0, Binv0, r0, st, b, basic, Binv, x, r, u = vtx
+    _start(J, vst, vb, S, k, basic0, Binv0, r0, st, b, basic, Binv, r)
     sp = m - 1
     for _ in range(MAX_PIVOTS):
-        if not _basic_values(J, xdot, st, b, basic, B, Binv, x):
-            return UNDECIDED
+        _solve(Binv, r, x)
         p, bound = _leaving(st, basic, lo, hi, x, n)
         if p < 0:
             break
         q = _entering(J, st, Binv, p, sp, x[p] < bound)
-        if q < 0:
+        if q < 0 or not _pivot(J, Binv, p, q, u):
             return UNDECIDED
         leave = basic[p]
         if st[leave] == _FIXED:
             st[leave] = _OFF
         else:
             st[leave], b[leave] = (_UPPER if bound == hi[leave] else _LOWER), bound
+            for i in range(m):
+                r[i] -= J[i, leave] * bound
+        for i in range(m):  # q leaves its bound b_q
+            r[i] += J[i, q] * b[q]
         st[q], basic[p] = _FREE, q
     else:
         return UNDECIDED
     s = _rates_at(st, b, basic, lo, hi, x, n, qd, act)
-    if not (-BOX_TOL <= s <= s_top + BOX_TOL and _strict(J, st, Binv, sp)):
+    if not (-BOX_TOL <= s <= top + BOX_TOL and _strict(J, st, Binv, sp)):
         return UNDECIDED
     if not _on_task(J, xdot, qd, s):
         return UNDECIDED
