@@ -156,6 +156,52 @@ def test_the_refusal_names_the_cause_and_every_proposed_fix_passes(case, capsys)
         capsys.readouterr()
 
 
+def _counts(line: str) -> str:
+    """The counts by category of a refusal: "3 path out of reach (joint2); 1 singular"."""
+    m = re.search(r"(?:refused|near mid-range): (.*?); e\.g\. ", line)
+    assert m, f"no counts in: {line}"
+    return m.group(1)
+
+
+def _reach(arm: ft.Arm) -> float:
+    """An upper bound of the distance [m] from the first joint to the tip, from the model alone:
+    the distances between successive joint origins and from the last one to the tip frame."""
+    model = arm.model
+    links = [np.linalg.norm(model.jointPlacements[i].translation) for i in range(2, model.njoints)]
+    return float(sum(links) + np.linalg.norm(model.frames[arm.frame_id].placement.translation))
+
+
+def _assert_every_fix_passes(base: list[str], line: str, capsys) -> list[str]:
+    fixes = _proposed(line)
+    assert 1 <= len(fixes) <= 2, line
+    for fix in fixes:
+        assert main(_applied(base, fix)) == 0, fix
+        capsys.readouterr()
+    return fixes
+
+
+def test_a_path_out_of_reach_is_named_so_and_the_fixes_it_proposes_pass(capsys):
+    """A 1 m circle from the planar 3R's catalog start (0.35, 0) leaves the arm's 1.5 m reach
+    within 2 s. The runs stretch the arm to a singularity on the way, yet the refusal names the
+    path out of reach (not a singular arm) and the point asked for, which is farther from the
+    base than the links reach (from the model); each fix it proposes, pasted in, runs (exit 0)."""
+    base = ["simulate", "--robot", "planar_3r", "--radius", "1", "--omega", "0.8",
+            "--duration", "2", "--algorithms", "jvja", "--no-progress"]  # fmt: skip
+    line = _refusal(base, capsys)
+    counts = _counts(line)
+    assert re.match(rf"\d+ {sc.OUT_OF_REACH}", counts) and sc.SINGULAR not in counts, line
+    assert "the path leaves the workspace" in line
+    m = re.search(
+        r"it asks for x = \[(.*?)\], which no configuration inside the limits reach", line
+    )
+    assert m, line
+    arm = ft.load_arm("planar_3r")
+    x = np.array([float(v) for v in m.group(1).split(",")])
+    assert np.linalg.norm(x - arm.model.jointPlacements[1].translation[:2]) > _reach(arm)
+    fixes = _assert_every_fix_passes(base, line, capsys)
+    assert all(f.split()[0] in ("--radius", "--rows") for f in fixes), fixes
+
+
 def _lock_argv(name: str) -> tuple[list[str], str]:
     if name in ARMS:
         arm, argv = load(name), cli_args(name) + list(ARMS[name].get("path_args", []))

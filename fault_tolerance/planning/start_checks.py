@@ -178,7 +178,10 @@ def run_failure(arm: Arm, run) -> Failure | None:
 
     A task error with samples where the rate box scaled the task (L3) and a joint at its velocity
     limit is :data:`TOO_FAST`; a run that leaves the joint limits, or whose error grows without
-    that, is :data:`OUT_OF_REACH` (the joints named are those at a position limit, if any).
+    that, is :data:`OUT_OF_REACH` (the joints named are those at a position limit, if any). A run
+    that passes near a singularity of J is :data:`SINGULAR`, unless its error grows at a point of
+    the path that no configuration reaches (:func:`unreached_point`): then the arm stretched to the
+    edge of its workspace because the path leaves it, :data:`OUT_OF_REACH`.
     """
     from fault_tolerance.simulation.run import FLAG_NEAR_SINGULAR
 
@@ -192,19 +195,48 @@ def run_failure(arm: Arm, run) -> Failure | None:
             tuple(arm.joint_names[j] for j in joints),
             f"leaves the joint limits at t = {run.t[k]:.3f} s",
         )
+    text = _error_text(run)
     if np.any(run.flags & FLAG_NEAR_SINGULAR):
-        return Failure(SINGULAR, (), "passes near a singularity of J")
-    ori = run.orientation_error
-    if run.error.max() > ERROR_TOL:
-        text = f"position error reaches {1e3 * run.error.max():.3g} mm"
-    elif ori is not None and ori.max() > ERROR_TOL:
-        text = f"orientation error reaches {ori.max():.3g} rad"
-    else:
+        k = int(np.argmax(run.flags & FLAG_NEAR_SINGULAR))
+        away = None if text is None else unreached_point(arm, run)
+        if away is None:
+            return Failure(SINGULAR, (), f"passes near a singularity of J at t = {run.t[k]:.3f} s")
+        return Failure(
+            OUT_OF_REACH,
+            at_position_limit(arm, run),
+            f"{text}: the path leaves the workspace (at t = {run.t[away]:.3f} s it asks for "
+            f"x = {np.round(run.x_des[away], 4).tolist()}, which no configuration inside the "
+            f"limits reaches; the arm stretches to a singularity of J from t = {run.t[k]:.3f} s)",
+        )
+    if text is None:
         return None
     fast = at_velocity_limit(arm, run)
     if fast:
         return Failure(TOO_FAST, fast, f"{text} (the task is scaled to the velocity limits)")
     return Failure(OUT_OF_REACH, at_position_limit(arm, run), text)
+
+
+def _error_text(run) -> str | None:
+    """The task error of ``run`` beyond :data:`ERROR_TOL`, as text, or ``None``."""
+    ori = run.orientation_error
+    if run.error.max() > ERROR_TOL:
+        return f"position error reaches {1e3 * run.error.max():.3g} mm"
+    if ori is not None and ori.max() > ERROR_TOL:
+        return f"orientation error reaches {ori.max():.3g} rad"
+    return None
+
+
+def unreached_point(arm: Arm, run) -> int | None:
+    """The sample of ``run``'s largest task error if no configuration reaches its desired point.
+
+    :func:`~.posture.reaches` from the run's configuration there (and the usual seeds); ``None``
+    when a configuration reaches it: the path is in reach there.
+    """
+    from fault_tolerance.planning.posture import reaches
+
+    ori = run.orientation_error
+    k = int(np.argmax(run.error if ori is None or run.error.max() > ERROR_TOL else ori))
+    return None if reaches(arm, run.x_des[k], near=[run.q[k]]) else k
 
 
 def at_velocity_limit(arm: Arm, run, slack: float = 1e-3) -> tuple[str, ...]:
