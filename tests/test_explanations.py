@@ -125,7 +125,7 @@ CASES = {
     ),
     "rows the arm cannot move": (
         ["--robot", "panda", "--joints", "panda_joint2,panda_joint4,panda_joint6,panda_joint7",
-         "--task", "position"], "structurally", "--task x,z",
+         "--task", "position"], "singular at every configuration", "--task x,z",
     ),
     "tip on the wrist axis": (
         ["--robot", "ur5", "--tip", "wrist_3_link", "--task", "position"], "structurally",
@@ -200,6 +200,35 @@ def test_a_path_out_of_reach_is_named_so_and_the_fixes_it_proposes_pass(capsys):
     assert np.linalg.norm(x - arm.model.jointPlacements[1].translation[:2]) > _reach(arm)
     fixes = _assert_every_fix_passes(base, line, capsys)
     assert all(f.split()[0] in ("--radius", "--rows") for f in fixes), fixes
+
+
+def test_a_task_no_joint_moves_is_named_singular_and_the_fixes_it_proposes_pass(capsys):
+    """The Panda with only its joints 2, 4, 6, 7 and a position task: they all turn the tool in
+    one vertical plane, so J has no y motion anywhere (checked with Pinocchio). The refusal
+    names a singular task and the row no joint moves, not a structurally intolerable lock (nor
+    its removal as a fix); the fix it proposes, --task x,z, runs (exit 0)."""
+    import pinocchio as pin
+
+    joints = "panda_joint2,panda_joint4,panda_joint6,panda_joint7"
+    base = ["simulate", "--robot", "panda", "--joints", joints, "--task", "position",
+            "--algorithms", "jvja", "--no-progress"]  # fmt: skip
+    arm = ft.load_arm("panda", joints=joints.split(","), task="position")
+    model, rng = arm.model, np.random.default_rng(3)
+    data = model.createData()
+    for _ in range(10):
+        q = rng.uniform(model.lowerPositionLimit, model.upperPositionLimit)
+        jac = pin.computeFrameJacobian(model, data, q, arm.frame_id, pin.LOCAL_WORLD_ALIGNED)
+        assert np.abs(jac[1]).max() < 1e-12 and np.abs(jac[[0, 2]]).max() > 0.1
+    assert sc.still_rows(arm) == ("y",)
+    assert sc.intolerable_everywhere(arm, joints.split(",")) == []  # no regular configuration
+    line = _refusal(base, capsys)
+    counts = _counts(line)
+    assert re.fullmatch(rf"\d+ {sc.SINGULAR}", counts), line
+    assert "no regular seed among" in line
+    assert "the task x/y/z is singular at every configuration" in line
+    assert "no joint moves the tool along y;" in line
+    assert "structurally" not in line and "remove panda_joint" not in line, line
+    assert "--task x,z" in _assert_every_fix_passes(base, line, capsys)
 
 
 def _lock_argv(name: str) -> tuple[list[str], str]:

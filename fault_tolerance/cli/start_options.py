@@ -286,10 +286,10 @@ def _other_tips(arm, count: int = 2) -> list[tuple[str, dict]]:
 
 def _spanned_task(args, arm, samples: int = 20, seed: int = 0) -> list[tuple[str, dict]]:
     """``--task`` with the rows the Jacobian moves (rows zero at every sample left out)."""
-    rng = np.random.default_rng(seed)
-    J = np.array([arm.jacobian(arm.random_q(rng)) for _ in range(samples)])
-    moving = np.abs(J).max(axis=(0, 2)) > 1e-9
-    kept = [r for r, m in zip(arm.task, moving, strict=True) if m]
+    from fault_tolerance.planning.start_checks import still_rows
+
+    still = still_rows(arm, 1e-9, samples, seed)
+    kept = [r for r in arm.task if r not in still]
     out = []
     if 2 <= len(kept) < len(arm.task) and len(kept) < arm.n:
         out.append((f"--task {','.join(kept)}", {"task": ",".join(kept), "rows": None}))

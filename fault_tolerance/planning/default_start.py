@@ -53,6 +53,7 @@ from fault_tolerance.planning.posture import initial_posture, joint_distance, lo
 from fault_tolerance.planning.start_checks import (
     NEARLY_INTOLERABLE,
     OUT_OF_REACH,
+    SINGULAR,
     STRUCTURAL_SAMPLES,
     UNDER_LIMITS,
     Failure,
@@ -61,6 +62,7 @@ from fault_tolerance.planning.start_checks import (
     limit_box,
     run_caveat,
     run_failure,
+    singular_task_text,
     start_failure,
     still_joints,
     still_joints_text,
@@ -205,7 +207,7 @@ def _seeds(arm: Arm, sc: Scenarios, rng, max_seeds: int, tally: FailureTally):
     """
     lo, hi = limit_box(arm)
     mid = (lo + hi) / 2
-    tally.drawn = SEED_SAMPLES
+    tally.drawn = SEED_SAMPLES + 1  # the mid-range configuration and the draws near it
     failure = start_failure(arm, mid, sc)
     if failure is not None:
         tally.add_seed(failure)
@@ -339,6 +341,8 @@ def default_start(
     where = f"at x0 = {np.round(x0, 4).tolist()}" if x0 is not None else "from mid-range seeds"
     still, lever = still_joints(arm)
     cause = f"; {still_joints_text(arm, still, lever)}" if still else ""
+    singular = singular_task_text(arm) if SINGULAR in (c for c, _, _ in tally.dominant()) else ""
+    cause = f"; {singular}{cause}" if singular else cause
     raise NoStartFound(
         f"no start {where} for {arm.name} passed the checks ({tally.summary()}){cause}",
         tally.dominant(),

@@ -301,7 +301,9 @@ def intolerable_everywhere(
     """Scenarios intolerable at every one of ``samples`` random regular configurations (seeded).
 
     A configuration is regular when ``σ_min(J) >= 1e-3``; intolerable means the smallest pivot of
-    ``N[S, S]`` is below ``1e3 · PIVOT_TOL`` there. The spatial 4R's ``joint4`` is one.
+    ``N[S, S]`` is below ``1e3 · PIVOT_TOL`` there. The spatial 4R's ``joint4`` is one. None when
+    no configuration drawn is regular (J singular everywhere, e.g. a task row no joint moves):
+    that is a singular task, not a scenario the others cannot make up.
     """
     sc = lockable_scenarios(arm, lockable)
     rng = np.random.default_rng(seed)
@@ -316,7 +318,7 @@ def intolerable_everywhere(
         seen += 1
         if seen == samples or not always:
             break
-    return [tuple(sc.name(sc.sets[k])) for k in sorted(always)]
+    return [tuple(sc.name(sc.sets[k])) for k in sorted(always)] if seen else []
 
 
 #: Largest column norm of the task Jacobian [task units per rad] of a joint that does not move
@@ -331,12 +333,39 @@ def still_joints(arm: Arm, samples: int = 20, seed: int = 0) -> tuple[tuple[str,
     position task whose tip lies on the axes of the wrist joints is one: those joints do not move
     it, so the task rests on the others alone.
     """
-    rng = np.random.default_rng(seed)
-    lever = np.zeros(arm.n)
-    for _ in range(samples):
-        lever = np.maximum(lever, np.linalg.norm(arm.jacobian(arm.random_q(rng)), axis=0))
+    lever = np.linalg.norm(sampled_jacobians(arm, samples, seed), axis=1).max(axis=0)
     still = np.flatnonzero(lever < STILL_TOL)
     return tuple(arm.joint_names[j] for j in still), float(lever[still].max(initial=0.0))
+
+
+def sampled_jacobians(arm: Arm, samples: int = 20, seed: int = 0) -> np.ndarray:
+    """Task Jacobians at ``samples`` random configurations (seeded), shape (samples, m, n)."""
+    rng = np.random.default_rng(seed)
+    return np.array([arm.jacobian(arm.random_q(rng)) for _ in range(samples)])
+
+
+def still_rows(arm: Arm, tol: float = STILL_TOL, samples: int = 20, seed: int = 0):
+    """Task rows no joint moves: their row of J stays below ``tol`` at every sample (seeded)."""
+    reach = np.abs(sampled_jacobians(arm, samples, seed)).max(axis=(0, 2))
+    return tuple(r for r, v in zip(arm.task, reach, strict=True) if v < tol)
+
+
+def singular_task_text(arm: Arm, samples: int = 20, seed: int = 0) -> str:
+    """The cause a refusal names when J is singular at every sample (seeded), else ``""``.
+
+    The rank J keeps at most, and the task rows no joint moves (:func:`still_rows`), if any.
+    """
+    J = sampled_jacobians(arm, samples, seed)
+    sigma = np.linalg.svd(J, compute_uv=False)
+    if sigma[:, -1].max() >= SIGMA_REGULAR:
+        return ""
+    rank = int((sigma >= SIGMA_REGULAR).sum(axis=1).max())
+    rows = still_rows(arm, samples=samples, seed=seed)
+    which = f": no joint moves the tool along {', '.join(rows)}" if rows else ""
+    return (
+        f"the task {'/'.join(arm.task)} is singular at every configuration: J has rank at most "
+        f"{rank} < {arm.m} at {samples} sampled configurations (σ_min(J) < {SIGMA_REGULAR:g}){which}"
+    )
 
 
 def still_joints_text(arm: Arm, still: tuple[str, ...], lever: float, samples: int = 20) -> str:
@@ -351,8 +380,9 @@ def still_joints_text(arm: Arm, still: tuple[str, ...], lever: float, samples: i
         where = f"the tip lies at the wrist centre: {', '.join(still)} do not move it"
     else:
         where = f"the tip lies on the axis of {still[0]}: it does not move it"
+    columns, stay = ("its column", "stays") if len(still) == 1 else ("their columns", "stay")
     return (
-        f"{where} (their columns of the task Jacobian stay below {STILL_TOL:g} per rad or m at "
+        f"{where} ({columns} of the task Jacobian {stay} below {STILL_TOL:g} per rad or m at "
         f"{samples} sampled configurations, at most {lever:.1g}), so the task rests on {others} "
         "alone"
     )
