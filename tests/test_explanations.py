@@ -19,7 +19,7 @@ from real_arms import ARMS, cli_args, load
 import fault_tolerance as ft
 from fault_tolerance.cli import main
 from fault_tolerance.planning import start_checks as sc
-from fault_tolerance.planning.default_start import fixes_line, try_fixes
+from fault_tolerance.planning.default_start import CHECK_HORIZON, fixes_line, try_fixes
 from fault_tolerance.simulation.paths import CirclePath
 
 
@@ -180,13 +180,18 @@ def _assert_every_fix_passes(base: list[str], line: str, capsys) -> list[str]:
     return fixes
 
 
-def test_a_path_out_of_reach_is_named_so_and_the_fixes_it_proposes_pass(capsys):
+@pytest.mark.parametrize(
+    "duration", [CHECK_HORIZON, pytest.param(2.5 * CHECK_HORIZON, marks=pytest.mark.slow)]
+)
+def test_a_path_out_of_reach_is_named_so_and_the_fixes_it_proposes_pass(duration, capsys):
     """A 1 m circle from the planar 3R's catalog start (0.35, 0) leaves the arm's 1.5 m reach
     within 2 s. The runs stretch the arm to a singularity on the way, yet the refusal names the
     path out of reach (not a singular arm) and the point asked for, which is farther from the
-    base than the links reach (from the model); each fix it proposes, pasted in, runs (exit 0)."""
+    base than the links reach (from the model); each fix it proposes, pasted in, runs (exit 0).
+    For a task longer than the start's check, the fixes say they were checked over its first
+    seconds only."""
     base = ["simulate", "--robot", "planar_3r", "--radius", "1", "--omega", "0.8",
-            "--duration", "2", "--algorithms", "jvja", "--no-progress"]  # fmt: skip
+            "--duration", f"{duration:g}", "--algorithms", "jvja", "--no-progress"]  # fmt: skip
     line = _refusal(base, capsys)
     counts = _counts(line)
     assert re.match(rf"\d+ {sc.OUT_OF_REACH}", counts) and sc.SINGULAR not in counts, line
@@ -198,6 +203,8 @@ def test_a_path_out_of_reach_is_named_so_and_the_fixes_it_proposes_pass(capsys):
     arm = ft.load_arm("planar_3r")
     x = np.array([float(v) for v in m.group(1).split(",")])
     assert np.linalg.norm(x - arm.model.jointPlacements[1].translation[:2]) > _reach(arm)
+    capped = f"each a start search over the task's first {CHECK_HORIZON:g} s only"
+    assert (capped in line) == (duration > CHECK_HORIZON), line
     fixes = _assert_every_fix_passes(base, line, capsys)
     assert all(f.split()[0] in ("--radius", "--rows") for f in fixes), fixes
 
