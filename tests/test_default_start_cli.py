@@ -69,6 +69,25 @@ def test_plainest_simulate_runs_from_the_default_start(name, tmp_path, capsys):
         np.testing.assert_allclose(run.q[0], q0)
 
 
+@pytest.mark.parametrize("command", ["simulate", "lock"])
+def test_a_start_checked_over_part_of_a_longer_task_says_so(command, capsys):
+    """The default start is checked over the task's first CHECK_HORIZON seconds at most: for a
+    task 2.5 times as long the start line says that only those were checked, of how long a task;
+    for a task within the horizon it claims no such cut."""
+    from fault_tolerance.planning.default_start import CHECK_HORIZON
+
+    base = [command, "--robot", "planar_3r", "--no-progress"]
+    base += ["--joint", "joint2"] if command == "lock" else ["--algorithms", "jvja"]
+    long, short = 2.5 * CHECK_HORIZON, CHECK_HORIZON / 2
+    assert main([*base, "--duration", f"{long:g}"]) == 0
+    start = [line for line in capsys.readouterr().out.splitlines() if line.startswith("start q0")]
+    assert len(start) == 1
+    assert f"only its first {CHECK_HORIZON:g} s of the {long:g} s task were checked" in start[0]
+    assert main([*base, "--duration", f"{short:g}"]) == 0
+    start = [line for line in capsys.readouterr().out.splitlines() if line.startswith("start q0")]
+    assert len(start) == 1 and "were checked" not in start[0]
+
+
 # -- real descriptions (tests/data/robots): the plainest --urdf FILE --tip T ------------------
 
 try:

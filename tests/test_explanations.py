@@ -19,7 +19,7 @@ from real_arms import ARMS, cli_args, load
 import fault_tolerance as ft
 from fault_tolerance.cli import main
 from fault_tolerance.planning import start_checks as sc
-from fault_tolerance.planning.default_start import fixes_line, try_fixes
+from fault_tolerance.planning.default_start import CHECK_HORIZON, fixes_line, try_fixes
 from fault_tolerance.simulation.paths import CirclePath
 
 
@@ -125,7 +125,7 @@ CASES = {
     ),
     "rows the arm cannot move": (
         ["--robot", "panda", "--joints", "panda_joint2,panda_joint4,panda_joint6,panda_joint7",
-         "--task", "position"], "structurally", "--task x,z",
+         "--task", "position"], "singular at every configuration", "--task x,z",
     ),
     "tip on the wrist axis": (
         ["--robot", "ur5", "--tip", "wrist_3_link", "--task", "position"], "structurally",
@@ -154,6 +154,88 @@ def test_the_refusal_names_the_cause_and_every_proposed_fix_passes(case, capsys)
     for fix in fixes:
         assert main(_applied(base, fix)) == 0, fix
         capsys.readouterr()
+
+
+def _counts(line: str) -> str:
+    """The counts by category of a refusal: "3 path out of reach (joint2); 1 singular"."""
+    m = re.search(r"(?:refused|near mid-range): (.*?); e\.g\. ", line)
+    assert m, f"no counts in: {line}"
+    return m.group(1)
+
+
+def _reach(arm: ft.Arm) -> float:
+    """An upper bound of the distance [m] from the first joint to the tip, from the model alone:
+    the distances between successive joint origins and from the last one to the tip frame."""
+    model = arm.model
+    links = [np.linalg.norm(model.jointPlacements[i].translation) for i in range(2, model.njoints)]
+    return float(sum(links) + np.linalg.norm(model.frames[arm.frame_id].placement.translation))
+
+
+def _assert_every_fix_passes(base: list[str], line: str, capsys) -> list[str]:
+    fixes = _proposed(line)
+    assert 1 <= len(fixes) <= 2, line
+    for fix in fixes:
+        assert main(_applied(base, fix)) == 0, fix
+        capsys.readouterr()
+    return fixes
+
+
+@pytest.mark.parametrize(
+    "duration", [CHECK_HORIZON, pytest.param(2.5 * CHECK_HORIZON, marks=pytest.mark.slow)]
+)
+def test_a_path_out_of_reach_is_named_so_and_the_fixes_it_proposes_pass(duration, capsys):
+    """A 1 m circle from the planar 3R's catalog start (0.35, 0) leaves the arm's 1.5 m reach
+    within 2 s. The runs stretch the arm to a singularity on the way, yet the refusal names the
+    path out of reach (not a singular arm) and the point asked for, which is farther from the
+    base than the links reach (from the model); each fix it proposes, pasted in, runs (exit 0).
+    For a task longer than the start's check, the fixes say they were checked over its first
+    seconds only."""
+    base = ["simulate", "--robot", "planar_3r", "--radius", "1", "--omega", "0.8",
+            "--duration", f"{duration:g}", "--algorithms", "jvja", "--no-progress"]  # fmt: skip
+    line = _refusal(base, capsys)
+    counts = _counts(line)
+    assert re.match(rf"\d+ {sc.OUT_OF_REACH}", counts) and sc.SINGULAR not in counts, line
+    assert "the path leaves the workspace" in line
+    m = re.search(
+        r"it asks for x = \[(.*?)\], which no configuration inside the limits reach", line
+    )
+    assert m, line
+    arm = ft.load_arm("planar_3r")
+    x = np.array([float(v) for v in m.group(1).split(",")])
+    assert np.linalg.norm(x - arm.model.jointPlacements[1].translation[:2]) > _reach(arm)
+    capped = f"each a start search over the task's first {CHECK_HORIZON:g} s only"
+    assert (capped in line) == (duration > CHECK_HORIZON), line
+    fixes = _assert_every_fix_passes(base, line, capsys)
+    assert all(f.split()[0] in ("--radius", "--rows") for f in fixes), fixes
+
+
+def test_a_task_no_joint_moves_is_named_singular_and_the_fixes_it_proposes_pass(capsys):
+    """The Panda with only its joints 2, 4, 6, 7 and a position task: they all turn the tool in
+    one vertical plane, so J has no y motion anywhere (checked with Pinocchio). The refusal
+    names a singular task and the row no joint moves, not a structurally intolerable lock (nor
+    its removal as a fix); the fix it proposes, --task x,z, runs (exit 0)."""
+    import pinocchio as pin
+
+    joints = "panda_joint2,panda_joint4,panda_joint6,panda_joint7"
+    base = ["simulate", "--robot", "panda", "--joints", joints, "--task", "position",
+            "--algorithms", "jvja", "--no-progress"]  # fmt: skip
+    arm = ft.load_arm("panda", joints=joints.split(","), task="position")
+    model, rng = arm.model, np.random.default_rng(3)
+    data = model.createData()
+    for _ in range(10):
+        q = rng.uniform(model.lowerPositionLimit, model.upperPositionLimit)
+        jac = pin.computeFrameJacobian(model, data, q, arm.frame_id, pin.LOCAL_WORLD_ALIGNED)
+        assert np.abs(jac[1]).max() < 1e-12 and np.abs(jac[[0, 2]]).max() > 0.1
+    assert sc.still_rows(arm) == ("y",)
+    assert sc.intolerable_everywhere(arm, joints.split(",")) == []  # no regular configuration
+    line = _refusal(base, capsys)
+    counts = _counts(line)
+    assert re.fullmatch(rf"\d+ {sc.SINGULAR}", counts), line
+    assert "no regular seed among" in line
+    assert "the task x/y/z is singular at every configuration" in line
+    assert "no joint moves the tool along y;" in line
+    assert "structurally" not in line and "remove panda_joint" not in line, line
+    assert "--task x,z" in _assert_every_fix_passes(base, line, capsys)
 
 
 def _lock_argv(name: str) -> tuple[list[str], str]:

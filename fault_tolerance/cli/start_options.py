@@ -116,7 +116,12 @@ def refusal_with_fixes(args, arm, err, lockable, rerun) -> NoStartFound:
     ``rerun``: ``(algorithms, extra_lockable, sim_options)`` of the refused search.
     """
     from fault_tolerance.cli.common import load_robot
-    from fault_tolerance.planning.default_start import FIX_SEEDS, fixes_line, try_fixes
+    from fault_tolerance.planning.default_start import (
+        CHECK_HORIZON,
+        FIX_SEEDS,
+        fixes_line,
+        try_fixes,
+    )
     from fault_tolerance.planning.start_checks import STRUCTURAL
 
     algorithms, extra, sim_options = rerun
@@ -139,8 +144,9 @@ def refusal_with_fixes(args, arm, err, lockable, rerun) -> NoStartFound:
 
     options = fix_options(args, arm, reasons, lockable, extra, still)
     trials = try_fixes((text, attempt(changes)) for text, changes in options)
+    capped = CHECK_HORIZON if _path_spec(args, arm)[2] > CHECK_HORIZON else None
     return NoStartFound(
-        f"{err}; {fixes_line(trials)}{_no_tip_past(arm, still, options)}",
+        f"{err}; {fixes_line(trials, capped)}{_no_tip_past(arm, still, options)}",
         reasons,
         [t.option for t in trials if t.works],
         still=still,
@@ -174,7 +180,7 @@ def fix_options(args, arm, reasons, lockable, extra=(), still=()) -> list[tuple[
     from fault_tolerance.planning import start_checks as sc
 
     out: list[tuple[str, dict]] = _past_the_wrist(arm, lockable, extra) if still else []
-    radius, omega = _path_speed(args, arm)
+    radius, omega, _ = _path_spec(args, arm)
     for category, _, joints in reasons:
         if category == sc.STRUCTURAL:
             every = _every_structural(arm, lockable, joints)
@@ -228,15 +234,15 @@ def _set(option: str, value: float) -> tuple[str, dict]:
     return f"--{option} {value:g}", {option: value}
 
 
-def _path_speed(args, arm) -> tuple[float, float]:
-    """The circle's radius [m] and angular rate [rad/s] the refused search used."""
+def _path_spec(args, arm) -> tuple[float, float, float]:
+    """The circle's radius [m], angular rate [rad/s] and duration [s] the refused search used."""
     from fault_tolerance.model.catalog import catalog
 
     entry = catalog().get(arm.name) if arm.source == arm.name else None
     spec = (entry or {}).get("path", {})
     radius = args.radius if args.radius is not None else spec.get("radius", 0.05)
     omega = args.omega if args.omega is not None else spec.get("omega", 2 * np.pi)
-    return float(radius), float(omega)
+    return float(radius), float(omega), float(args.duration or spec.get("duration", 1.0))
 
 
 def _without(lockable, joints, extra) -> list[tuple[str, dict]]:
@@ -286,10 +292,10 @@ def _other_tips(arm, count: int = 2) -> list[tuple[str, dict]]:
 
 def _spanned_task(args, arm, samples: int = 20, seed: int = 0) -> list[tuple[str, dict]]:
     """``--task`` with the rows the Jacobian moves (rows zero at every sample left out)."""
-    rng = np.random.default_rng(seed)
-    J = np.array([arm.jacobian(arm.random_q(rng)) for _ in range(samples)])
-    moving = np.abs(J).max(axis=(0, 2)) > 1e-9
-    kept = [r for r, m in zip(arm.task, moving, strict=True) if m]
+    from fault_tolerance.planning.start_checks import still_rows
+
+    still = still_rows(arm, 1e-9, samples, seed)
+    kept = [r for r in arm.task if r not in still]
     out = []
     if 2 <= len(kept) < len(arm.task) and len(kept) < arm.n:
         out.append((f"--task {','.join(kept)}", {"task": ",".join(kept), "rows": None}))

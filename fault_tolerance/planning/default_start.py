@@ -53,6 +53,7 @@ from fault_tolerance.planning.posture import initial_posture, joint_distance, lo
 from fault_tolerance.planning.start_checks import (
     NEARLY_INTOLERABLE,
     OUT_OF_REACH,
+    SINGULAR,
     STRUCTURAL_SAMPLES,
     UNDER_LIMITS,
     Failure,
@@ -61,6 +62,7 @@ from fault_tolerance.planning.start_checks import (
     limit_box,
     run_caveat,
     run_failure,
+    singular_task_text,
     start_failure,
     still_joints,
     still_joints_text,
@@ -97,6 +99,7 @@ class StartChoice:
         tried: Candidates simulated before this one was accepted (itself included).
         note: A caveat, e.g. that no candidate kept the RCN below the threshold.
         checked: Seconds of the task that were checked when that is less than all of it.
+        task_duration: The task's length [s] when only ``checked`` seconds of it were checked.
         runs: The checked runs from ``q0`` by algorithm (reuse them instead of simulating again).
         under_limits: ``None`` when joint limits were not checked (limits off, no task); else the
             scenarios intolerable under the joint limits at ``t = 0`` from ``q0`` (empty: none).
@@ -114,6 +117,7 @@ class StartChoice:
     tried: int
     note: str = ""
     checked: float | None = None
+    task_duration: float | None = None
     runs: dict = field(default_factory=dict, repr=False, compare=False)
     under_limits: tuple[str, ...] | None = None
     lockable_without: tuple[str, ...] = ()
@@ -136,13 +140,21 @@ class StartChoice:
             "starts tried; or run a slower path (--radius, --duration) or --no-limits"
         )
 
+    def horizon_note(self) -> str:
+        """That only the task's first seconds were checked (empty when all of it was)."""
+        if not self.checked:
+            return ""
+        of = f" of the {self.task_duration:g} s task" if self.task_duration else ""
+        return (
+            f" (only its first {self.checked:g} s{of} were checked: a start is checked over "
+            f"{self.checked:g} s at most, the rest of the run is not)"
+        )
+
     def reason(self) -> str:
         """One line: the start and why it was chosen."""
         checked = (
-            "; the task runs from it"
-            + (f" (its first {self.checked:g} s checked)" if self.checked else "")
-            + f" with {'/'.join(self.algorithms)} inside the limits, "
-            f"regular, largest k_S {self.run_rcn_max:.3g}"
+            f"; the task runs from it with {'/'.join(self.algorithms)} inside the limits, "
+            f"regular, largest k_S {self.run_rcn_max:.3g}{self.horizon_note()}"
             if self.algorithms
             else ""
         )
@@ -205,7 +217,7 @@ def _seeds(arm: Arm, sc: Scenarios, rng, max_seeds: int, tally: FailureTally):
     """
     lo, hi = limit_box(arm)
     mid = (lo + hi) / 2
-    tally.drawn = SEED_SAMPLES
+    tally.drawn = SEED_SAMPLES + 1  # the mid-range configuration and the draws near it
     failure = start_failure(arm, mid, sc)
     if failure is not None:
         tally.add_seed(failure)
@@ -339,6 +351,8 @@ def default_start(
     where = f"at x0 = {np.round(x0, 4).tolist()}" if x0 is not None else "from mid-range seeds"
     still, lever = still_joints(arm)
     cause = f"; {still_joints_text(arm, still, lever)}" if still else ""
+    singular = singular_task_text(arm) if SINGULAR in (c for c, _, _ in tally.dominant()) else ""
+    cause = f"; {singular}{cause}" if singular else cause
     raise NoStartFound(
         f"no start {where} for {arm.name} passed the checks ({tally.summary()}){cause}",
         tally.dominant(),
@@ -418,7 +432,7 @@ def _try(arm, sc, where, algorithms, options, checked, tried, bad, tally, drop=(
         return None, None
     choice = _choice(arm, q, point, sc, worst, origin, task, algorithms, tried, runs)
     if checked is not None:  # only the first seconds ran: nothing to reuse
-        choice = replace(choice, runs={}, checked=checked)
+        choice = replace(choice, runs={}, checked=checked[0], task_duration=checked[1])
     if bad is not None:
         locked = {n for name in (*bad, *drop) for n in name.split("+")}
         without = tuple(dict.fromkeys(n for S in sc.sets for n in sc.name(S) if n not in locked))
@@ -455,14 +469,17 @@ def _refuse_structural(arm: Arm, sc: Scenarios, seed: int) -> None:
         raise StructurallyIntolerable(S, float(sc.pivots(projection(J).N)[k]), STRUCTURAL_SAMPLES)
 
 
-def _horizon(task, sim_options: dict, horizon: float) -> tuple[dict, float | None]:
-    """Simulation options that run at most ``horizon`` seconds of ``task``; the cap, if it acts."""
+def _horizon(task, sim_options: dict, horizon: float):
+    """Simulation options that run at most ``horizon`` seconds of ``task``.
+
+    With them ``(horizon, the task's length)`` when the cap acts, else ``None``.
+    """
     if task is None:
         return sim_options, None
     duration = sim_options.get("duration") or task.duration
     if duration <= horizon:
         return sim_options, None
-    return {**sim_options, "duration": horizon}, float(horizon)
+    return {**sim_options, "duration": horizon}, (float(horizon), float(duration))
 
 
 def _choice(arm, q, point, sc, worst, origin, task, algorithms, tried, runs) -> StartChoice:
@@ -532,8 +549,11 @@ def try_fixes(
     return trials
 
 
-def fixes_line(trials: Sequence[FixTrial]) -> str:
-    """What the trials found, one line: the fixes that work (exact option text) and the cost."""
+def fixes_line(trials: Sequence[FixTrial], checked: float | None = None) -> str:
+    """What the trials found, one line: the fixes that work (exact option text) and the cost.
+
+    ``checked``: the seconds of a longer task each trial's start search checked, if it was capped.
+    """
     if not trials:
         return "no fix was tried"
     cost = sum(t.seconds for t in trials)
@@ -541,9 +561,10 @@ def fixes_line(trials: Sequence[FixTrial]) -> str:
     tried = f"{len(trials)} fix{'es' if len(trials) > 1 else ''} tried in {cost:.0f} s"
     if not works:
         return f"none of the {tried} finds a start ({'; '.join(t.option for t in trials)})"
+    over = f" over the task's first {checked:g} s only" if checked else ""
     return (
         f"a start passes with {' or with '.join(works)} (that option set so, the others as given; "
-        f"{tried}, each a start search)"
+        f"{tried}, each a start search{over})"
     )
 
 

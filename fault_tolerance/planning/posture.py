@@ -233,10 +233,8 @@ def initial_posture(
     )
     if starts is None:
         starts = [arm.q_reference, arm.neutral()] + [arm.random_q(rng) for _ in range(seeds)]
-    starts = [arm.check_q(q) for q in starts]
     steps = _steps(arm, x0, reference)
-    sols = [s for s in (_newton(steps, q.copy(), 1e-10, 200) for q in starts) if s is not None]
-    sols = [s for s in sols if np.all(_wrappable(arm) | ((s >= arm.lower) & (s <= arm.upper)))]
+    sols = _solutions(arm, steps, starts)
     if not sols:
         raise InvalidInput(
             f"x0 = {x0.tolist()} is out of reach of {arm.name}, or on the edge of its workspace (no "
@@ -253,6 +251,28 @@ def initial_posture(
             f"configurations reach it and the posture search ends {miss:.2g} away; move x0 inward"
         )
     return posture
+
+
+def _solutions(arm: Arm, steps, starts: Sequence[np.ndarray]) -> list[np.ndarray]:
+    """Inverse-kinematics solutions from ``starts`` inside the joint limits (full turns wrap)."""
+    sols = [_newton(steps, arm.check_q(q).copy(), 1e-10, 200) for q in starts]
+    wraps = _wrappable(arm)
+    return [
+        s for s in sols if s is not None and np.all(wraps | ((s >= arm.lower) & (s <= arm.upper)))
+    ]
+
+
+def reaches(arm: Arm, x: np.ndarray, near: Sequence[np.ndarray] = (), seeds: int = 8) -> bool:
+    """Whether a configuration inside the joint limits puts the tool at ``x`` (task coordinates).
+
+    The inverse kinematics of :func:`initial_posture` from the configurations ``near``, the
+    reference and neutral ones and ``seeds`` random ones (seeded): ``False`` when none converges,
+    i.e. ``x`` is out of reach, or on the edge of the workspace (only singular configurations
+    reach it).
+    """
+    rng = np.random.default_rng(0)
+    starts = [*near, arm.q_reference, arm.neutral()] + [arm.random_q(rng) for _ in range(seeds)]
+    return bool(_solutions(arm, _steps(arm, np.asarray(x, dtype=float), False), starts))
 
 
 def _posture_on_curves(arm, steps, sols, sc, step) -> Posture:

@@ -178,7 +178,10 @@ def run_failure(arm: Arm, run) -> Failure | None:
 
     A task error with samples where the rate box scaled the task (L3) and a joint at its velocity
     limit is :data:`TOO_FAST`; a run that leaves the joint limits, or whose error grows without
-    that, is :data:`OUT_OF_REACH` (the joints named are those at a position limit, if any).
+    that, is :data:`OUT_OF_REACH` (the joints named are those at a position limit, if any). A run
+    that passes near a singularity of J is :data:`SINGULAR`, unless its error grows at a point of
+    the path that no configuration reaches (:func:`unreached_point`): then the arm stretched to the
+    edge of its workspace because the path leaves it, :data:`OUT_OF_REACH`.
     """
     from fault_tolerance.simulation.run import FLAG_NEAR_SINGULAR
 
@@ -192,19 +195,48 @@ def run_failure(arm: Arm, run) -> Failure | None:
             tuple(arm.joint_names[j] for j in joints),
             f"leaves the joint limits at t = {run.t[k]:.3f} s",
         )
+    text = _error_text(run)
     if np.any(run.flags & FLAG_NEAR_SINGULAR):
-        return Failure(SINGULAR, (), "passes near a singularity of J")
-    ori = run.orientation_error
-    if run.error.max() > ERROR_TOL:
-        text = f"position error reaches {1e3 * run.error.max():.3g} mm"
-    elif ori is not None and ori.max() > ERROR_TOL:
-        text = f"orientation error reaches {ori.max():.3g} rad"
-    else:
+        k = int(np.argmax(run.flags & FLAG_NEAR_SINGULAR))
+        away = None if text is None else unreached_point(arm, run)
+        if away is None:
+            return Failure(SINGULAR, (), f"passes near a singularity of J at t = {run.t[k]:.3f} s")
+        return Failure(
+            OUT_OF_REACH,
+            at_position_limit(arm, run),
+            f"{text}: the path leaves the workspace (at t = {run.t[away]:.3f} s it asks for "
+            f"x = {np.round(run.x_des[away], 4).tolist()}, which no configuration inside the "
+            f"limits reaches; the arm stretches to a singularity of J from t = {run.t[k]:.3f} s)",
+        )
+    if text is None:
         return None
     fast = at_velocity_limit(arm, run)
     if fast:
         return Failure(TOO_FAST, fast, f"{text} (the task is scaled to the velocity limits)")
     return Failure(OUT_OF_REACH, at_position_limit(arm, run), text)
+
+
+def _error_text(run) -> str | None:
+    """The task error of ``run`` beyond :data:`ERROR_TOL`, as text, or ``None``."""
+    ori = run.orientation_error
+    if run.error.max() > ERROR_TOL:
+        return f"position error reaches {1e3 * run.error.max():.3g} mm"
+    if ori is not None and ori.max() > ERROR_TOL:
+        return f"orientation error reaches {ori.max():.3g} rad"
+    return None
+
+
+def unreached_point(arm: Arm, run) -> int | None:
+    """The sample of ``run``'s largest task error if no configuration reaches its desired point.
+
+    :func:`~.posture.reaches` from the run's configuration there (and the usual seeds); ``None``
+    when a configuration reaches it: the path is in reach there.
+    """
+    from fault_tolerance.planning.posture import reaches
+
+    ori = run.orientation_error
+    k = int(np.argmax(run.error if ori is None or run.error.max() > ERROR_TOL else ori))
+    return None if reaches(arm, run.x_des[k], near=[run.q[k]]) else k
 
 
 def at_velocity_limit(arm: Arm, run, slack: float = 1e-3) -> tuple[str, ...]:
@@ -269,7 +301,9 @@ def intolerable_everywhere(
     """Scenarios intolerable at every one of ``samples`` random regular configurations (seeded).
 
     A configuration is regular when ``σ_min(J) >= 1e-3``; intolerable means the smallest pivot of
-    ``N[S, S]`` is below ``1e3 · PIVOT_TOL`` there. The spatial 4R's ``joint4`` is one.
+    ``N[S, S]`` is below ``1e3 · PIVOT_TOL`` there. The spatial 4R's ``joint4`` is one. None when
+    no configuration drawn is regular (J singular everywhere, e.g. a task row no joint moves):
+    that is a singular task, not a scenario the others cannot make up.
     """
     sc = lockable_scenarios(arm, lockable)
     rng = np.random.default_rng(seed)
@@ -284,7 +318,7 @@ def intolerable_everywhere(
         seen += 1
         if seen == samples or not always:
             break
-    return [tuple(sc.name(sc.sets[k])) for k in sorted(always)]
+    return [tuple(sc.name(sc.sets[k])) for k in sorted(always)] if seen else []
 
 
 #: Largest column norm of the task Jacobian [task units per rad] of a joint that does not move
@@ -299,12 +333,39 @@ def still_joints(arm: Arm, samples: int = 20, seed: int = 0) -> tuple[tuple[str,
     position task whose tip lies on the axes of the wrist joints is one: those joints do not move
     it, so the task rests on the others alone.
     """
-    rng = np.random.default_rng(seed)
-    lever = np.zeros(arm.n)
-    for _ in range(samples):
-        lever = np.maximum(lever, np.linalg.norm(arm.jacobian(arm.random_q(rng)), axis=0))
+    lever = np.linalg.norm(sampled_jacobians(arm, samples, seed), axis=1).max(axis=0)
     still = np.flatnonzero(lever < STILL_TOL)
     return tuple(arm.joint_names[j] for j in still), float(lever[still].max(initial=0.0))
+
+
+def sampled_jacobians(arm: Arm, samples: int = 20, seed: int = 0) -> np.ndarray:
+    """Task Jacobians at ``samples`` random configurations (seeded), shape (samples, m, n)."""
+    rng = np.random.default_rng(seed)
+    return np.array([arm.jacobian(arm.random_q(rng)) for _ in range(samples)])
+
+
+def still_rows(arm: Arm, tol: float = STILL_TOL, samples: int = 20, seed: int = 0):
+    """Task rows no joint moves: their row of J stays below ``tol`` at every sample (seeded)."""
+    reach = np.abs(sampled_jacobians(arm, samples, seed)).max(axis=(0, 2))
+    return tuple(r for r, v in zip(arm.task, reach, strict=True) if v < tol)
+
+
+def singular_task_text(arm: Arm, samples: int = 20, seed: int = 0) -> str:
+    """The cause a refusal names when J is singular at every sample (seeded), else ``""``.
+
+    The rank J keeps at most, and the task rows no joint moves (:func:`still_rows`), if any.
+    """
+    J = sampled_jacobians(arm, samples, seed)
+    sigma = np.linalg.svd(J, compute_uv=False)
+    if sigma[:, -1].max() >= SIGMA_REGULAR:
+        return ""
+    rank = int((sigma >= SIGMA_REGULAR).sum(axis=1).max())
+    rows = still_rows(arm, samples=samples, seed=seed)
+    which = f": no joint moves the tool along {', '.join(rows)}" if rows else ""
+    return (
+        f"the task {'/'.join(arm.task)} is singular at every configuration: J has rank at most "
+        f"{rank} < {arm.m} at {samples} sampled configurations (σ_min(J) < {SIGMA_REGULAR:g}){which}"
+    )
 
 
 def still_joints_text(arm: Arm, still: tuple[str, ...], lever: float, samples: int = 20) -> str:
@@ -319,8 +380,9 @@ def still_joints_text(arm: Arm, still: tuple[str, ...], lever: float, samples: i
         where = f"the tip lies at the wrist centre: {', '.join(still)} do not move it"
     else:
         where = f"the tip lies on the axis of {still[0]}: it does not move it"
+    columns, stay = ("its column", "stays") if len(still) == 1 else ("their columns", "stay")
     return (
-        f"{where} (their columns of the task Jacobian stay below {STILL_TOL:g} per rad or m at "
+        f"{where} ({columns} of the task Jacobian {stay} below {STILL_TOL:g} per rad or m at "
         f"{samples} sampled configurations, at most {lever:.1g}), so the task rests on {others} "
         "alone"
     )
