@@ -3,7 +3,9 @@
 * ``jvja_bounded_scaled``, ``lnva_bounded_scaled``: ``Controller(limits=True)`` JVJA and LNVA
   steps on configurations of the pool with ``ẋ`` grown until the task is scaled (L3) and most
   joints are held at a bound (the long chains' cost). Their
-  targets compare them to the unbounded steps (``jvja``, ``lnva``) of the same arm;
+  targets compare them to the unbounded steps of the same arm, timed again in this group's rounds
+  (``jvja_unbounded_scaled``, ``lnva_unbounded_scaled``, on the arm's pool), so that a change of the
+  machine's speed between groups does not enter the ratio;
 * ``pink_tick``: one QP tick of pink (PyPI ``pin-pink``, solver daqp) on the same configurations:
   a frame task whose target is the pose moved by ``ẋ h``, pink's default limits (position and
   velocity) at ``dt = h``; skipped with an ``info: pink not installed`` line when absent;
@@ -27,6 +29,8 @@ DESCRIPTIONS = {
     "bound)",
     "pink_tick": "one pink QP tick (daqp) of a frame task moved by ẋ h, pink's limits",
     "qp_soft_task": "one quadprog call: min ½‖J q̇ − ẋ‖² + ½ε‖q̇‖² in the rate box",
+    "jvja_unbounded_scaled": "the unbounded JVJA step, timed in the rounds of the task-scaled rows",
+    "lnva_unbounded_scaled": "the unbounded LNVA step, timed in the rounds of the task-scaled rows",
 }
 #: Regularisation of the soft-task QP (quadprog needs a positive definite Hessian).
 SOFT_EPS = 1e-6
@@ -59,7 +63,9 @@ def scaled_rows(case) -> dict[str, tuple[Callable[..., np.ndarray], list[tuple]]
     pool = _scaled_pool(case, ctrl)
     if not pool:
         return {}
-    rows = {"jvja_bounded_scaled": (ctrl.jvja, pool), "lnva_bounded_scaled": (ctrl.lnva, pool)}
+    rows = {"jvja_bounded_scaled": (ctrl.jvja, pool), "lnva_bounded_scaled": (ctrl.lnva, pool),
+            "jvja_unbounded_scaled": (case.ctrl.jvja, case.qxo),
+            "lnva_unbounded_scaled": (case.ctrl.lnva, case.qxo)}  # fmt: skip
     args = [(q, xd) for q, xd, _ in pool]
     if installed("quadprog"):
         rows["qp_soft_task"] = (_soft_task_qp(case.arm, ctrl), args)

@@ -151,10 +151,11 @@ def _limit_targets(key, jv, med) -> list[dict]:
 
 
 def _scaled_targets(key, med) -> list[dict]:
-    """Bounded JVJA and LNVA with the task scaled, against their unbounded steps."""
+    """Bounded JVJA and LNVA with the task scaled, against their unbounded steps (same rounds)."""
     out = []
     for method, limit in (("jvja", MAX_SCALED_JVJA_OVER_JVJA), ("lnva", MAX_SCALED_LNVA_OVER_LNVA)):
-        free, scaled = med(method), med(f"{method}_bounded_scaled")
+        free = med(f"{method}_unbounded_scaled") or med(method)
+        scaled = med(f"{method}_bounded_scaled")
         if free and scaled:
             out.append(_at_most(key, f"scaled_{method}_over_{method}", f"bounded "
                                 f"{method.upper()}, task scaled / {method.upper()}", scaled / free,
