@@ -244,11 +244,12 @@ def test_scaled_rows_time_scaled_bounded_steps_and_their_targets():
     rows = scaled_rows(case)
     from fault_tolerance.bench.routes import installed
 
-    expect = {"jvja_bounded_scaled", "lnva_bounded_scaled"}
+    unbounded = {"jvja_unbounded_scaled", "lnva_unbounded_scaled"}
+    expect = {"jvja_bounded_scaled", "lnva_bounded_scaled", *unbounded}
     expect |= {"qp_soft_task"} if installed("quadprog") else set()
     expect |= {"pink_tick"} if installed("pink") else set()
     assert set(rows) == expect
-    for name in expect - {"jvja_bounded_scaled", "lnva_bounded_scaled"}:
+    for name in expect - {"jvja_bounded_scaled", "lnva_bounded_scaled", *unbounded}:
         fn, args = rows[name]
         qd = np.asarray(fn(*args[0]))
         assert qd.shape == (case.arm.n,) and np.all(np.isfinite(qd))
@@ -261,3 +262,8 @@ def test_scaled_rows_time_scaled_bounded_steps_and_their_targets():
            {"jvja": 1.0, "lnva": 1.0, "jvja_bounded_scaled": 60.0, "lnva_bounded_scaled": 5.0}.items()}  # fmt: skip
     got = {t["name"]: t["pass"] for t in arm_targets("chain_14", ops)}
     assert got["scaled_jvja_over_jvja"] is False and got["scaled_lnva_over_lnva"] is True
+    # the same rounds' unbounded steps, when timed, are the divisors
+    ops |= {"jvja_unbounded_scaled": {"median_us": 2.0, "p99_us": 2.0},
+            "lnva_unbounded_scaled": {"median_us": 0.25, "p99_us": 0.25}}  # fmt: skip
+    got = {t["name"]: t["pass"] for t in arm_targets("chain_14", ops)}
+    assert got["scaled_jvja_over_jvja"] is True and got["scaled_lnva_over_lnva"] is False
