@@ -364,24 +364,24 @@ def least_norm_path(J, xdot, lo, hi, mask, qd, act, ws, wsi, L, out):  # pragma:
         if not _on_task(J, xdot, qd, s):
             return UNDECIDED
         out[0], out[1] = s, 1.0
-        return VERTEX if exact and _strict(state, ws, n) else SOLVED
+        return VERTEX if exact and strictly_signed(ws[_G1], state, n) else SOLVED
     return UNDECIDED
 
 
 @_njit
-def _strict(state, ws, n) -> bool:  # pragma: no cover - numba
-    """Whether the certificate ``g`` points strictly out of the box at every held joint.
+def strictly_signed(g, state, n) -> bool:  # pragma: no cover - numba
+    """Whether a certificate ``g`` points strictly out of the box at every held joint.
 
-    ``g`` is the row ``g₁`` :func:`_release` left. Then the vertex is the LP's only optimum.
+    ``g_j > 1e-9 max|g|`` at an upper bound, ``< −1e-9 max|g|`` at a lower one (max over the joints
+    not off): then the vertex is the LP's only optimum.
     """
     big = 0.0
     for j in range(n):
         if state[j] != _OFF:
-            big = max(big, abs(ws[_G1, j]))
+            big = max(big, abs(g[j]))
     for j in range(n):
-        g = ws[_G1, j]
-        if (state[j] == _UPPER and not g > SIGN_TOL * big) or (
-            state[j] == _LOWER and not g < -SIGN_TOL * big
+        if (state[j] == _UPPER and not g[j] > SIGN_TOL * big) or (
+            state[j] == _LOWER and not g[j] < -SIGN_TOL * big
         ):
             return False
     return big > 0.0

@@ -29,6 +29,7 @@ from fault_tolerance.resolution.fast.least_norm_path import (  # the path's stat
     SIGN_TOL,
     UNDECIDED,
     _on_task,
+    strictly_signed,
 )
 
 #: Dual simplex pivots tried before the caller's path takes over.
@@ -205,27 +206,15 @@ def _entering(J, st, Binv, p, sp, rises) -> int:  # pragma: no cover - numba
 
 
 @_njit
-def _strict(J, st, Binv, sp) -> bool:  # pragma: no cover - numba
-    """Whether ``g = Jᵀy`` (``y = −(B⁻¹)_{sp}``) points strictly out of the box at every held joint."""
+def _certificate(J, st, Binv, sp, g) -> None:  # pragma: no cover - numba
+    """``g = Jᵀy`` with ``y = −(B⁻¹)_{sp}`` (``J_Fᵀy = 0``, ``yᵀẋ = 1``), zero at the locked joints."""
     m, n = J.shape
-    big = 0.0
     for j in range(n):
+        t = 0.0
         if st[j] != _OFF and st[j] != _FIXED:
-            g = 0.0
             for i in range(m):
-                g -= Binv[sp, i] * J[i, j]
-            big = max(big, abs(g))
-    for j in range(n):
-        sj = st[j]
-        if sj == _LOWER or sj == _UPPER:
-            g = 0.0
-            for i in range(m):
-                g -= Binv[sp, i] * J[i, j]
-            if (sj == _UPPER and not g > SIGN_TOL * big) or (
-                sj == _LOWER and not g < -SIGN_TOL * big
-            ):
-                return False
-    return big > 0.0
+                t -= Binv[sp, i] * J[i, j]
+        g[j] = t
 
 
 @_njit
@@ -285,7 +274,8 @@ def reduced_vertex(J, xdot, lo, hi, S, k, vtx, top, qd, act, out):  # pragma: no
     else:
         return UNDECIDED
     s = _rates_at(st, b, basic, lo, hi, x, n, qd, act)
-    if not (-BOX_TOL <= s <= top + BOX_TOL and _strict(J, st, Binv, sp)):
+    _certificate(J, st, Binv, sp, b)  # the held values are in qd now: b holds g
+    if not (-BOX_TOL <= s <= top + BOX_TOL and strictly_signed(b, st, n)):
         return UNDECIDED
     if not _on_task(J, xdot, qd, s):
         return UNDECIDED
