@@ -282,12 +282,13 @@ def target_list(results: dict, batch: dict | None, sweep: dict | None) -> list[d
 
 
 def remeasure_failed(args: argparse.Namespace, found: tuple, progress) -> tuple:
-    """Measure once more what a failed target is computed from; report the second measurement.
+    """Measure once more what a failed target is computed from; a FAIL must fail twice.
 
     The rows of an arm with a failed target (or the batched API, or the workspace sweep) are
-    timed again, and every target computed from them is evaluated on the second measurement
-    (its ``first_value`` and ``first_pass`` keep the first). Returns ``((results, batch, sweep),
-    items)``.
+    timed again, and each target that failed is evaluated on the second measurement (its
+    ``first_value`` and ``first_pass`` keep the first). A target that passed the first time keeps
+    its first result: re-timing its rows for another target's sake is no second chance to fail.
+    Returns ``((results, batch, sweep), items)``.
     """
     results, batch, sweep = found
     first = target_list(results, batch, sweep)
@@ -312,8 +313,13 @@ def remeasure_failed(args: argparse.Namespace, found: tuple, progress) -> tuple:
         return t["arm"] in arms
 
     items = target_list(results, batch, sweep)
-    for t in filter(measured_again, items):
+    for k, t in enumerate(items):
         old = before.get((t["arm"], t["name"]), {})
+        if not measured_again(t):
+            continue
+        if old.get("pass") is not False and old:  # passed (or informed) the first time: kept
+            items[k] = old
+            continue
         t.update(remeasured=True, first_value=old.get("value"), first_pass=old.get("pass"))
     return (results, batch, sweep), items
 
