@@ -356,7 +356,11 @@ GROUPS: list[tuple[str, Callable[[Case], dict[str, Row]], int]] = [
     ("joint limits", _limits_rows, 1),
     ("reference routes", reference_rows, 1),
     ("slow routes", slow_rows, 10),
-    ("task scaled", _scaled_rows, 20),  # up to a millisecond a call (pink, quadprog) on a long chain
+    (
+        "task scaled",
+        _scaled_rows,
+        20,
+    ),  # up to a millisecond a call (pink, quadprog) on a long chain
 ]
 
 

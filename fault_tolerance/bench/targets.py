@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from fault_tolerance.bench.cases import DEFAULT_ARMS as MDA_TARGET_ARMS
+
 #: JVJA step / LNVA step, and the bounds of the fast path's other ratios.
 MAX_JVJA_OVER_LNVA = 1.5
 #: Tighter JVJA / LNVA bounds for some arms.
@@ -23,7 +25,6 @@ MAX_DYN_OVER_STEP = 20.0
 #: The compiled MDA step / the JVJA step (both with their Jacobian), on the default arms only
 #: (elsewhere, e.g. the long chains, the ratio is printed as information).
 MAX_MDA_OVER_JVJA = 2.0
-MDA_TARGET_ARMS = ("planar_3r", "spatial_4r", "panda_pose", "panda_position")
 
 #: Generic routes that must be slower than the fast JVJA step: (row, label).
 SLOWER_ROUTES = (
