@@ -231,3 +231,35 @@ def test_bounded_solver_converges_seeded():
 def test_bounded_solver_converges_many():
     """Several thousand more problems (slow)."""
     assert _check_both_responses(np.random.default_rng(99), 4000) > 6000
+
+
+def test_mda_with_its_null_step_at_the_cap_reaches_the_lp_scale():
+    """MDA under limits where ∇K is huge (a null step of 1e3-1e4 rad/s): the reference's task scale
+    is still the LP's largest (HiGHS), and the compiled step gives the same rates."""
+    import fault_tolerance as ft
+    from fault_tolerance.control.controller import Controller
+    from fault_tolerance.resolution.mda import MDA_MAX_STEP
+
+    arm = ft.load_arm("iiwa", task="position")
+    ctrl = Controller(arm, "all", backend="numba", limits=True)
+    rng = np.random.default_rng(1)
+    checked = 0
+    for _ in range(40):
+        q = arm.random_q(rng)
+        xd = rng.standard_normal(arm.m)
+        xd *= rng.choice([3.0, 10.0, 50.0]) / np.linalg.norm(xd)
+        J, (lo, hi) = arm.jacobian(q), arm.rate_bounds(q, ctrl.horizon)
+        free = ft.resolve("mda", J, xd, lockable="all", arm=arm, q=q)
+        if np.abs(free).max() < 1e-1 * MDA_MAX_STEP:
+            continue
+        ref = resolve_bounded("mda", J, xd, "all", bounds=(lo, hi), arm=arm, q=q)
+        n = J.shape[1]
+        lp = linprog(np.r_[np.zeros(n), -1.0], A_eq=np.hstack([J, -xd[:, None]]), b_eq=np.zeros(3),
+                     bounds=[*zip(lo, hi, strict=True), (0.0, 1.0)], method="highs")  # fmt: skip
+        assert lp.status == 0 and ref.scale == pytest.approx(lp.x[-1], abs=1e-8)
+        assert np.all(ref.qd >= lo - 1e-9) and np.all(ref.qd <= hi + 1e-9)
+        qd = ctrl.mda(q, xd)
+        assert ctrl.last_scale == pytest.approx(ref.scale, abs=1e-8)
+        assert np.abs(qd - ref.qd).max() <= 1e-6 * max(1.0, np.abs(ref.qd).max())
+        checked += 1
+    assert checked >= 1

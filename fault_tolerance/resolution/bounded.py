@@ -231,8 +231,10 @@ def _nearest_on_task(J, xdot, qd, lo, hi, proj) -> BoundedRates:
     n = J.shape[1]
     if _inside(qd, lo, hi):
         return BoundedRates(np.clip(qd, lo, hi), 1.0, np.zeros(n, dtype=bool), np.zeros(0))
-    a = proj.Jpinv @ xdot
-    sol = solve_box(proj.N @ (qd - a), a, _null_basis(proj.N), lo, hi)  # near a singularity
+    a, Z = proj.Jpinv @ xdot, _null_basis(proj.N)
+    # the scale from the well-conditioned problem (Z=Z): MDA's null step reaches MDA_MAX_STEP
+    # (1e4 rad/s) near a reduced singularity, where a scaling search from p₀ itself loses it
+    sol = solve_box(proj.N @ (qd - a), a, Z, lo, hi, Z=Z)
     # the damped qd - a is not in the null space exactly; its task part stays in a
     return BoundedRates(sol.qd, sol.scale, sol.active, np.zeros(0))
 
