@@ -17,7 +17,13 @@ import numpy as np
 import pinocchio as pin
 
 from fault_tolerance.bench.cases import ARMS, make_case
-from fault_tolerance.numerics.fast.rank_one_eigen import eigenpairs, highest_root, lowest_root
+from fault_tolerance.numerics.fast.dense import gram_into
+from fault_tolerance.numerics.fast.rank_one_eigen import (
+    eigenpairs,
+    highest_root,
+    lowest_root,
+    project,
+)
 from fault_tolerance.numerics.fast.small_eigen import njit
 
 REPS = 20000
@@ -43,13 +49,7 @@ def _eigen_loop(Js, reps):  # pragma: no cover - numba
     A, V, d, w = np.empty((m, m)), np.empty((m, m)), np.empty(m), np.empty(2 * m)
     acc = 0.0
     for t in range(reps):
-        J = Js[t % k]
-        for i in range(m):
-            for j in range(i + 1):
-                s = 0.0
-                for c in range(n):
-                    s += J[i, c] * J[j, c]
-                A[i, j] = s
+        gram_into(Js[t % k], A)
         eigenpairs(A, m, V, d, w)
         acc += d[0]
     return acc
@@ -62,26 +62,14 @@ def _roots_loop(Js, cols, reps):  # pragma: no cover - numba
     A, V, d, w, u2 = np.empty((m, m)), np.empty((m, m)), np.empty(m), np.empty(2 * m), np.empty(m)
     Vs, ds = np.empty((k, m, m)), np.empty((k, m))
     for t in range(k):
-        J = Js[t]
-        for i in range(m):
-            for j in range(i + 1):
-                s = 0.0
-                for c in range(n):
-                    s += J[i, c] * J[j, c]
-                A[i, j] = s
+        gram_into(Js[t], A)
         eigenpairs(A, m, V, d, w)
         Vs[t], ds[t] = V, d
     acc = 0.0
     for t in range(reps):
         J, V, d = Js[t % k], Vs[t % k], ds[t % k]
         for i in cols:
-            total = 0.0
-            for a in range(m):
-                s = 0.0
-                for r in range(m):
-                    s += V[r, a] * J[r, i]
-                u2[a] = s * s
-                total += u2[a]
+            total = project(V, J, i, m, u2)
             lo, _ = lowest_root(d, u2, m, total)
             hi, _ = highest_root(d, u2, m)
             acc += lo + hi

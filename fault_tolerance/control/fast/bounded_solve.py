@@ -170,6 +170,30 @@ def _reduced_box(
     return solve_box_rates(p0, d, Zs, rs, lo, hi, mask, qd, act, ws, wsi, gram, res, 1.0)
 
 
+@_inline
+def _set_size(sets, sc) -> int:  # pragma: no cover - numba
+    """The number of joints of scenario ``sc`` (its row of ``sets`` is −1 padded)."""
+    k = 0
+    while k < sets.shape[1] and sets[sc, k] >= 0:
+        k += 1
+    return k
+
+
+@_inline
+def _record_post(qd, S, k, sc, wrel, P, cbar, ps, pb, res) -> None:  # pragma: no cover - numba
+    """A reduced robot's bounded rates ``qd`` (zeroed on ``S[:k]``) into row ``sc`` of ``P``.
+
+    Its share ``w_S/W`` of them goes into ``cbar``, its scale ``res[0]`` into ``ps``;
+    ``pb[sc] = res[1] = 1``.
+    """
+    for t in range(k):
+        qd[S[t]] = 0.0
+    for j in range(qd.shape[0]):
+        P[sc, j] = qd[j]
+        cbar[j] += wrel[sc] * qd[j]
+    ps[sc], pb[sc], res[1] = res[0], 1.0, 1.0
+
+
 @_njit
 def _jvja_target(
     J, xdot, Z, r, V, tr, lo, hi, sets, wrel, params, W, res
@@ -187,10 +211,7 @@ def _jvja_target(
     for j in range(n):
         cbar[j] = 0.0
     for sc in range(f):
-        k = 0
-        while k < s and sets[sc, k] >= 0:
-            k += 1
-        S = sets[sc]
+        k, S = _set_size(sets, sc), sets[sc]
         trinv = reduced_rates(Z, r, V[0], S, k, post, NSS, ys, params[1], zr)
         if trinv < 0.0:
             return 2
@@ -218,12 +239,7 @@ def _jvja_target(
                               V[4], act, res)  # fmt: skip
             if st:
                 return st
-        for t in range(k):
-            V[4, S[t]] = 0.0
-        for j in range(n):
-            P[sc, j] = V[4, j]
-            cbar[j] += wrel[sc] * V[4, j]
-        ps[sc], pb[sc], res[1] = res[0], 1.0, 1.0
+        _record_post(V[4], S, k, sc, wrel, P, cbar, ps, pb, res)
     return 0
 
 
@@ -301,21 +317,13 @@ def _vertex_target(J, xdot, lo, hi, V, p3, F, Iw, top, res) -> int:  # pragma: n
     for j in range(n):
         cbar[j] = 0.0
     for sc in range(f):
-        k = 0
-        while k < s and sets[sc, k] >= 0:
-            k += 1
-        S = sets[sc]
+        k, S = _set_size(sets, sc), sets[sc]
         clear = pivots_clear(Y, S, k, p3[1], NSS)
         if clear <= 0:
             return 2 if clear < 0 else UNDECIDED
         if reduced_vertex(J, xdot, lo, hi, S, k, vtx, top, qd, act, res):
             return UNDECIDED
-        for t in range(k):
-            qd[S[t]] = 0.0
-        for j in range(n):
-            P[sc, j] = qd[j]
-            cbar[j] += wrel[sc] * qd[j]
-        ps[sc], pb[sc], res[1] = res[0], 1.0, 1.0
+        _record_post(qd, S, k, sc, wrel, P, cbar, ps, pb, res)
     return 0
 
 
