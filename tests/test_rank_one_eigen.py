@@ -14,11 +14,11 @@ EPS = np.finfo(float).eps
 
 
 def _basis(G):
-    """``(ok, V, d)`` of :func:`ro.eigenpairs` on a copy of ``G``."""
+    """``(ok, V, d)`` of :func:`ro.eigenpairs` on a copy of ``G``, the eigenvectors by columns."""
     m = G.shape[0]
-    V, d = np.full((m, m), np.nan), np.full(m, np.nan)
-    ok = ro.eigenpairs(np.array(G, dtype=float), m, V, d, np.empty(2 * m))
-    return ok, V, d
+    Vt, d = np.full((m, m), np.nan), np.full(m, np.nan)
+    ok = ro.eigenpairs(np.array(G, dtype=float), m, Vt, d, np.empty(2 * m))
+    return ok, Vt.T, d
 
 
 def _extremes(G, v):
@@ -26,7 +26,7 @@ def _extremes(G, v):
     m = G.shape[0]
     ok, V, d = _basis(G)
     assert ok
-    lo, hi, ok = ro.downdate_extremes(V, d, v.reshape(m, 1), 0, m, np.empty(m))
+    lo, hi, ok = ro.downdate_extremes(V.T.copy(), d, v.reshape(m, 1), 0, m, np.empty(m))
     assert ok
     return lo, hi
 

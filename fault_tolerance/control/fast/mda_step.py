@@ -175,10 +175,10 @@ def _unit(u, m) -> bool:  # pragma: no cover - numba
 
 
 @njit
-def _eigenvector(W, V, d, z, mu, top, u, y, M, m) -> bool:  # pragma: no cover - numba
+def _eigenvector(W, Vt, d, z, mu, top, u, y, M, m) -> bool:  # pragma: no cover - numba
     """Unit eigenvector of ``W = G − J_i J_iᵀ`` for its extreme eigenvalue ``μ`` into ``u``.
 
-    Start ``u ∝ V (diag(d) − μ)⁻¹ z`` (``z = Vᵀ J_i``; each distance at least ``ε d_m``, the
+    Start ``u ∝ Vtᵀ (diag(d) − μ)⁻¹ z`` (``z = Vt J_i``; each distance at least ``ε d_m``, the
     eigenvector of ``d``'s end when nothing is left), then two steps of inverse iteration on
     ``W − μ I`` (one factorisation): exact also where ``J_i`` is (nearly) zero and ``W = G``.
     ``y`` holds ``2 m`` numbers.
@@ -188,10 +188,11 @@ def _eigenvector(W, V, d, z, mu, top, u, y, M, m) -> bool:  # pragma: no cover -
             y[k] = 0.0
         y[m - 1 if top else 0] = 1.0
     for r in range(m):
-        s = 0.0
-        for k in range(m):
-            s += V[r, k] * y[k]
-        u[r] = s
+        u[r] = 0.0
+    for k in range(m):
+        yk = y[k]
+        for r in range(m):
+            u[r] += Vt[k, r] * yk
     perm, t = y[0:m], y[m : 2 * m]
     _lu_factor(W, mu, M, perm, m)
     for _ in range(2):
@@ -199,28 +200,6 @@ def _eigenvector(W, V, d, z, mu, top, u, y, M, m) -> bool:  # pragma: no cover -
         if not _unit(u, m):
             return False
     return True
-
-
-@njit
-def _derivative(Jf, rix, i, u, ut, w, S, D, n, m) -> None:  # pragma: no cover - numba
-    """``D_j = ũᵀ (∂J/∂q_j) v`` with ``v = J_Sᵀu / ‖J_Sᵀu‖`` (column ``i`` locked), all j."""
-    for r in range(6):
-        ut[r] = 0.0
-    for k in range(m):
-        ut[rix[k]] = u[k]
-    s = 0.0
-    for c in range(n):
-        t = 0.0
-        if c != i:
-            for k in range(m):
-                t += Jf[rix[k], c] * u[k]
-        w[c] = t
-        s += t * t
-    s = math.sqrt(s)
-    if s > 0.0:
-        for c in range(n):
-            w[c] /= s
-    hessian_contract(Jf, ut, w, S, D)
 
 
 # Eqn. (H5): ∇_j = ω_j · Σ_{k>j} c_k + a_j · Σ_{k≤j} e_k, c_k = a_k × M_lin,k + ω_k × M_ang,k,
@@ -287,33 +266,33 @@ def _secular_vector(d, z, mu, y, m) -> bool:  # pragma: no cover - numba
 
 
 @njit
-def _accumulate(Z, i, y, coef, w, M, n, m) -> None:  # pragma: no cover - numba
-    """``M += coef · y xᵀ`` with ``x = J_Sᵀu / ‖J_Sᵀu‖ = Zᵀy / ‖·‖`` (``x_i = 0``: ``i`` locked).
+def _gather(y, zy, coef, i, B, Me, m) -> None:  # pragma: no cover - numba
+    """``B += coef · y yᵀ`` and ``Me[:, i] −= coef (zᵀy) y``: one vector's term of eq. (H5).
 
-    ``Z = Vᵀ J``, ``y = Vᵀ u``; ``M`` (m, n) in the eigenbasis of ``G``; ``w`` (n) scratch.
+    In the eigenbasis of ``G`` (``y = Vᵀu``, ``z = Vᵀ J_i``) the term ``coef · y wᵀ`` of the
+    vector ``w = J_Sᵀu = Zᵀy − (zᵀy) e_i`` (column ``i`` locked) splits into ``coef · y yᵀ Z``,
+    summed over every vector first and multiplied by ``Z`` once (:func:`rcn_gradient_kernel`),
+    and a correction of column ``i``.
     """
-    s = 0.0
-    for c in range(n):
-        w[c] = 0.0
-    for k in range(m):
-        yk = y[k]
-        for c in range(n):
-            w[c] += Z[k, c] * yk
-    w[i] = 0.0
-    for c in range(n):
-        s += w[c] * w[c]
-    if not s > 0.0:
-        return
-    f = coef / math.sqrt(s)
-    for k in range(m):
-        yk = y[k] * f
-        for c in range(n):
-            M[k, c] += yk * w[c]
+    for r in range(m):
+        cy = coef * y[r]
+        for c in range(m):
+            B[r, c] += cy * y[c]
+        Me[r, i] -= cy * zy
 
 
 @njit
-def _refine(G, J, V, d, z, W, M, mu, top, i, out, y) -> bool:  # pragma: no cover - numba
-    """``out = Vᵀu``, ``u`` the unit eigenvector of ``W_S`` for ``μ`` by inverse iteration.
+def _dot(a, b, m) -> float:  # pragma: no cover - numba
+    """``aᵀb`` of the first ``m`` entries."""
+    t = 0.0
+    for k in range(m):
+        t += a[k] * b[k]
+    return t
+
+
+@njit
+def _refine(G, J, Vt, d, z, W, M, mu, top, i, out, y) -> bool:  # pragma: no cover - numba
+    """``out = Vt u``, ``u`` the unit eigenvector of ``W_S`` for ``μ`` by inverse iteration.
 
     For the vectors whose closed form (eq. H6) was refused. ``W`` and ``M`` (m, m) scratch;
     ``y`` 3 m numbers.
@@ -323,13 +302,10 @@ def _refine(G, J, V, d, z, W, M, mu, top, i, out, y) -> bool:  # pragma: no cove
         for c in range(m):
             W[r, c] = (G[r, c] if c <= r else G[c, r]) - J[r, i] * J[c, i]
     u = y[2 * m : 3 * m]
-    if not _eigenvector(W, V, d, z, mu, top, u, y, M, m):
+    if not _eigenvector(W, Vt, d, z, mu, top, u, y, M, m):
         return False
-    for k in range(m):  # back to the eigenbasis: Vᵀu
-        t = 0.0
-        for r in range(m):
-            t += V[r, k] * u[r]
-        out[k] = t
+    for k in range(m):  # back to the eigenbasis: Vt u
+        out[k] = _dot(Vt[k], u, m)
     return True
 
 
@@ -340,22 +316,22 @@ def rcn_gradient_kernel(Jf, J, G, cols, params, F, grad) -> int:  # pragma: no c
     ``J`` (m, n) the task rows of ``Jf``, ``G = J Jᵀ`` (lower triangle read). Per scenario
     :math:`\partial(k^2)/\partial q_j = 2k(\sigma'_{max}\sigma_{min} -
     \sigma_{max}\sigma'_{min})/\sigma_{min}^2` with ``σ_min`` floored at ``σ_max / RCN_MAX`` and
-    ``σ' = uᵀ(∂J_S/∂q_j)v``; singular reduced robots add nothing (eq. S1). Everything per
-    scenario is done in the eigenbasis of ``G`` (``Z = VᵀJ`` once; eq. H6); the vectors of all
-    scenarios are summed into one matrix, rotated back and contracted with the Hessian once (H5).
-    ``F`` scratch of :func:`gradient_scratch` numbers. Returns :data:`OK` or :data:`NO_EIGEN`.
+    ``σ' = uᵀ(∂J_S/∂q_j)J_Sᵀu / σ``; singular reduced robots add nothing (eq. S1). Everything
+    per scenario is done in the eigenbasis of ``G`` (``Z = Vt J`` once; eq. H6); the vectors of
+    all scenarios are summed into one matrix, rotated back and contracted with the Hessian once
+    (H5). ``F`` scratch of :func:`gradient_scratch` numbers. Returns :data:`OK` or
+    :data:`NO_EIGEN`.
     """
     m, n = J.shape
-    V, A = F[0 : m * m].reshape((m, m)), F[m * m : 2 * m * m].reshape((m, m))
+    Vt, A = F[0 : m * m].reshape((m, m)), F[m * m : 2 * m * m].reshape((m, m))
     Mlu, W = F[2 * m * m : 3 * m * m].reshape((m, m)), F[3 * m * m : 4 * m * m].reshape((m, m))
-    o = 4 * m * m
+    B = F[4 * m * m : 5 * m * m].reshape((m, m))
+    o = 5 * m * m
     d, u2, y = F[o : o + m], F[o + m : o + 2 * m], F[o + 2 * m : o + 5 * m]
     ymin, ymax, z = F[o + 5 * m : o + 6 * m], F[o + 6 * m : o + 7 * m], F[o + 7 * m : o + 8 * m]
     o += 8 * m
     work = F[o : o + 2 * m]
     o += 2 * m
-    w = F[o : o + n]
-    o += n
     M = F[o : o + 6 * n].reshape((6, n))
     o += 6 * n
     Z, Me = F[o : o + m * n].reshape((m, n)), F[o + m * n : o + 2 * m * n].reshape((m, n))
@@ -368,14 +344,16 @@ def rcn_gradient_kernel(Jf, J, G, cols, params, F, grad) -> int:  # pragma: no c
     for r in range(m):
         for c in range(r + 1):
             A[r, c] = G[r, c]
-    if not eigenpairs(A, m, V, d, work):
+    if not eigenpairs(A, m, Vt, d, work):
         return NO_EIGEN
-    for k in range(m):  # Z = Vᵀ J, Me = 0
+    for k in range(m):  # Z = Vt J, Me = 0, B = 0
         for c in range(n):
             Z[k, c] = 0.0
             Me[k, c] = 0.0
+        for c in range(m):
+            B[k, c] = 0.0
         for r in range(m):
-            v = V[r, k]
+            v = Vt[k, r]
             for c in range(n):
                 Z[k, c] += v * J[r, c]
     for s in range(f):
@@ -395,31 +373,38 @@ def rcn_gradient_kernel(Jf, J, G, cols, params, F, grad) -> int:  # pragma: no c
         if not sminr > smax / params[P_SINGULAR]:  # a singular reduced robot: no term (eq. S1)
             continue
         if not _secular_vector(d, z, hi, ymax, m):  # eq. (H6), else inverse iteration
-            if not _refine(G, J, V, d, z, W, Mlu, hi, True, i, ymax, y):
+            if not _refine(G, J, Vt, d, z, W, Mlu, hi, True, i, ymax, y):
                 return NO_EIGEN
         if not _secular_vector(d, z, lo, ymin, m):
-            if not _refine(G, J, V, d, z, W, Mlu, lo, False, i, ymin, y):
+            if not _refine(G, J, Vt, d, z, W, Mlu, lo, False, i, ymin, y):
                 return NO_EIGEN
         smin = max(sminr, smax / params[P_RCN_MAX])
-        k = smax / smin
-        _accumulate(Z, i, ymax, 2.0 * k / smin, w, Me, n, m)
-        _accumulate(Z, i, ymin, -2.0 * k * smax / (smin * smin), w, Me, n, m)
-    _rotate_back(V, Me, rix, M)
+        k = smax / smin  # ‖J_Sᵀu‖ = σ: the vectors' terms divide by it (σ' above)
+        _gather(ymax, _dot(z, ymax, m), 2.0 * k / (smin * smax), i, B, Me, m)
+        _gather(ymin, _dot(z, ymin, m), -2.0 * k * smax / (smin * smin * sminr), i, B, Me, m)
+    _rotate_back(Vt, B, Z, Me, rix, M)
     matrix_contract(Jf, M, grad)
     return OK
 
 
 @njit
-def _rotate_back(V, Me, rix, M) -> None:  # pragma: no cover - numba
-    """``M[rix] = V Me`` (the eigenbasis sum back on the task rows), zero elsewhere."""
+def _rotate_back(Vt, B, Z, Me, rix, M) -> None:  # pragma: no cover - numba
+    """``M[rix] = Vtᵀ (B Z + Me)`` (the eigenbasis sum back on the task rows), zero elsewhere.
+
+    ``Me`` is overwritten with ``B Z + Me``.
+    """
     m, n = Me.shape
+    for r in range(m):
+        for k in range(m):
+            b = B[r, k]
+            for c in range(n):
+                Me[r, c] += b * Z[k, c]
     for r in range(6):
         for c in range(n):
             M[r, c] = 0.0
-    for r in range(m):
-        row = rix[r]
-        for k in range(m):
-            v = V[r, k]
+    for k in range(m):
+        for r in range(m):
+            v, row = Vt[k, r], rix[r]
             for c in range(n):
                 M[row, c] += v * Me[k, c]
 
@@ -427,7 +412,7 @@ def _rotate_back(V, Me, rix, M) -> None:  # pragma: no cover - numba
 @njit
 def gradient_scratch(m, n):  # pragma: no cover - numba
     """Length of the scratch ``F`` of :func:`rcn_gradient_kernel`."""
-    return 4 * m * m + 10 * m + 7 * n + 2 * m * n
+    return 5 * m * m + 10 * m + 6 * n + 2 * m * n
 
 
 @njit

@@ -2,7 +2,7 @@
 
 Every scenario's ``W_S = J_S J_Sᵀ = G − J_i J_iᵀ`` (eq. 15) is a rank-one downdate of the same
 ``G = J Jᵀ``. With ``G = V diag(d) Vᵀ`` (``d`` ascending; :func:`eigenpairs`, once per
-sample) and ``u = Vᵀ J_i``, the eigenvalues of ``W_S`` are those of ``diag(d) − u uᵀ``: the roots
+sample, gives ``Vt = Vᵀ``, the eigenvectors by rows) and ``u = Vᵀ J_i``, the eigenvalues of ``W_S`` are those of ``diag(d) − u uᵀ``: the roots
 ``μ`` of the secular equation ``1 = Σ_k u_k² / (d_k − μ)``. They interlace, ``μ_1 ≤ d_1 ≤ μ_2 ≤
 … ≤ μ_m ≤ d_m``, so
 
@@ -26,8 +26,8 @@ Example::
 
     >>> import numpy as np
     >>> from fault_tolerance.numerics.fast.rank_one_eigen import eigenpairs
-    >>> A, V, d = np.array([[2.0, 1.0], [1.0, 2.0]]), np.empty((2, 2)), np.empty(2)
-    >>> eigenpairs(A, 2, V, d, np.empty(4)), np.round(d, 12).tolist()
+    >>> A, Vt, d = np.array([[2.0, 1.0], [1.0, 2.0]]), np.empty((2, 2)), np.empty(2)
+    >>> eigenpairs(A, 2, Vt, d, np.empty(4)), np.round(d, 12).tolist()
     (True, [1.0, 3.0])
 """
 
@@ -45,57 +45,68 @@ TOL = 64.0 * EPS
 
 
 @njit
-def _householder_basis(A, m, V) -> None:  # pragma: no cover - numba
-    """``V = Q = H_0 H_1 … H_{m−2}`` from the reflectors :func:`.tridiagonalize` left in ``A``."""
+def _householder_rows(A, m, Vt) -> None:  # pragma: no cover - numba
+    """``Vt = Qᵀ = H_{m−2} … H_1 H_0`` from the reflectors :func:`.tridiagonalize` left in ``A``.
+
+    The basis is kept by rows (``Vt[k]`` the k-th vector), so every update below reads and
+    writes contiguous memory.
+    """
     for r in range(m):
         for c in range(m):
-            V[r, c] = 1.0 if r == c else 0.0
+            Vt[r, c] = 1.0 if r == c else 0.0
     for k in range(m - 2, -1, -1):
         tau = A[k, k + 1]
         if tau == 0.0:
             continue
-        for c in range(k + 1, m):  # V[k+1:, c] ← H_k V[k+1:, c]
+        for r in range(k + 1, m):  # Vt[r, k+1:] ← Vt[r, k+1:] H_k
             s = 0.0
-            for r in range(k + 1, m):
-                s += A[r, k] * V[r, c]
+            for c in range(k + 1, m):
+                s += A[c, k] * Vt[r, c]
             s *= tau
-            for r in range(k + 1, m):
-                V[r, c] -= s * A[r, k]
+            for c in range(k + 1, m):
+                Vt[r, c] -= s * A[c, k]
 
 
 @njit
-def _ql_vectors_sweep(d, e, lo, j, V, m) -> None:  # pragma: no cover - numba
-    """One implicit QL step with Wilkinson's shift on the block ``lo..j``; ``V ← V R`` (tql2)."""
+def _ql_vectors_sweep(d, e, lo, j, Vt, m) -> None:  # pragma: no cover - numba
+    """One implicit QL step with Wilkinson's shift on the block ``lo..j``; rows of ``Vt`` rotated.
+
+    EISPACK's ``tql2`` with ``√(f² + g²)`` for ``hypot``: :func:`eigenpairs` admits only
+    matrices whose largest entry lies in ``[SMALLEST, LARGEST]`` (as ``dsterf``), where no
+    square over- or underflows to a wrong sum. ``|g| < 1/(2ε)`` in the shift, since ``e[lo]``
+    is not negligible there.
+    """
     g = (d[lo + 1] - d[lo]) / (2.0 * e[lo])
-    r = math.hypot(g, 1.0)
+    r = math.sqrt(g * g + 1.0)
     g = d[j] - d[lo] + e[lo] / (g + math.copysign(r, g))
     s, c, p = 1.0, 1.0, 0.0
     for i in range(j - 1, lo - 1, -1):
         f, b = s * e[i], c * e[i]
-        r = math.hypot(f, g)
+        r = math.sqrt(f * f + g * g)
         e[i + 1] = r
         if r == 0.0:  # underflow: the block splits here
             d[i + 1] -= p
             e[j] = 0.0
             return
-        s, c = f / r, g / r
+        inv = 1.0 / r
+        s, c = f * inv, g * inv
         g = d[i + 1] - p
         r = (d[i] - g) * s + 2.0 * c * b
         p = s * r
         d[i + 1] = g + p
         g = c * r - b
         for k in range(m):
-            t = V[k, i + 1]
-            V[k, i + 1] = s * V[k, i] + c * t
-            V[k, i] = c * V[k, i] - s * t
+            t = Vt[i + 1, k]
+            Vt[i + 1, k] = s * Vt[i, k] + c * t
+            Vt[i, k] = c * Vt[i, k] - s * t
     d[lo] -= p
     e[lo] = g
     e[j] = 0.0
 
 
 @njit
-def _ql_vectors(d, e, m, V) -> bool:  # pragma: no cover - numba
-    """Eigenvalues of ``T`` (``d``, ``e``) into ``d`` and ``V ← V Z``; False after 30 m sweeps."""
+def _ql_vectors(d, e, m, Vt) -> bool:  # pragma: no cover - numba
+    """Eigenvalues of ``T`` (``d``, ``e``) into ``d`` and ``Vt ← Zᵀ Vt``; False after 30 m sweeps."""
     e[m - 1] = 0.0
     budget = 30 * m
     for lo in range(m):
@@ -108,53 +119,53 @@ def _ql_vectors(d, e, m, V) -> bool:  # pragma: no cover - numba
             if budget == 0:
                 return False
             budget -= 1
-            _ql_vectors_sweep(d, e, lo, j, V, m)
+            _ql_vectors_sweep(d, e, lo, j, Vt, m)
     return True
 
 
 @njit
-def _sort_pairs(V, m, d) -> None:  # pragma: no cover - numba
-    """``d`` ascending, the columns of ``V`` in the same order."""
+def _sort_pairs(Vt, m, d) -> None:  # pragma: no cover - numba
+    """``d`` ascending, the rows of ``Vt`` in the same order."""
     for j in range(1, m):
         k = j
         while k > 0 and d[k] < d[k - 1]:
             d[k], d[k - 1] = d[k - 1], d[k]
-            for r in range(m):
-                V[r, k], V[r, k - 1] = V[r, k - 1], V[r, k]
+            for c in range(m):
+                Vt[k, c], Vt[k - 1, c] = Vt[k - 1, c], Vt[k, c]
             k -= 1
 
 
 @njit
-def eigenpairs(A, m, V, d, work) -> bool:  # pragma: no cover - numba
-    """``A[:m, :m] = V diag(d) Vᵀ``, ``d`` ascending (lower triangle read, ``A`` overwritten).
+def eigenpairs(A, m, Vt, d, work) -> bool:  # pragma: no cover - numba
+    """``A[:m, :m] = Vtᵀ diag(d) Vt``, ``d`` ascending, the eigenvectors the rows of ``Vt``.
 
-    Householder tridiagonalisation (:func:`.tridiagonalize`), the reflectors accumulated, and
-    the implicit QL iteration with the rotations applied to ``V`` (EISPACK's ``tql2``).
-    ``work`` holds ``2 m`` numbers. False when a number is not finite or out of range, or after
-    ``30 m`` sweeps.
+    Householder tridiagonalisation (:func:`.tridiagonalize`; lower triangle read, ``A``
+    overwritten), the reflectors accumulated, and the implicit QL iteration with its rotations
+    applied to the rows of ``Vt`` (EISPACK's ``tql2``). ``work`` holds ``2 m`` numbers. False
+    when a number is not finite or out of range, or after ``30 m`` sweeps.
     """
     e, w = work[0:m], work[m : 2 * m]
     tridiagonalize(A, m, d, e, w)
     if not _in_range(d, e, m):
         return False
-    _householder_basis(A, m, V)
-    if not _ql_vectors(d, e, m, V):
+    _householder_rows(A, m, Vt)
+    if not _ql_vectors(d, e, m, Vt):
         return False
     for j in range(m):
         if not abs(d[j]) < math.inf:
             return False
-    _sort_pairs(V, m, d)
+    _sort_pairs(Vt, m, d)
     return True
 
 
 @njit
-def project(V, J, i, m, u2) -> float:  # pragma: no cover - numba
-    """``u2 = (Vᵀ J_i)²`` entry by entry; returns ``‖u‖²``."""
+def project(Vt, J, i, m, u2) -> float:  # pragma: no cover - numba
+    """``u2 = (Vt J_i)²`` entry by entry; returns ``‖u‖²``."""
     total = 0.0
     for k in range(m):
         s = 0.0
         for r in range(m):
-            s += V[r, k] * J[r, i]
+            s += Vt[k, r] * J[r, i]
         u2[k] = s * s
         total += u2[k]
     return total
@@ -288,9 +299,9 @@ def highest_root(d, u2, m):  # pragma: no cover - numba
 
 
 @njit
-def downdate_extremes(V, d, J, i, m, u2):  # pragma: no cover - numba
-    """``(λ_min, λ_max, ok)`` of ``G − J_i J_iᵀ`` from ``G = V diag(d) Vᵀ`` (``u2``: m scratch)."""
-    total = project(V, J, i, m, u2)
+def downdate_extremes(Vt, d, J, i, m, u2):  # pragma: no cover - numba
+    """``(λ_min, λ_max, ok)`` of ``G − J_i J_iᵀ`` from ``G = Vtᵀ diag(d) Vt`` (``u2``: m scratch)."""
+    total = project(Vt, J, i, m, u2)
     lo, ok = lowest_root(d, u2, m, total)
     if not ok:
         return math.nan, math.nan, False

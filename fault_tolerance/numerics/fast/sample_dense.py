@@ -90,13 +90,13 @@ def _capped_k(lo, hi, rcn_max) -> float:  # pragma: no cover - numba
 def _spectra(G, J, cols, ks, W, rcn_max, scratch):  # pragma: no cover - numba
     """``k_S`` of every scenario into ``ks``; ``(K, σ_min(J))``, from one eigenbasis of ``G``.
 
-    ``G = V diag(d) Vᵀ`` once (:func:`.rank_one_eigen.eigenpairs`); each ``J_S J_Sᵀ = G − J_i
+    ``G = Vtᵀ diag(d) Vt`` once (:func:`.rank_one_eigen.eigenpairs`); each ``J_S J_Sᵀ = G − J_i
     J_iᵀ`` by its secular equation (:func:`.rank_one_eigen.downdate_extremes`). A scenario whose
     roots fail, or all when the eigenbasis fails, takes :func:`_reduced_extremes` (QL, then
-    LAPACK); ``W`` (m, m) and ``scratch`` (``m² + 5 m``: ``V``, ``d``, ``u²``, 3 m) are scratch.
+    LAPACK); ``W`` (m, m) and ``scratch`` (``m² + 5 m``: ``Vt``, ``d``, ``u²``, 3 m) are scratch.
     """
     m = G.shape[0]
-    V = scratch[0 : m * m].reshape((m, m))
+    Vt = scratch[0 : m * m].reshape((m, m))
     d, u2, t = (
         scratch[m * m : m * m + m],
         scratch[m * m + m : m * m + 2 * m],
@@ -105,12 +105,12 @@ def _spectra(G, J, cols, ks, W, rcn_max, scratch):  # pragma: no cover - numba
     for r in range(m):
         for c in range(m):
             W[r, c] = G[r, c]
-    basis = eigenpairs(W, m, V, d, t)
+    basis = eigenpairs(W, m, Vt, d, t)
     K = 0.0
     for s in range(cols.shape[0]):
         ok = False
         if basis:
-            lo, hi, ok = downdate_extremes(V, d, J, cols[s], m, u2)
+            lo, hi, ok = downdate_extremes(Vt, d, J, cols[s], m, u2)
         if not ok:
             lo, hi = _reduced_extremes(G, J, cols[s], W, t)
         ks[s] = _capped_k(lo, hi, rcn_max)
