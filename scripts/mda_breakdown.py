@@ -2,7 +2,7 @@
 
 Times, in one process and on the benchmark's pool of configurations, the whole MDA and JVJA
 steps of the Controller, the Jacobian, and ∇K's parts inside compiled loops (no call overhead):
-the eigenpairs of ``G = J Jᵀ`` and the two secular roots of every scenario (eq. 15, H6). It
+the eigenpairs of ``G = J Jᵀ`` and the two secular roots of every scenario (eq. 15, K3). It
 explains the ``mda_over_jvja`` row of ``fault-tolerance bench`` (docs/mda.md)::
 
     python scripts/mda_breakdown.py panda_pose panda_position spatial_4r
@@ -18,12 +18,7 @@ import pinocchio as pin
 
 from fault_tolerance.bench.cases import ARMS, make_case
 from fault_tolerance.numerics.fast.dense import gram_into
-from fault_tolerance.numerics.fast.rank_one_eigen import (
-    eigenpairs,
-    highest_root,
-    lowest_root,
-    project,
-)
+from fault_tolerance.numerics.fast.rank_one_eigen import LANE_ROWS, all_extremes, eigenpairs
 from fault_tolerance.numerics.fast.small_eigen import njit
 
 REPS = 20000
@@ -46,33 +41,32 @@ def median_us(fn, args, reps=REPS) -> float:
 def _eigen_loop(Js, reps):  # pragma: no cover - numba
     """``reps`` Gram matrices and their eigenpairs (the first part of ∇K), cycling over ``Js``."""
     k, m, n = Js.shape
-    A, V, d, w = np.empty((m, m)), np.empty((m, m)), np.empty(m), np.empty(2 * m)
+    A, Vt, d, w = np.empty((m, m)), np.empty((m, m)), np.empty(m), np.empty(2 * m)
     acc = 0.0
     for t in range(reps):
         gram_into(Js[t % k], A)
-        eigenpairs(A, m, V, d, w)
+        eigenpairs(A, m, Vt, d, w)
         acc += d[0]
     return acc
 
 
 @njit
 def _roots_loop(Js, cols, reps):  # pragma: no cover - numba
-    """``reps`` times: ``u = Vᵀ J_i`` and both secular roots of every scenario (``G``'s eigenpairs given)."""
+    """``reps`` times: ``Z = Vt J`` and both secular roots of every scenario, side by side
+    (:func:`all_extremes`, as the kernel; ``G``'s eigenpairs given)."""
     k, m, n = Js.shape
-    A, V, d, w, u2 = np.empty((m, m)), np.empty((m, m)), np.empty(m), np.empty(2 * m), np.empty(m)
-    Vs, ds = np.empty((k, m, m)), np.empty((k, m))
+    f = cols.shape[0]
+    A, Vt, d, w = np.empty((m, m)), np.empty((m, m)), np.empty(m), np.empty(2 * m)
+    Zs, ds = np.empty((k, m, n)), np.empty((k, m))
     for t in range(k):
         gram_into(Js[t], A)
-        eigenpairs(A, m, V, d, w)
-        Vs[t], ds[t] = V, d
+        eigenpairs(A, m, Vt, d, w)
+        Zs[t], ds[t] = Vt @ Js[t], d
+    U2, X, lam = np.empty((m, f)), np.empty((LANE_ROWS + 1, max(f, m))), np.empty((3, f))
     acc = 0.0
     for t in range(reps):
-        J, V, d = Js[t % k], Vs[t % k], ds[t % k]
-        for i in cols:
-            total = project(V, J, i, m, u2)
-            lo, _ = lowest_root(d, u2, m, total)
-            hi, _ = highest_root(d, u2, m)
-            acc += lo + hi
+        all_extremes(ds[t % k], Zs[t % k], cols, m, U2, X, lam)
+        acc += lam[0, 0] + lam[1, 0]
     return acc
 
 

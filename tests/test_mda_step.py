@@ -72,7 +72,7 @@ def test_near_singular_configurations_are_near_singular():
 
 
 def test_hessian_contraction_equals_the_kinematic_hessian():
-    """hessian_contract (H1) equals uᵀ (∂J/∂q_j) x from Arm.jacobian_derivatives, to 1e-12."""
+    """hessian_contract (K1) equals uᵀ (∂J/∂q_j) x from Arm.jacobian_derivatives, to 1e-12."""
     rng = np.random.default_rng(SEED)
     for arm in (ft.load_arm("panda", task="pose"), ft.load_arm("spatial_4r")):
         data = arm.model.createData()
@@ -89,7 +89,7 @@ def test_hessian_contraction_equals_the_kinematic_hessian():
 
 
 def test_matrix_contraction_equals_the_kinematic_hessian():
-    """matrix_contract (H5) equals Σ M[r, k] (∂J/∂q_j)[r, k] from Arm.jacobian_derivatives, 1e-12."""
+    """matrix_contract (K2) equals Σ M[r, k] (∂J/∂q_j)[r, k] from Arm.jacobian_derivatives, 1e-12."""
     rng = np.random.default_rng(SEED)
     for arm in (ft.load_arm("panda", task="pose"), ft.load_arm("spatial_4r")):
         data = arm.model.createData()

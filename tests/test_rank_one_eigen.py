@@ -169,3 +169,62 @@ def test_a_failed_root_takes_the_ql_path(monkeypatch):
     slow, K2, smin2 = _spectra(J, sl._spectra.py_func)
     _close_k(slow, ks)
     assert (K2, smin2) == pytest.approx((K, smin), rel=1e-8)
+
+
+def _side_by_side(d, Z):
+    """``(λ_min, λ_max, ok)`` rows of :func:`ro.all_extremes` for every column of ``Z``."""
+    m, f = Z.shape
+    lam = np.full((3, f), np.nan)
+    X = np.full((ro.LANE_ROWS + 1, max(f, m)), np.nan)
+    ro.all_extremes(d, np.ascontiguousarray(Z), np.arange(f), m, np.empty((m, f)), X, lam)
+    return lam
+
+
+def _one_by_one(d, z):
+    """The scalar roots of one scenario (``z`` in the eigenbasis)."""
+    u2 = z * z
+    lo, ok1 = ro.lowest_root(d, u2, len(d), u2.sum())
+    hi, ok2 = ro.highest_root(d, u2, len(d))
+    return lo, hi, ok1 and ok2
+
+
+@pytest.mark.parametrize("m", [2, 3, 6, 12])
+def test_side_by_side_roots_equal_the_scalar_roots(m):
+    """``all_extremes`` (every scenario's steps side by side) gives the scalar functions' roots
+    to rounding and LAPACK's within 30 m ε ‖G‖: random Jacobians with columns scaled over
+    1e-8..1e8, fewer and more scenarios than m, repeated eigenvalues, and the lanes the scalar
+    functions take alone (a zero weight at the nearest pole, ``v`` along one eigenvector, zero)."""
+    rng = np.random.default_rng(40 + m)
+    cases = []
+    for spread in (0.0, 4.0, 8.0):
+        for n in (1, m, m + 3):
+            for _ in range(10):
+                J = _jacobian(rng, m, n, spread)
+                ok, V, d = _basis(J @ J.T)
+                cases.append((d, V.T @ J, J @ J.T, J))
+    Q, _ = np.linalg.qr(rng.standard_normal((m, m)))
+    for lam in (np.ones(m), np.r_[np.ones(m - 1), 3.0], np.sort(rng.uniform(0.1, 2.0, m))):
+        cols = [Q[:, 0] * 0.7, Q[:, -1] * 0.9, np.zeros(m), rng.standard_normal(m) * 0.4]
+        cols += [Q[:, [0, -1]] @ [0.3, 0.4], Q[:, -2:] @ [0.2, 0.5]]  # u_2 = 0, u_{m-1} = 0
+        G, J = (Q * lam) @ Q.T, np.array(cols).T
+        ok, V, d = _basis(G)
+        cases.append((d, V.T @ J, G, J))
+    for d, Z, G, J in cases:
+        lam = _side_by_side(d, Z)
+        scale = max(d[-1], 1e-300)
+        for s in range(Z.shape[1]):
+            lo, hi, ok = _one_by_one(d, Z[:, s])
+            assert lam[2, s] == 1.0 and ok
+            np.testing.assert_allclose(lam[:2, s], [lo, hi], rtol=0, atol=8 * EPS * scale)
+            ref = np.linalg.eigvalsh(G - np.outer(J[:, s], J[:, s]))
+            atol = 30 * m * EPS * scale
+            np.testing.assert_allclose(lam[:2, s], [ref[0], ref[-1]], rtol=0, atol=atol)
+
+
+def test_side_by_side_roots_report_nan():
+    """A scenario with NaN weights is reported not solved; the others still are."""
+    d = np.array([1.0, 2.0, 3.0])
+    Z = np.array([[0.3, np.nan], [0.2, 0.1], [0.4, 0.2]])
+    lam = _side_by_side(d, Z)
+    assert lam[2].tolist() == [1.0, 0.0]
+    np.testing.assert_allclose(lam[:2, 0], _one_by_one(d, Z[:, 0])[:2], rtol=0, atol=1e-15)

@@ -8,9 +8,10 @@
 * ``∇K`` (:func:`rcn_gradient_kernel`, eq. 15 and its gradient): ``G = V diag(d) Vᵀ`` once and
   ``Z = VᵀJ``; each scenario's ``W_S = G − J_i J_iᵀ`` by its secular equation (the extreme
   eigenvalues, :mod:`fault_tolerance.numerics.fast.rank_one_eigen`), the eigenvectors in that
-  basis in closed form ``y ∝ (diag(d) − μ)⁻¹ z`` (eq. H6; inverse iteration on ``W_S − μ I`` when
+  basis in closed form ``y ∝ (diag(d) − μ)⁻¹ z`` (eq. K3; inverse iteration on ``W_S − μ I`` when
   the residual refuses one); ``∂λ/∂q_j = 2 ũᵀ (∂J/∂q_j) J_Sᵀ u`` summed over all the vectors
-  into one matrix and contracted with the kinematic Hessian once, never formed (eq. H5, ``O(n)``);
+  through one ``m × m`` matrix (eq. K4), rotated back and contracted with the kinematic Hessian
+  once, never formed (eq. K2, ``O(n)``);
 * the singular reduced robots (``σ_min ≤ σ_max / RCN_SINGULAR``) add nothing (eq. S1), as in the
   reference :func:`fault_tolerance.resolution.indices.rcn_gradient`;
 * the null step ``α N ∇K = α(∇K − Yᵀ(Y ∇K))``, capped at ``max_step`` as
@@ -41,7 +42,7 @@ from fault_tolerance.numerics.fast.dense import (
     rank_ok,
     trace_inverse,
 )
-from fault_tolerance.numerics.fast.rank_one_eigen import eigenpairs, highest_root, lowest_root
+from fault_tolerance.numerics.fast.rank_one_eigen import LANE_ROWS, all_extremes, eigenpairs
 from fault_tolerance.numerics.fast.small_eigen import njit
 
 try:  # inlined into its callers at numba's IR level (no call of a compiled function per step)
@@ -63,7 +64,7 @@ __all__ = [
 
 _INF = math.inf
 _EPS = 2.220446049250313e-16
-#: A closed-form eigenvector (eq. H6) is kept when its residual is below this many ``m ε λ_max``.
+#: A closed-form eigenvector (eq. K3) is kept when its residual is below this many ``m ε λ_max``.
 RESIDUAL_TOL = 8.0
 #: Entries of the parameter block (the first of the float workspace).
 P_TRACE, P_RANK, P_GAIN, P_MAXSTEP, P_RCN_MAX, P_SINGULAR = range(6)
@@ -79,10 +80,10 @@ def _triple(a0, a1, a2, b0, b1, b2, c0, c1, c2) -> float:  # pragma: no cover - 
     return c0 * (a1 * b2 - a2 * b1) + c1 * (a2 * b0 - a0 * b2) + c2 * (a0 * b1 - a1 * b0)
 
 
-# Eqn. (H1): ∂J_k/∂q_j = [ω_j × a_k; ω_j × ω_k] (j < k), [ω_k × a_j; 0] (j ≥ k), LWA columns.
+# Eqn. (K1): ∂J_k/∂q_j = [ω_j × a_k; ω_j × ω_k] (j < k), [ω_k × a_j; 0] (j ≥ k), LWA columns.
 @njit
 def hessian_contract(Jf, ut, x, S, D) -> None:  # pragma: no cover - numba
-    r"""``D_j = ũᵀ (∂J/∂q_j) x`` for every joint j, the Hessian never formed (eq. H1).
+    r"""``D_j = ũᵀ (∂J/∂q_j) x`` for every joint j, the Hessian never formed (eq. K1).
 
     ``Jf`` (6, n) the ``LOCAL_WORLD_ALIGNED`` Jacobian, columns ``[a_k; ω_k]``; ``ũ`` (6) a
     row-space vector (zero off the task rows). With the suffix sums :math:`A_j = \sum_{k>j} x_k
@@ -202,11 +203,11 @@ def _eigenvector(W, Vt, d, z, mu, top, u, y, M, m) -> bool:  # pragma: no cover 
     return True
 
 
-# Eqn. (H5): ∇_j = ω_j · Σ_{k>j} c_k + a_j · Σ_{k≤j} e_k, c_k = a_k × M_lin,k + ω_k × M_ang,k,
-# e_k = M_lin,k × ω_k: all the vectors' contractions (H1) at once, from M = Σ_t c_t ũ_t x_tᵀ.
+# Eqn. (K2): ∇_j = ω_j · Σ_{k>j} c_k + a_j · Σ_{k≤j} e_k, c_k = a_k × M_lin,k + ω_k × M_ang,k,
+# e_k = M_lin,k × ω_k: all the vectors' contractions (K1) at once, from M = Σ_t c_t ũ_t x_tᵀ.
 @njit
 def matrix_contract(Jf, M, grad) -> None:  # pragma: no cover - numba
-    r"""``grad_j = Σ_{r,k} M[r, k] (∂J/∂q_j)[r, k]`` for every joint j (eq. H5), ``O(n)``.
+    r"""``grad_j = Σ_{r,k} M[r, k] (∂J/∂q_j)[r, k]`` for every joint j (eq. K2), ``O(n)``.
 
     ``M`` (6, n), zero off the task rows; the Hessian never formed. With ``M = ũ xᵀ`` this is
     :func:`hessian_contract`; a sum of such terms is contracted in one pass.
@@ -229,10 +230,10 @@ def matrix_contract(Jf, M, grad) -> None:  # pragma: no cover - numba
         grad[j] += Jf[0, j] * p0 + Jf[1, j] * p1 + Jf[2, j] * p2
 
 
-# Eqn. (H6): y = (diag(d) − μ)⁻¹ z / ‖·‖ (u = V y), kept when ‖(diag(d) − z zᵀ − μ) y‖ ≤ 8 m ε d_m.
+# Eqn. (K3): y = (diag(d) − μ)⁻¹ z / ‖·‖ (u = V y), kept when ‖(diag(d) − z zᵀ − μ) y‖ ≤ 8 m ε d_m.
 @njit
 def _secular_start(d, z, mu, y, m) -> bool:  # pragma: no cover - numba
-    """``y = (diag(d) − μ)⁻¹ z`` normalised (eq. H6), each distance at least ``ε d_m``.
+    """``y = (diag(d) − μ)⁻¹ z`` normalised (eq. K3), each distance at least ``ε d_m``.
 
     False when nothing is left to normalise (``z`` zero where ``μ`` is not a pole).
     """
@@ -247,7 +248,7 @@ def _secular_start(d, z, mu, y, m) -> bool:  # pragma: no cover - numba
 
 @njit
 def _secular_vector(d, z, mu, y, m) -> bool:  # pragma: no cover - numba
-    """The closed-form unit eigenvector of ``diag(d) − z zᵀ`` for ``μ`` (eq. H6) into ``y``.
+    """The closed-form unit eigenvector of ``diag(d) − z zᵀ`` for ``μ`` (eq. K3) into ``y``.
 
     ``y`` is ``Vᵀu`` of the eigenvector ``u`` of ``W_S = G − J_i J_iᵀ`` (``z = Vᵀ J_i``). True
     when its residual in that basis is at rounding level (then ``u`` is as accurate as a
@@ -265,9 +266,10 @@ def _secular_vector(d, z, mu, y, m) -> bool:  # pragma: no cover - numba
     return math.sqrt(res) <= RESIDUAL_TOL * m * _EPS * max(abs(d[m - 1]), 1e-300)
 
 
+# Eqn. (K4): Σ_t c_t y_t (J_Sᵀu_t)ᵀ = B Z − Σ_t c_t (zᵀy_t) y_t e_iᵀ, B = Σ_t c_t y_t y_tᵀ.
 @njit
 def _gather(y, zy, coef, i, B, Me, m) -> None:  # pragma: no cover - numba
-    """``B += coef · y yᵀ`` and ``Me[:, i] −= coef (zᵀy) y``: one vector's term of eq. (H5).
+    """``B += coef · y yᵀ`` and ``Me[:, i] −= coef (zᵀy) y``: one vector's term of eq. (K4).
 
     In the eigenbasis of ``G`` (``y = Vᵀu``, ``z = Vᵀ J_i``) the term ``coef · y wᵀ`` of the
     vector ``w = J_Sᵀu = Zᵀy − (zᵀy) e_i`` (column ``i`` locked) splits into ``coef · y yᵀ Z``,
@@ -294,7 +296,7 @@ def _dot(a, b, m) -> float:  # pragma: no cover - numba
 def _refine(G, J, Vt, d, z, W, M, mu, top, i, out, y) -> bool:  # pragma: no cover - numba
     """``out = Vt u``, ``u`` the unit eigenvector of ``W_S`` for ``μ`` by inverse iteration.
 
-    For the vectors whose closed form (eq. H6) was refused. ``W`` and ``M`` (m, m) scratch;
+    For the vectors whose closed form (eq. K3) was refused. ``W`` and ``M`` (m, m) scratch;
     ``y`` 3 m numbers.
     """
     m = J.shape[0]
@@ -317,9 +319,9 @@ def rcn_gradient_kernel(Jf, J, G, cols, params, F, grad) -> int:  # pragma: no c
     :math:`\partial(k^2)/\partial q_j = 2k(\sigma'_{max}\sigma_{min} -
     \sigma_{max}\sigma'_{min})/\sigma_{min}^2` with ``σ_min`` floored at ``σ_max / RCN_MAX`` and
     ``σ' = uᵀ(∂J_S/∂q_j)J_Sᵀu / σ``; singular reduced robots add nothing (eq. S1). Everything
-    per scenario is done in the eigenbasis of ``G`` (``Z = Vt J`` once; eq. H6); the vectors of
+    per scenario is done in the eigenbasis of ``G`` (``Z = Vt J`` once; eq. K3); the vectors of
     all scenarios are summed into one matrix, rotated back and contracted with the Hessian once
-    (H5). ``F`` scratch of :func:`gradient_scratch` numbers. Returns :data:`OK` or
+    (K2). ``F`` scratch of :func:`gradient_scratch` numbers. Returns :data:`OK` or
     :data:`NO_EIGEN`.
     """
     m, n = J.shape
@@ -327,16 +329,21 @@ def rcn_gradient_kernel(Jf, J, G, cols, params, F, grad) -> int:  # pragma: no c
     Mlu, W = F[2 * m * m : 3 * m * m].reshape((m, m)), F[3 * m * m : 4 * m * m].reshape((m, m))
     B = F[4 * m * m : 5 * m * m].reshape((m, m))
     o = 5 * m * m
-    d, u2, y = F[o : o + m], F[o + m : o + 2 * m], F[o + 2 * m : o + 5 * m]
-    ymin, ymax, z = F[o + 5 * m : o + 6 * m], F[o + 6 * m : o + 7 * m], F[o + 7 * m : o + 8 * m]
-    o += 8 * m
+    d, y = F[o : o + m], F[o + m : o + 4 * m]
+    ymin, ymax, z = F[o + 4 * m : o + 5 * m], F[o + 5 * m : o + 6 * m], F[o + 6 * m : o + 7 * m]
+    o += 7 * m
     work = F[o : o + 2 * m]
     o += 2 * m
     M = F[o : o + 6 * n].reshape((6, n))
     o += 6 * n
     Z, Me = F[o : o + m * n].reshape((m, n)), F[o + m * n : o + 2 * m * n].reshape((m, n))
+    o += 2 * m * n
     rix = cols[cols.shape[0] - m :]  # the task rows, after the scenarios' columns
     f = cols.shape[0] - m
+    w = max(f, m)
+    U2, E = F[o : o + m * f].reshape((m, f)), F[o + m * f : o + (m + 3) * f].reshape((3, f))
+    o += (m + 3) * f
+    X = F[o : o + (LANE_ROWS + 1) * w].reshape((LANE_ROWS + 1, w))
     for c in range(n):
         grad[c] = 0.0
     if m < 2:
@@ -356,23 +363,18 @@ def rcn_gradient_kernel(Jf, J, G, cols, params, F, grad) -> int:  # pragma: no c
             v = Vt[k, r]
             for c in range(n):
                 Z[k, c] += v * J[r, c]
+    all_extremes(d, Z, cols[:f], m, U2, X, E)  # every scenario's secular roots, side by side
     for s in range(f):
         i = cols[s]
-        total = 0.0
+        lo, hi = E[0, s], E[1, s]
+        if E[2, s] == 0.0:
+            return NO_EIGEN
         for k in range(m):
             z[k] = Z[k, i]
-            u2[k] = z[k] * z[k]
-            total += u2[k]
-        lo, ok = lowest_root(d, u2, m, total)
-        if not ok:
-            return NO_EIGEN
-        hi, ok = highest_root(d, u2, m)
-        if not ok:
-            return NO_EIGEN
         smax, sminr = math.sqrt(max(hi, 0.0)), math.sqrt(max(lo, 0.0))
         if not sminr > smax / params[P_SINGULAR]:  # a singular reduced robot: no term (eq. S1)
             continue
-        if not _secular_vector(d, z, hi, ymax, m):  # eq. (H6), else inverse iteration
+        if not _secular_vector(d, z, hi, ymax, m):  # eq. (K3), else inverse iteration
             if not _refine(G, J, Vt, d, z, W, Mlu, hi, True, i, ymax, y):
                 return NO_EIGEN
         if not _secular_vector(d, z, lo, ymin, m):
@@ -410,9 +412,9 @@ def _rotate_back(Vt, B, Z, Me, rix, M) -> None:  # pragma: no cover - numba
 
 
 @njit
-def gradient_scratch(m, n):  # pragma: no cover - numba
-    """Length of the scratch ``F`` of :func:`rcn_gradient_kernel`."""
-    return 5 * m * m + 10 * m + 6 * n + 2 * m * n
+def gradient_scratch(m, n, f):  # pragma: no cover - numba
+    """Length of the scratch ``F`` of :func:`rcn_gradient_kernel` (``f`` scenarios)."""
+    return 5 * m * m + 9 * m + 6 * n + 2 * m * n + (m + 3) * f + (LANE_ROWS + 1) * max(f, m)
 
 
 @njit
@@ -430,7 +432,7 @@ def gradient_kernel(Jf, F, Iw, m) -> int:  # pragma: no cover - numba
     """``∇K`` alone (the simulated sample's MDA): into ``F``'s gradient view (:func:`gradient_view`)."""
     n = Jf.shape[1]
     f = Iw.shape[0] - m
-    if f < 1 or F.shape[0] != workspace_size(m, n) or Jf.shape[0] != 6:
+    if f < 1 or F.shape[0] != workspace_size(m, n, f) or Jf.shape[0] != 6:
         return BAD_SIZE
     o = N_PARAMS
     J = F[o : o + m * n].reshape((m, n))
@@ -481,7 +483,7 @@ def mda_kernel(Jf, xdot, out, F, Iw) -> int:  # pragma: no cover - numba
     n = Jf.shape[1]
     m = xdot.shape[0]
     f = Iw.shape[0] - m
-    if out.shape[0] != n or f < 1 or F.shape[0] != workspace_size(m, n) or Jf.shape[0] != 6:
+    if out.shape[0] != n or f < 1 or F.shape[0] != workspace_size(m, n, f) or Jf.shape[0] != 6:
         return BAD_SIZE
     params = F[0:N_PARAMS]
     o = N_PARAMS
@@ -513,15 +515,16 @@ def mda_kernel(Jf, xdot, out, F, Iw) -> int:  # pragma: no cover - numba
 
 
 @njit
-def workspace_size(m, n):  # pragma: no cover - numba
-    """Length of the float workspace of :func:`mda_kernel`."""
-    return N_PARAMS + 2 * m * n + 2 * m * m + m + n + gradient_scratch(m, n)
+def workspace_size(m, n, f):  # pragma: no cover - numba
+    """Length of the float workspace of :func:`mda_kernel` (``f`` scenarios)."""
+    return N_PARAMS + 2 * m * n + 2 * m * m + m + n + gradient_scratch(m, n, f)
 
 
 def gradient_workspace(cw: ControllerWorkspace) -> tuple[np.ndarray, np.ndarray]:
     """``(F, Iw)`` of :func:`mda_kernel` for the Controller workspace ``cw`` (single-joint scenarios)."""
     m, n = cw.m, cw.n
-    F = np.zeros(getattr(workspace_size, "py_func", workspace_size)(m, n))
+    f = len(cw.scenarios.columns)
+    F = np.zeros(getattr(workspace_size, "py_func", workspace_size)(m, n, f))
     F[:N_PARAMS] = TRACE_MAX, cw.rank_coef, cw.gain, cw.max_step, RCN_MAX, RCN_SINGULAR
     rows = np.arange(6)[cw.rows]
     Iw = np.concatenate([np.asarray(cw.scenarios.columns, dtype=np.int64), rows.astype(np.int64)])

@@ -172,24 +172,19 @@ def project(Vt, J, i, m, u2) -> float:  # pragma: no cover - numba
 
 
 @njit
-def _lowest_model(d, u2, m, q, tau):  # pragma: no cover - numba
-    """``F`` of :func:`lowest_root` at ``τ`` and the root of its model, NaN if it has none.
+def _lowest_quadratic(tau, u0, uq, dq, r0, r1):  # pragma: no cover - numba
+    """``F`` of :func:`lowest_root` at ``τ`` and the root of its model, from the sums over the far poles.
 
-    The poles beyond ``q`` (the nearest one, at ``τ = −δ_q``) become ``a + b / (δ_q + τ)``,
-    matching their value and slope at ``τ``; the model ``τ (1 − a − b / (δ_q + τ)) = u_1²`` is a
-    quadratic with one positive root when ``1 − a > 0`` (always so right of the root).
+    ``r0 = Σ_{k>q} u_k² / (δ_k + τ)`` and ``r1 = Σ_{k>q} u_k² / (δ_k + τ)²``: the poles beyond
+    ``q`` (the nearest one, at ``τ = −δ_q``) become ``a + b / (δ_q + τ)``, matching their value
+    and slope at ``τ``; the model ``τ (1 − a − b / (δ_q + τ)) = u_1²`` is a quadratic with one
+    positive root when ``1 − a > 0`` (always so right of the root); NaN when it has none.
     """
-    dq = d[q] - d[0]
-    r0, r1 = 0.0, 0.0
-    for k in range(q + 1, m):
-        r = 1.0 / ((d[k] - d[0]) + tau)
-        r0 += u2[k] * r
-        r1 += u2[k] * r * r
-    rq = 1.0 / (dq + tau)
-    F = tau * (1.0 - r0 - u2[q] * rq) - u2[0]
-    P = 1.0 - r0 + r1 * (dq + tau)  # 1 − a
-    b = u2[q] + r1 * (dq + tau) * (dq + tau)
-    B, C = P * dq - b - u2[0], u2[0] * dq  # P τ² + B τ − C = 0
+    e = dq + tau
+    F = tau * (1.0 - r0 - uq / e) - u0
+    P = 1.0 - r0 + r1 * e  # 1 − a
+    b = uq + r1 * e * e
+    B, C = P * dq - b - u0, u0 * dq  # P τ² + B τ − C = 0
     if not P > 0.0:
         return F, math.nan
     D = math.sqrt(B * B + 4.0 * P * C)
@@ -197,33 +192,59 @@ def _lowest_model(d, u2, m, q, tau):  # pragma: no cover - numba
 
 
 @njit
+def _lowest_model(d, u2, m, q, tau):  # pragma: no cover - numba
+    """``F`` of :func:`lowest_root` at ``τ`` and the root of its model (:func:`_lowest_quadratic`)."""
+    r0, r1 = 0.0, 0.0
+    for k in range(q + 1, m):
+        r = 1.0 / ((d[k] - d[0]) + tau)
+        r0 += u2[k] * r
+        r1 += u2[k] * r * r
+    return _lowest_quadratic(tau, u2[0], u2[q], d[q] - d[0], r0, r1)
+
+
+@njit
+def _advance(F, new, x, lo, hi, below, floor):  # pragma: no cover - numba
+    """One safeguarded step of a root in ``x``: ``(next x, lo, hi, done, root)``.
+
+    ``below`` says the root lies above ``x``. The bracket shrinks to the side of the root; the
+    root is taken (``done``) when ``F`` is 0 or the next (quadratically convergent) step is below
+    ``TOL x + floor`` (rounding makes ``F``'s root uncertain by a few ulps, the step never
+    smaller) or the bracket is that small; a step that leaves the bracket bisects it.
+    """
+    lo, hi = (x, hi) if below else (lo, x)
+    done = F == 0.0 or abs(new - x) <= TOL * x + floor or hi - lo <= TOL * hi + floor
+    root = x if F == 0.0 else min(max(new, lo), hi)
+    return (new if lo <= new <= hi else 0.5 * (lo + hi)), lo, hi, done, root
+
+
+@njit
+def _lowest_start(d, total):  # pragma: no cover - numba
+    """The first ``τ`` of :func:`lowest_root`: ``d_1`` (``λ_min = 0``, as ``W ⪰ 0``) or ``‖u‖²``."""
+    return min(total, max(d[0], 0.0)) if d[0] > 0.0 else total
+
+
+@njit
 def lowest_root(d, u2, m, total):  # pragma: no cover - numba
     """``(λ_min(diag(d) − u uᵀ), ok)``, ``d`` ascending, ``u2 = u²``, ``total = ‖u‖²``.
 
-    The modelled root of :func:`_lowest_model` from ``τ = ‖u‖²`` (where ``F ≥ 0``), inside the
-    bracket ``[0, ‖u‖²]``; ``d_1 − u_1²`` when ``u`` has no other component.
+    The modelled root of :func:`_lowest_model` from :func:`_lowest_start` (where ``F ≥ 0``),
+    inside the bracket ``[0, ‖u‖²]`` (:func:`_advance`); ``d_1 − u_1²`` when ``u`` has no other
+    component.
     """
     q = 1
     while q < m and u2[q] == 0.0:
         q += 1
     if q == m:
         return d[0] - u2[0], True
-    lo, hi = 0.0, total
-    tau = min(total, max(d[0], 0.0)) if d[0] > 0.0 else total  # λ_min(W) ≥ 0 when W ⪰ 0
+    lo, hi, tau = 0.0, total, _lowest_start(d, total)
     floor = EPS * abs(d[m - 1])  # F is uncertain by rounding: its root by a few ε ‖G‖
     for _ in range(MAX_STEPS):
         F, new = _lowest_model(d, u2, m, q, tau)
         if F != F:  # NaN in d or u: no bracket to keep
             break
-        if F <= 0.0:
-            lo = tau
-        else:
-            hi = tau
-        if F == 0.0:
-            return d[0] - tau, True
-        if abs(new - tau) <= TOL * tau + floor or hi - lo <= TOL * hi + floor:
-            return d[0] - min(max(new, lo), hi), True
-        tau = new if lo <= new <= hi else 0.5 * (lo + hi)  # outside the bracket (or NaN): bisect
+        tau, lo, hi, done, root = _advance(F, new, tau, lo, hi, F <= 0.0, floor)
+        if done:
+            return d[0] - root, True
     return math.nan, False
 
 
@@ -237,25 +258,19 @@ def _first_pole(d, u2, m) -> int:  # pragma: no cover - numba
 
 
 @njit
-def _highest_model(d, u2, m, p, x, at_pole):  # pragma: no cover - numba
+def _highest_quadratic(x, at_pole, um, up, dp, r0, r1):  # pragma: no cover - numba
     """``F`` of :func:`highest_root` at ``x`` and the root of its model, in the same variable.
 
     ``x = τ`` (the distance from ``d_m``), or ``x = σ = Δ_p − τ`` (from the pole ``d_p``) when
-    ``at_pole``: the distances to the poles are then formed from the nearer one, without
-    cancellation. The poles beyond ``p`` become ``a + b / σ``, matching their value and slope at
-    ``x``; the model ``τ (1 + a + b / σ) = u_m²`` is a quadratic with one root in the interval.
+    ``at_pole``; ``r0``, ``r1`` the sums of ``u_k² / dist_k`` and ``u_k² / dist_k²`` over the
+    poles below ``p`` (``dist_k`` measured from the nearer end, without cancellation). Those
+    poles become ``a + b / σ``, matching their value and slope at ``x``; the model ``τ (1 + a +
+    b / σ) = u_m²`` is a quadratic with one root in the interval.
     """
-    top, dp = d[m - 1], d[m - 1] - d[p]
     tau, sig = (dp - x, x) if at_pole else (x, dp - x)
-    r0, r1 = 0.0, 0.0
-    for k in range(p):
-        r = 1.0 / ((d[p] - d[k]) + sig) if at_pole else 1.0 / ((top - d[k]) - tau)
-        r0 += u2[k] * r
-        r1 += u2[k] * r * r
-    um = u2[m - 1]
-    F = tau * (1.0 + r0 + u2[p] / sig) - um
+    F = tau * (1.0 + r0 + up / sig) - um
     A = 1.0 + r0 - r1 * sig  # 1 + a
-    b = u2[p] + r1 * sig * sig
+    b = up + r1 * sig * sig
     if not at_pole:  # A τ² − B τ + C = 0, the smaller root
         B, C = A * dp + b + um, um * dp
         return F, 2.0 * C / (B + math.sqrt(max(B * B - 4.0 * A * C, 0.0)))
@@ -265,12 +280,55 @@ def _highest_model(d, u2, m, p, x, at_pole):  # pragma: no cover - numba
 
 
 @njit
+def _highest_sums(d, u2, m, p, x, at_pole):  # pragma: no cover - numba
+    """``(r0, r1)`` of :func:`_highest_quadratic` at ``x``: the poles below ``p``."""
+    top = d[m - 1]
+    r0, r1 = 0.0, 0.0
+    for k in range(p):
+        r = 1.0 / ((d[p] - d[k]) + x) if at_pole else 1.0 / ((top - d[k]) - x)
+        r0 += u2[k] * r
+        r1 += u2[k] * r * r
+    return r0, r1
+
+
+@njit
+def _highest_model(d, u2, m, p, x, at_pole):  # pragma: no cover - numba
+    """``F`` of :func:`highest_root` at ``x`` and the root of its model (:func:`_highest_quadratic`)."""
+    r0, r1 = _highest_sums(d, u2, m, p, x, at_pole)
+    return _highest_quadratic(x, at_pole, u2[m - 1], u2[p], d[m - 1] - d[p], r0, r1)
+
+
+@njit
+def _highest_first(d, u2, m, p, r0, r1):  # pragma: no cover - numba
+    """The first step of :func:`highest_root` from the middle of ``(d_p, d_m)``: ``(x, lo, hi, at_pole, F, new)``.
+
+    ``r0``, ``r1`` the sums at the middle (the same from either end). ``F ≤ 0`` there puts the
+    root nearer the pole (``x = σ``, bracket ``[0, Δ_p/2]``), otherwise nearer ``d_m`` (``x = τ``,
+    bracket ``[0, min(Δ_p/2, u_m²)]``); either way the middle's model gives the first step.
+    """
+    dp, um, up = d[m - 1] - d[p], u2[m - 1], u2[p]
+    half = 0.5 * dp
+    F, new = _highest_quadratic(half, True, um, up, dp, r0, r1)
+    if F <= 0.0:
+        return half, 0.0, half, True, F, new
+    F, new = _highest_quadratic(half, False, um, up, dp, r0, r1)
+    return half, 0.0, min(half, um), False, F, new
+
+
+@njit
+def _highest_value(d, m, p, x, at_pole) -> float:  # pragma: no cover - numba
+    """``λ_max`` from the root ``x`` of :func:`highest_root` (at least ``d_{m−1}``, interlacing)."""
+    return max(d[p] + x if at_pole else d[m - 1] - x, d[m - 2])
+
+
+@njit
 def highest_root(d, u2, m):  # pragma: no cover - numba
     """``(λ_max(diag(d) − u uᵀ), ok)``, ``d`` ascending, ``u2 = u²``; ``m ≥ 2``.
 
     No pole below ``d_m`` (``u`` only along its eigenvector): ``d_m − u_m²``; otherwise the
     modelled root of :func:`_highest_model` inside a bracket, measured from the nearer end of
-    ``(d_p, d_m)`` (the sign of ``F`` at the middle tells which).
+    ``(d_p, d_m)`` (the sign of ``F`` at the middle tells which, and its model gives the first
+    step from the pole).
     """
     top, below = d[m - 1], d[m - 2]
     if u2[m - 1] == 0.0 or top == below:
@@ -278,24 +336,152 @@ def highest_root(d, u2, m):  # pragma: no cover - numba
     p = _first_pole(d, u2, m)
     if p < 0:
         return max(top - u2[m - 1], below), True
-    half = 0.5 * (top - d[p])
-    at_pole = _highest_model(d, u2, m, p, half, False)[0] <= 0.0
-    lo, hi = 0.0, half if at_pole else min(half, u2[m - 1])
-    x = half if at_pole else 0.0
+    r0, r1 = _highest_sums(d, u2, m, p, 0.5 * (top - d[p]), True)
+    x, lo, hi, at_pole, F, new = _highest_first(d, u2, m, p, r0, r1)
     floor = EPS * abs(top)
-    for _ in range(MAX_STEPS):
-        F, new = _highest_model(d, u2, m, p, x, at_pole)
+    for step in range(MAX_STEPS):
+        if step > 0:  # the first step is the middle's
+            F, new = _highest_model(d, u2, m, p, x, at_pole)
         if F != F:
             break
-        if (F >= 0.0) == at_pole:  # F grows with τ, falls with σ
-            lo = x
-        else:
-            hi = x
-        if F == 0.0 or abs(new - x) <= TOL * x + floor or hi - lo <= TOL * hi + floor:
-            x = x if F == 0.0 else min(max(new, lo), hi)
-            return max(d[p] + x if at_pole else top - x, below), True
-        x = new if lo <= new <= hi else 0.5 * (lo + hi)
+        top_hi = hi
+        x, lo, hi, done, root = _advance(F, new, x, lo, hi, (F >= 0.0) == at_pole, floor)
+        hi = min(hi, top_hi)  # the middle may lie above the τ bracket's top u_m²
+        if done:  # F grows with τ, falls with σ
+            return _highest_value(d, m, p, root, at_pole), True
     return math.nan, False
+
+
+#: Per-scenario numbers :func:`all_extremes` keeps in its work array (rows of length ``f``).
+LANE_ROWS = 7
+
+
+@njit
+def _lowest_lanes(d, U2, m, f, X, ok) -> None:  # pragma: no cover - numba
+    """:func:`lowest_root` of every column of ``U2`` (m, f) at once; the roots into ``X[5]``.
+
+    One pass takes a step of every root: the loops run over the scenarios, so the steps of
+    different roots are independent (vectorised, overlapped). The nearest pole is ``q = 1``;
+    a lane with ``u_2 = 0`` or that does not converge gets ``ok = 0`` (:func:`all_extremes`
+    solves it alone). ``X`` rows: ``τ``, lo, hi, ``r0``, ``r1``, root, done.
+    """
+    tau, lo, hi, r0, r1, root, done = X[0], X[1], X[2], X[3], X[4], X[5], X[6]
+    floor, dq = EPS * abs(d[m - 1]), d[1] - d[0]
+    for s in range(f):
+        total = 0.0
+        for k in range(m):
+            total += U2[k, s]
+        tau[s], lo[s], hi[s], done[s] = _lowest_start(d, total), 0.0, total, 0.0
+        ok[s] = 1.0 if U2[1, s] > 0.0 else 0.0
+        done[s] = 1.0 - ok[s]
+    for _ in range(MAX_STEPS):
+        for s in range(f):
+            r0[s], r1[s] = 0.0, 0.0
+        for k in range(2, m):
+            dk = d[k] - d[0]
+            for s in range(f):
+                r = 1.0 / (dk + tau[s])
+                r0[s] += U2[k, s] * r
+                r1[s] += U2[k, s] * r * r
+        running = 0.0
+        for s in range(f):
+            F, new = _lowest_quadratic(tau[s], U2[0, s], U2[1, s], dq, r0[s], r1[s])
+            x, a, b, fin, r = _advance(F, new, tau[s], lo[s], hi[s], F <= 0.0, floor)
+            keep = done[s] != 0.0
+            root[s] = root[s] if keep else r
+            tau[s], lo[s], hi[s] = (tau[s], lo[s], hi[s]) if keep else (x, a, b)
+            done[s] = 1.0 if keep or fin or F != F else 0.0
+            ok[s] = ok[s] if F == F else 0.0
+            running += 1.0 - done[s]
+        if running == 0.0:
+            return
+    for s in range(f):
+        ok[s] = ok[s] * done[s]
+
+
+@njit
+def _highest_lanes(d, U2, m, f, X, ok) -> None:  # pragma: no cover - numba
+    """:func:`highest_root` of every column of ``U2`` at once (as :func:`_lowest_lanes`).
+
+    The nearest pole below ``d_m`` is ``p = m − 1``; a lane with ``u_p = 0`` or ``u_m = 0``, or
+    ``d_p = d_m``, gets ``ok = 0``. ``X`` rows: ``x``, lo, hi, ``r0``, ``r1``, root (NaN while
+    running), measured from the pole.
+    """
+    x, lo, hi, r0, r1, root, pole = X[0], X[1], X[2], X[3], X[4], X[5], X[6]
+    p, top = m - 2, d[m - 1]
+    dp, floor = top - d[p], EPS * abs(top)
+    half = 0.5 * dp
+    for s in range(f):
+        ok[s] = 1.0 if U2[p, s] > 0.0 and U2[m - 1, s] > 0.0 and dp > 0.0 else 0.0
+        x[s], pole[s], lo[s], hi[s] = half, 1.0, 0.0, half
+        root[s] = math.nan if ok[s] != 0.0 else 0.0
+    for step in range(MAX_STEPS):
+        for s in range(f):
+            r0[s], r1[s] = 0.0, 0.0
+        for k in range(p):
+            near, far = d[p] - d[k], top - d[k]
+            for s in range(f):
+                r = 1.0 / (near + x[s]) if pole[s] != 0.0 else 1.0 / (far - x[s])
+                r0[s] += U2[k, s] * r
+                r1[s] += U2[k, s] * r * r
+        running = 0.0
+        for s in range(f):
+            if root[s] == root[s]:  # solved or left
+                continue
+            um, up = U2[m - 1, s], U2[p, s]
+            if step == 0:
+                xs, a, b, at_pole, F, new = _highest_first(d, U2[:, s], m, p, r0[s], r1[s])
+                pole[s], hi[s] = 1.0 if at_pole else 0.0, b
+            else:
+                at_pole = pole[s] != 0.0
+                F, new = _highest_quadratic(x[s], at_pole, um, up, dp, r0[s], r1[s])
+            if F != F:
+                ok[s], root[s] = 0.0, 0.0
+                continue
+            top_hi = hi[s]
+            nx, a, b, fin, r = _advance(F, new, x[s], lo[s], hi[s], (F >= 0.0) == at_pole, floor)
+            x[s], lo[s], hi[s] = nx, a, min(b, top_hi)
+            if fin:
+                root[s] = _highest_value(d, m, p, r, at_pole)
+            else:
+                running += 1.0
+        if running == 0.0:
+            return
+    for s in range(f):
+        ok[s] = ok[s] if root[s] == root[s] else 0.0
+
+
+@njit
+def all_extremes(d, Z, cols, m, U2, X, lam) -> None:  # pragma: no cover - numba
+    """``lam[:, s] = (λ_min, λ_max, ok)`` of ``diag(d) − z zᵀ``, ``z = Z[:, cols[s]]``, all s.
+
+    The roots of :func:`lowest_root` and :func:`highest_root`, every scenario's steps side by
+    side (:func:`_lowest_lanes`, :func:`_highest_lanes`); a scenario they leave (a zero weight
+    at the nearest pole, no convergence) is solved alone by the scalar functions. ``U2`` (m, f)
+    receives ``z²``; ``X`` (:data:`LANE_ROWS` + 1, ``max(f, m)``) is scratch; ``lam`` (3, f);
+    ``m ≥ 2``.
+    """
+    f = cols.shape[0]
+    for k in range(m):
+        for s in range(f):
+            z = Z[k, cols[s]]
+            U2[k, s] = z * z
+    lanes, ok = X[0:LANE_ROWS], X[LANE_ROWS]
+    _lowest_lanes(d, U2, m, f, lanes, ok)
+    for s in range(f):
+        lam[0, s], lam[2, s] = d[0] - lanes[5, s], ok[s]
+    _highest_lanes(d, U2, m, f, lanes, ok)
+    for s in range(f):
+        lam[1, s] = lanes[5, s]
+        if lam[2, s] != 0.0 and ok[s] != 0.0:
+            continue
+        u2, total = lanes[0, :m], 0.0  # the scenario alone, u² in a free row
+        for k in range(m):
+            u2[k] = U2[k, s]
+            total += u2[k]
+        lo, good = lowest_root(d, u2, m, total)
+        hi, better = highest_root(d, u2, m)
+        lam[0, s], lam[1, s], lam[2, s] = lo, hi, 1.0 if good and better else 0.0
 
 
 @njit
