@@ -16,6 +16,8 @@ import time
 import numpy as np
 import pinocchio as pin
 
+import fault_tolerance as ft
+
 from fault_tolerance.bench.cases import ARMS, make_case
 from fault_tolerance.numerics.fast.dense import gram_into
 from fault_tolerance.numerics.fast.rank_one_eigen import LANE_ROWS, all_extremes, eigenpairs
@@ -81,6 +83,16 @@ def in_loop_us(fn, *args) -> float:
     return float(np.median(runs))
 
 
+def reference_gap(case, count=100) -> float:
+    """Largest ``|MDA step − ft.resolve('mda')| / max(1, |q̇|)`` over ``count`` pool samples."""
+    ctrl, arm, worst = case.ctrl, case.arm, 0.0
+    for q, xd in list(zip(case.qs, case.xds, strict=True))[:count]:
+        got = ctrl.mda(q, xd).copy()
+        ref = ft.resolve("mda", arm.jacobian(q), xd, lockable=ctrl.scenarios, arm=arm, q=q)
+        worst = max(worst, float(np.abs(got - ref).max() / max(1.0, np.abs(ref).max())))
+    return worst
+
+
 def breakdown(key: str) -> dict[str, float]:
     """The parts of the MDA step of the bench arm ``key`` [µs]."""
     case = make_case(key)
@@ -106,7 +118,8 @@ def main() -> None:
     for key in parser.parse_args().arms:
         parts = breakdown(key)
         print(f"{key}: " + ", ".join(f"{k} {v:.2f} µs" for k, v in parts.items())
-              + f"; MDA / JVJA {parts['mda step'] / parts['jvja step']:.2f}")  # fmt: skip
+              + f"; MDA / JVJA {parts['mda step'] / parts['jvja step']:.2f}"
+              + f"; MDA vs ft.resolve('mda') {reference_gap(make_case(key)):.1e}")  # fmt: skip
 
 
 if __name__ == "__main__":
