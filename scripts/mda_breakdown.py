@@ -17,7 +17,6 @@ import numpy as np
 import pinocchio as pin
 
 import fault_tolerance as ft
-
 from fault_tolerance.bench.cases import ARMS, make_case
 from fault_tolerance.numerics.fast.dense import gram_into
 from fault_tolerance.numerics.fast.rank_one_eigen import LANE_ROWS, all_extremes, eigenpairs
