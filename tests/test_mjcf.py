@@ -363,8 +363,8 @@ def test_a_free_joint_on_the_chain_is_refused_and_fixed_when_left_out(tmp_path):
     assert arm.joint_names == ["j1", "j2"]
 
 
-def test_the_descriptions_page_example_runs(monkeypatch):
-    """docs/descriptions.md's Python example runs from the repository root."""
+def test_the_descriptions_page_example_runs(monkeypatch, tmp_path):
+    """docs/descriptions.md's Python example runs in a fresh folder (it writes ``arm.xml``)."""
     import re
 
     root = Path(__file__).resolve().parents[1]
@@ -372,7 +372,8 @@ def test_the_descriptions_page_example_runs(monkeypatch):
         r"```python\n(.*?)```", (root / "docs" / "descriptions.md").read_text(), re.S
     )
     assert len(blocks) == 1
-    monkeypatch.chdir(root)
+    monkeypatch.chdir(tmp_path)
     ns: dict = {}
     exec(compile(blocks[0], "descriptions.md", "exec"), ns)  # noqa: S102 - our own documentation
     assert ns["run"].arm_record["description_format"] == "mjcf"
+    assert (tmp_path / "arm.xml").is_file()  # written here, not into the checkout
