@@ -2,8 +2,8 @@
 
 Every scenario's ``W_S = J_S J_Sᵀ = G − J_i J_iᵀ`` (eq. 15) is a rank-one downdate of the same
 ``G = J Jᵀ``. With ``G = V diag(d) Vᵀ`` (``d`` ascending; :func:`eigenpairs`, once per
-sample, gives ``Vt = Vᵀ``, the eigenvectors by rows) and ``u = Vᵀ J_i``, the eigenvalues of ``W_S`` are those of ``diag(d) − u uᵀ``: the roots
-``μ`` of the secular equation ``1 = Σ_k u_k² / (d_k − μ)``. They interlace, ``μ_1 ≤ d_1 ≤ μ_2 ≤
+sample, gives ``Vt = Vᵀ``, the eigenvectors by rows) and ``u = Vᵀ J_i``, the eigenvalues of
+``W_S`` are those of ``diag(d) − u uᵀ``: the roots ``μ`` of the secular equation ``1 = Σ_k u_k² / (d_k − μ)``. They interlace, ``μ_1 ≤ d_1 ≤ μ_2 ≤
 … ≤ μ_m ≤ d_m``, so
 
 * ``λ_min(W) = d_1 − τ`` with ``τ ∈ [0, ‖u‖²]`` the root of the convex
@@ -299,20 +299,22 @@ def _highest_model(d, u2, m, p, x, at_pole):  # pragma: no cover - numba
 
 
 @njit
-def _highest_first(d, u2, m, p, r0, r1):  # pragma: no cover - numba
-    """The first step of :func:`highest_root` from the middle of ``(d_p, d_m)``: ``(x, lo, hi, at_pole, F, new)``.
+def _highest_first(d, u2, m, p, r0, r1, floor):  # pragma: no cover - numba
+    """The first step of :func:`highest_root`, from the middle of ``(d_p, d_m)``.
 
     ``r0``, ``r1`` the sums at the middle (the same from either end). ``F ≤ 0`` there puts the
     root nearer the pole (``x = σ``, bracket ``[0, Δ_p/2]``), otherwise nearer ``d_m`` (``x = τ``,
     bracket ``[0, min(Δ_p/2, u_m²)]``); either way the middle's model gives the first step.
+    Returns ``(at_pole, F, x, lo, hi, done, root)`` after that step (:func:`_advance`).
     """
     dp, um, up = d[m - 1] - d[p], u2[m - 1], u2[p]
     half = 0.5 * dp
     F, new = _highest_quadratic(half, True, um, up, dp, r0, r1)
-    if F <= 0.0:
-        return half, 0.0, half, True, F, new
-    F, new = _highest_quadratic(half, False, um, up, dp, r0, r1)
-    return half, 0.0, min(half, um), False, F, new
+    at_pole = F <= 0.0
+    if not at_pole:
+        F, new = _highest_quadratic(half, False, um, up, dp, r0, r1)
+    x, lo, hi, done, root = _advance(F, new, half, 0.0, half, (F >= 0.0) == at_pole, floor)
+    return at_pole, F, x, lo, hi if at_pole else min(hi, um), done, root
 
 
 @njit
@@ -336,19 +338,16 @@ def highest_root(d, u2, m):  # pragma: no cover - numba
     p = _first_pole(d, u2, m)
     if p < 0:
         return max(top - u2[m - 1], below), True
-    r0, r1 = _highest_sums(d, u2, m, p, 0.5 * (top - d[p]), True)
-    x, lo, hi, at_pole, F, new = _highest_first(d, u2, m, p, r0, r1)
     floor = EPS * abs(top)
-    for step in range(MAX_STEPS):
-        if step > 0:  # the first step is the middle's
-            F, new = _highest_model(d, u2, m, p, x, at_pole)
+    r0, r1 = _highest_sums(d, u2, m, p, 0.5 * (top - d[p]), True)
+    at_pole, F, x, lo, hi, done, root = _highest_first(d, u2, m, p, r0, r1, floor)
+    for _ in range(MAX_STEPS):
         if F != F:
             break
-        top_hi = hi
-        x, lo, hi, done, root = _advance(F, new, x, lo, hi, (F >= 0.0) == at_pole, floor)
-        hi = min(hi, top_hi)  # the middle may lie above the τ bracket's top u_m²
-        if done:  # F grows with τ, falls with σ
+        if done:
             return _highest_value(d, m, p, root, at_pole), True
+        F, new = _highest_model(d, u2, m, p, x, at_pole)
+        x, lo, hi, done, root = _advance(F, new, x, lo, hi, (F >= 0.0) == at_pole, floor)
     return math.nan, False
 
 
@@ -371,7 +370,7 @@ def _lowest_lanes(d, U2, m, f, X, ok) -> None:  # pragma: no cover - numba
         total = 0.0
         for k in range(m):
             total += U2[k, s]
-        tau[s], lo[s], hi[s], done[s] = _lowest_start(d, total), 0.0, total, 0.0
+        tau[s], lo[s], hi[s] = _lowest_start(d, total), 0.0, total
         ok[s] = 1.0 if U2[1, s] > 0.0 else 0.0
         done[s] = 1.0 - ok[s]
     for _ in range(MAX_STEPS):
@@ -428,19 +427,22 @@ def _highest_lanes(d, U2, m, f, X, ok) -> None:  # pragma: no cover - numba
         for s in range(f):
             if root[s] == root[s]:  # solved or left
                 continue
-            um, up = U2[m - 1, s], U2[p, s]
-            if step == 0:
-                xs, a, b, at_pole, F, new = _highest_first(d, U2[:, s], m, p, r0[s], r1[s])
-                pole[s], hi[s] = 1.0 if at_pole else 0.0, b
+            if step == 0:  # from the middle (the sums above were taken there, from the pole)
+                at_pole, F, nx, a, b, fin, r = _highest_first(
+                    d, U2[:, s], m, p, r0[s], r1[s], floor
+                )
+                pole[s] = 1.0 if at_pole else 0.0
             else:
                 at_pole = pole[s] != 0.0
+                um, up = U2[m - 1, s], U2[p, s]
                 F, new = _highest_quadratic(x[s], at_pole, um, up, dp, r0[s], r1[s])
+                nx, a, b, fin, r = _advance(
+                    F, new, x[s], lo[s], hi[s], (F >= 0.0) == at_pole, floor
+                )
             if F != F:
                 ok[s], root[s] = 0.0, 0.0
                 continue
-            top_hi = hi[s]
-            nx, a, b, fin, r = _advance(F, new, x[s], lo[s], hi[s], (F >= 0.0) == at_pole, floor)
-            x[s], lo[s], hi[s] = nx, a, min(b, top_hi)
+            x[s], lo[s], hi[s] = nx, a, b
             if fin:
                 root[s] = _highest_value(d, m, p, r, at_pole)
             else:
