@@ -92,9 +92,8 @@ def reference_gap(case, count=100) -> float:
     return worst
 
 
-def breakdown(key: str) -> dict[str, float]:
-    """The parts of the MDA step of the bench arm ``key`` [µs]."""
-    case = make_case(key)
+def breakdown(case) -> dict[str, float]:
+    """The parts of the MDA step of a bench case (:func:`make_case`) [µs]."""
     ctrl, cw = case.ctrl, case.ctrl.workspace
     Js = np.array(
         [pin.computeFrameJacobian(cw.model, cw.data, q, cw.frame_id, pin.LOCAL_WORLD_ALIGNED)[cw.rows]
@@ -115,10 +114,11 @@ def main() -> None:
     parser.add_argument("arms", nargs="+", choices=sorted(ARMS), metavar="ARM",
                         help="benchmark arms, e.g. panda_pose spatial_4r")  # fmt: skip
     for key in parser.parse_args().arms:
-        parts = breakdown(key)
+        case = make_case(key)
+        parts = breakdown(case)
         print(f"{key}: " + ", ".join(f"{k} {v:.2f} µs" for k, v in parts.items())
               + f"; MDA / JVJA {parts['mda step'] / parts['jvja step']:.2f}"
-              + f"; MDA vs ft.resolve('mda') {reference_gap(make_case(key)):.1e}")  # fmt: skip
+              + f"; MDA vs ft.resolve('mda') {reference_gap(case):.1e}")  # fmt: skip
 
 
 if __name__ == "__main__":
