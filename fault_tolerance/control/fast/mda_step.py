@@ -367,13 +367,7 @@ def rcn_gradient_kernel(Jf, J, G, cols, params, F, grad) -> int:  # pragma: no c
             A[r, c] = G[r, c]
     if not eigenpairs(A, m, Vt, d, work):
         return NO_EIGEN
-    for k in range(m):  # Z = Vt J, Me = 0 (sums in registers: the views share F)
-        for c in range(n):
-            t = 0.0
-            for r in range(m):
-                t += Vt[k, r] * J[r, c]
-            Z[k, c] = t
-            Me[k, c] = 0.0
+    _to_eigenbasis(Vt, J, Z, Me)
     all_extremes(d, Z, cols[:f], m, U2, X, E)  # every scenario's secular roots, side by side
     for s in range(f):
         i = cols[s]
@@ -402,6 +396,23 @@ def rcn_gradient_kernel(Jf, J, G, cols, params, F, grad) -> int:  # pragma: no c
     _rotate_back(Vt, B, Z, Me, rix, M)
     matrix_contract(Jf, M, grad)
     return OK
+
+
+@njit
+def _to_eigenbasis(Vt, J, Z, Me) -> None:  # pragma: no cover - numba
+    """``Z = Vt J`` (every column in the eigenbasis of ``G``) and ``Me = 0``.
+
+    Each entry is summed in a register: the workspace's views share one array, so a sum in place
+    would reload the entry at every term.
+    """
+    m, n = Z.shape
+    for k in range(m):
+        for c in range(n):
+            t = 0.0
+            for r in range(m):
+                t += Vt[k, r] * J[r, c]
+            Z[k, c] = t
+            Me[k, c] = 0.0
 
 
 @njit
