@@ -13,6 +13,7 @@ Every robot fixture is a :class:`RobotCase`: the arm and the lockable set the te
 from __future__ import annotations
 
 import os
+import signal
 import zlib
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -216,3 +217,13 @@ def draw_q() -> Callable[..., np.ndarray]:
 def draw_xdot() -> Callable[[np.random.Generator, int], np.ndarray]:
     """``draw_xdot(rng, m)``: a random task velocity of unit norm."""
     return random_xdot
+
+
+def default_sigint() -> None:
+    """``preexec_fn`` of a child the test interrupts: SIGINT at its default disposition.
+
+    A runner started in the background by a shell without job control inherits SIGINT ignored,
+    and so would the child (Python then never raises KeyboardInterrupt); Ctrl-C tests would
+    test the runner's shell instead of the command.
+    """
+    signal.signal(signal.SIGINT, signal.SIG_DFL)

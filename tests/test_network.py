@@ -12,6 +12,7 @@ from urllib.parse import urlparse
 
 import numpy as np
 import pytest
+from conftest import default_sigint
 
 psutil = pytest.importorskip("psutil")
 pytest.importorskip("meshcat")
@@ -178,6 +179,7 @@ def test_ctrl_c_stops_the_live_replay_with_exit_130(saved_run):
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
+        preexec_fn=default_sigint,
     )
     try:
         line = proc.stdout.readline()
