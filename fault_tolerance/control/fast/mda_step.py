@@ -398,7 +398,7 @@ def rcn_gradient_kernel(Jf, J, G, cols, params, F, grad) -> int:  # pragma: no c
     return OK
 
 
-@njit
+@_inline
 def _to_eigenbasis(Vt, J, Z, Me) -> None:  # pragma: no cover - numba
     """``Z = Vt J`` (every column in the eigenbasis of ``G``) and ``Me = 0``.
 
