@@ -268,28 +268,19 @@ def _secular_vector(d, z, mu, y, m) -> bool:  # pragma: no cover - numba
 
 # Eqn. (K4): Σ_t c_t y_t (J_Sᵀu_t)ᵀ = B Z − Σ_t c_t (zᵀy_t) y_t e_iᵀ, B = Σ_t c_t y_t y_tᵀ.
 @njit
-def _column_term(y, zy, coef, i, Me, m) -> None:  # pragma: no cover - numba
-    """``Me[:, i] −= coef (zᵀy) y``: the locked column's part of one vector's term of eq. (K4).
+def _gather(y, zy, coef, i, B, Me, m) -> None:  # pragma: no cover - numba
+    """``B += coef · y yᵀ`` and ``Me[:, i] −= coef (zᵀy) y``: one vector's term of eq. (K4).
 
     In the eigenbasis of ``G`` (``y = Vᵀu``, ``z = Vᵀ J_i``) the term ``coef · y wᵀ`` of the
     vector ``w = J_Sᵀu = Zᵀy − (zᵀy) e_i`` (column ``i`` locked) splits into ``coef · y yᵀ Z``,
-    summed over every vector first (:func:`_outer_sum`) and multiplied by ``Z`` once, and this
-    correction of column ``i``.
+    summed over every vector first and multiplied by ``Z`` once (:func:`rcn_gradient_kernel`),
+    and a correction of column ``i``.
     """
     for r in range(m):
-        Me[r, i] -= coef * zy * y[r]
-
-
-@njit
-def _outer_sum(Yc, count, B, m) -> None:  # pragma: no cover - numba
-    """``B = Σ_t c_t y_t y_tᵀ`` over the first ``count`` rows ``[y_t, c_t]`` of ``Yc`` (eq. K4)."""
-    for r in range(m):
-        for c in range(r + 1):
-            acc = 0.0
-            for t in range(count):
-                acc += Yc[t, m] * Yc[t, r] * Yc[t, c]
-            B[r, c] = acc
-            B[c, r] = acc
+        cy = coef * y[r]
+        for c in range(m):
+            B[r, c] += cy * y[c]
+        Me[r, i] -= cy * zy
 
 
 @njit
@@ -339,8 +330,8 @@ def rcn_gradient_kernel(Jf, J, G, cols, params, F, grad) -> int:  # pragma: no c
     B = F[4 * m * m : 5 * m * m].reshape((m, m))
     o = 5 * m * m
     d, y = F[o : o + m], F[o + m : o + 4 * m]
-    z = F[o + 4 * m : o + 5 * m]
-    o += 5 * m
+    ymin, ymax, z = F[o + 4 * m : o + 5 * m], F[o + 5 * m : o + 6 * m], F[o + 6 * m : o + 7 * m]
+    o += 7 * m
     work = F[o : o + 2 * m]
     o += 2 * m
     # One reshape for several matrices of a width (numba's reshape calls a helper, ~30 ns a
@@ -355,9 +346,6 @@ def rcn_gradient_kernel(Jf, J, G, cols, params, F, grad) -> int:  # pragma: no c
     U2, E = P[0:m], P[m:]
     o += (m + 3) * f
     X = F[o : o + (LANE_ROWS + 1) * w].reshape((LANE_ROWS + 1, w))
-    o += (LANE_ROWS + 1) * w
-    Yc = F[o : o + 2 * f * (m + 1)].reshape((2 * f, m + 1))
-    count = 0
     for c in range(n):
         grad[c] = 0.0
     if m < 2:
@@ -367,7 +355,16 @@ def rcn_gradient_kernel(Jf, J, G, cols, params, F, grad) -> int:  # pragma: no c
             A[r, c] = G[r, c]
     if not eigenpairs(A, m, Vt, d, work):
         return NO_EIGEN
-    _to_eigenbasis(Vt, J, Z, Me)
+    for k in range(m):  # Z = Vt J, Me = 0, B = 0
+        for c in range(n):
+            Z[k, c] = 0.0
+            Me[k, c] = 0.0
+        for c in range(m):
+            B[k, c] = 0.0
+        for r in range(m):
+            v = Vt[k, r]
+            for c in range(n):
+                Z[k, c] += v * J[r, c]
     all_extremes(d, Z, cols[:f], m, U2, X, E)  # every scenario's secular roots, side by side
     for s in range(f):
         i = cols[s]
@@ -379,7 +376,6 @@ def rcn_gradient_kernel(Jf, J, G, cols, params, F, grad) -> int:  # pragma: no c
         smax, sminr = math.sqrt(max(hi, 0.0)), math.sqrt(max(lo, 0.0))
         if not sminr > smax / params[P_SINGULAR]:  # a singular reduced robot: no term (eq. S1)
             continue
-        ymax, ymin = Yc[count], Yc[count + 1]  # [y, its coefficient] (eq. K4)
         if not _secular_vector(d, z, hi, ymax, m):  # eq. (K3), else inverse iteration
             if not _refine(G, J, Vt, d, z, W, Mlu, hi, True, i, ymax, y):
                 return NO_EIGEN
@@ -388,31 +384,11 @@ def rcn_gradient_kernel(Jf, J, G, cols, params, F, grad) -> int:  # pragma: no c
                 return NO_EIGEN
         smin = max(sminr, smax / params[P_RCN_MAX])
         k = smax / smin  # ‖J_Sᵀu‖ = σ: the vectors' terms divide by it (σ' above)
-        ymax[m], ymin[m] = 2.0 * k / (smin * smax), -2.0 * k * smax / (smin * smin * sminr)
-        _column_term(ymax, _dot(z, ymax, m), ymax[m], i, Me, m)
-        _column_term(ymin, _dot(z, ymin, m), ymin[m], i, Me, m)
-        count += 2
-    _outer_sum(Yc, count, B, m)
+        _gather(ymax, _dot(z, ymax, m), 2.0 * k / (smin * smax), i, B, Me, m)
+        _gather(ymin, _dot(z, ymin, m), -2.0 * k * smax / (smin * smin * sminr), i, B, Me, m)
     _rotate_back(Vt, B, Z, Me, rix, M)
     matrix_contract(Jf, M, grad)
     return OK
-
-
-@_inline
-def _to_eigenbasis(Vt, J, Z, Me) -> None:  # pragma: no cover - numba
-    """``Z = Vt J`` (every column in the eigenbasis of ``G``) and ``Me = 0``.
-
-    Each entry is summed in a register: the workspace's views share one array, so a sum in place
-    would reload the entry at every term.
-    """
-    m, n = Z.shape
-    for k in range(m):
-        for c in range(n):
-            t = 0.0
-            for r in range(m):
-                t += Vt[k, r] * J[r, c]
-            Z[k, c] = t
-            Me[k, c] = 0.0
 
 
 @njit
@@ -423,30 +399,24 @@ def _rotate_back(Vt, B, Z, Me, rix, M) -> None:  # pragma: no cover - numba
     """
     m, n = Me.shape
     for r in range(m):
-        for c in range(n):
-            t = Me[r, c]
-            for k in range(m):
-                t += B[r, k] * Z[k, c]
-            Me[r, c] = t
+        for k in range(m):
+            b = B[r, k]
+            for c in range(n):
+                Me[r, c] += b * Z[k, c]
     for r in range(6):
         for c in range(n):
             M[r, c] = 0.0
-    for r in range(m):
-        row = rix[r]
-        for c in range(n):
-            t = 0.0
-            for k in range(m):
-                t += Vt[k, r] * Me[k, c]
-            M[row, c] = t
+    for k in range(m):
+        for r in range(m):
+            v, row = Vt[k, r], rix[r]
+            for c in range(n):
+                M[row, c] += v * Me[k, c]
 
 
 @njit
 def gradient_scratch(m, n, f):  # pragma: no cover - numba
     """Length of the scratch ``F`` of :func:`rcn_gradient_kernel` (``f`` scenarios)."""
-    return (
-        5 * m * m + 7 * m + 6 * n + 2 * m * n + (m + 3) * f + (LANE_ROWS + 1) * max(f, m)
-        + 2 * f * (m + 1)
-    )  # fmt: skip
+    return 5 * m * m + 9 * m + 6 * n + 2 * m * n + (m + 3) * f + (LANE_ROWS + 1) * max(f, m)
 
 
 @njit
