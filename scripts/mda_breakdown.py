@@ -26,8 +26,11 @@ from fault_tolerance.numerics.fast.small_eigen import njit
 REPS = 20000
 
 
-def median_us(fn, args, reps=REPS) -> float:
-    """Median wall time of ``fn(*args[i])`` over ``reps`` calls [µs]."""
+def call_times_us(fn, args, reps=REPS) -> np.ndarray:
+    """Wall time of each of ``reps`` calls ``fn(*args[i])``, cycling over ``args`` [µs].
+
+    The first 50 calls run untimed.
+    """
     for a in args[:50]:
         fn(*a)
     ts = np.empty(reps)
@@ -36,7 +39,12 @@ def median_us(fn, args, reps=REPS) -> float:
         t = time.perf_counter()
         fn(*a)
         ts[r] = time.perf_counter() - t
-    return float(np.median(ts) * 1e6)
+    return ts * 1e6
+
+
+def median_us(fn, args, reps=REPS) -> float:
+    """Median wall time of ``fn(*args[i])`` over ``reps`` calls [µs]."""
+    return float(np.median(call_times_us(fn, args, reps)))
 
 
 @njit

@@ -16,11 +16,11 @@ import importlib.util
 import subprocess
 import sys
 import tempfile
-import time
 from pathlib import Path
 
 import numpy as np
 import pinocchio as pin
+from mda_breakdown import call_times_us  # scripts/, beside this file
 
 from fault_tolerance.bench.cases import ARMS, make_case
 from fault_tolerance.control.fast import mda_step
@@ -44,13 +44,8 @@ def kernel_at(rev: str, folder: Path):
 
 def call_times(kernel, calls) -> tuple[float, float]:
     """10th percentile and median of ``kernel(*calls[i])`` over :data:`CALLS` calls [µs]."""
-    ts = np.empty(CALLS)
-    for r in range(CALLS):
-        args = calls[r % len(calls)]
-        t = time.perf_counter()
-        kernel(*args)
-        ts[r] = time.perf_counter() - t
-    return float(np.percentile(ts, 10) * 1e6), float(np.median(ts) * 1e6)
+    ts = call_times_us(kernel, calls, CALLS)
+    return float(np.percentile(ts, 10)), float(np.median(ts))
 
 
 def compare(key: str, modules: dict) -> None:
