@@ -15,11 +15,6 @@ Example:
     True
 """
 
-from fault_tolerance.fast_cache import refresh as _refresh_kernel_cache
-from fault_tolerance.version import __version__
-
-_refresh_kernel_cache()  # numba's cache knows a kernel's own file only (fast_cache.py)
-
 from fault_tolerance.analysis import batch  # noqa: E402
 from fault_tolerance.control.controller import Controller  # noqa: E402
 from fault_tolerance.errors import (  # noqa: E402
@@ -88,6 +83,7 @@ from fault_tolerance.simulation.paths import (  # noqa: E402
 from fault_tolerance.simulation.run import Run  # noqa: E402
 from fault_tolerance.simulation.setup import ServoModel  # noqa: E402
 from fault_tolerance.simulation.simulate import simulate  # noqa: E402
+from fault_tolerance.version import __version__
 
 __all__ = [
     "__version__",

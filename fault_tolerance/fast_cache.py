@@ -1,104 +1,184 @@
-"""Keep numba's on-disk cache of the compiled kernels consistent with their sources.
+"""The compiled kernels' decorator and their on-disk cache, keyed on the content of their sources.
 
-numba keys a cached function by its own file only: a kernel in ``control/fast/bounded_solve.py``
-that calls one in ``resolution/fast/box_qp.py`` keeps running the old callee after the callee
-changes. At import the package compares the sizes and modification times of every module in a
-``fast/`` folder with the stamp it wrote last; when they differ it deletes the package's
-``__pycache__/*.nbi`` / ``*.nbc`` files in every folder (the
-next call recompiles, ~5-10 s once) and writes the new stamp. A package folder that cannot be
-written is left alone (numba then caches elsewhere or not at all).
+Every numba kernel of the package is made by :func:`njit` (or :func:`inline`): compiled at its
+first call, then cached on disk. numba keys a cached kernel on its own file only, so a kernel that
+calls one in another file would keep running the old callee after the callee changed, and its
+cache lives beside the installed sources, so a wheel and a checkout of the same code each
+compile it again. The package therefore puts every kernel's cache in one folder per *key*::
 
-:func:`is_warm` / :func:`mark_warm` keep one marker per group of kernels (``warm-<group>``) beside
-numba's cache (``NUMBA_CACHE_DIR`` when set, else the package's ``__pycache__``): written once the
-group was compiled into the cache, valid while the kernel sources, numba and Python are those it
-names. The command line reads them to know whether a command would compile first
-(:mod:`fault_tolerance.bench.warm`).
+    <root>/<key>/<module>/<numba's files>
+
+where ``key`` is a SHA-256 of the content of every kernel source (every module in a ``fast/``
+folder, with its path in the package), numba's and Python's versions. Any change to any kernel
+source gives a new key, so a callee's change reaches its callers; a reinstall (``pip install
+.`` and then ``pip install '.[notebooks]'``), a wheel, an editable checkout and a copy of the
+package with the same sources share one compiled cache. ``root`` is, in order:
+``FAULT_TOLERANCE_CACHE_DIR``, ``$XDG_CACHE_HOME/fault_tolerance/kernels``,
+``~/.cache/fault_tolerance/kernels``. Where it cannot be written numba's own places are used
+(``NUMBA_CACHE_DIR``, the package's ``__pycache__``), keyed as numba keys them.
+
+:func:`is_warm` / :func:`mark_warm` keep one marker per group of kernels (``warm-<group>``) in the
+key's folder: written once the group was compiled into the cache, so the command line knows
+whether a command would compile first (:mod:`fault_tolerance.bench.warm`). Importing this module
+imports no numba; :func:`njit` does, at the first kernel's definition.
 """
 
 from __future__ import annotations
 
+import hashlib
+import importlib.util
 import os
 import sys
+from collections.abc import Callable
+from functools import cache, lru_cache
 from pathlib import Path
+from typing import Any
 
 #: Where compiled (numba) code lives: every module in a ``fast/`` folder of the package.
 FAST_FOLDER = "fast"
-STAMP = "kernel_sources.stamp"
+#: The environment variable that chooses the cache's root folder.
+CACHE_ENV = "FAULT_TOLERANCE_CACHE_DIR"
 _PACKAGE = Path(__file__).resolve().parent
+#: numba's options for every kernel of the package.
+OPTIONS = {"cache": True, "nogil": True, "error_model": "numpy"}
+#: Whether numba is installed: the kernels are compiled (else they run as plain Python).
+COMPILED = importlib.util.find_spec("numba") is not None
 
 
-def kernel_sources(folder: Path) -> list[Path]:
+def kernel_sources(folder: Path = _PACKAGE) -> list[Path]:
     """The modules with compiled code: every ``.py`` in a ``fast/`` folder below ``folder``."""
     return sorted(p for p in folder.rglob("*.py") if p.parent.name == FAST_FOLDER)
 
 
-def stamp(folder: Path) -> str:
-    """``path size mtime_ns`` of every kernel source, one per line."""
-    lines = []
+def sources_digest(folder: Path = _PACKAGE) -> str:
+    """SHA-256 of every kernel source's path (in ``folder``) and content, in order."""
+    h = hashlib.sha256()
     for path in kernel_sources(folder):
-        st = path.stat()
-        lines.append(f"{path.relative_to(folder).as_posix()} {st.st_size} {st.st_mtime_ns}")
-    return "\n".join(lines) + "\n"
+        h.update(path.relative_to(folder).as_posix().encode() + b"\0")
+        h.update(path.read_bytes() + b"\0")
+    return h.hexdigest()
 
 
-def refresh(folder: Path | None = None) -> bool:
-    """Delete the compiled cache when a kernel source changed since the last stamp; True if so."""
-    folder = Path(__file__).resolve().parent if folder is None else folder
-    cache = folder / "__pycache__"
-    try:
-        now = stamp(folder)
-    except OSError:  # a kernel source vanished while read: nothing to do
-        return False
-    if now == "\n":  # no fast/ folder: not this package's layout
-        return False
-    try:
-        if (cache / STAMP).read_text() == now:
-            return False
-    except OSError:  # no stamp yet
-        pass
-    try:
-        cache.mkdir(exist_ok=True)
-        for f in list(folder.rglob("*.nbi")) + list(folder.rglob("*.nbc")):
-            f.unlink(missing_ok=True)
-        (cache / STAMP).write_text(now)
-    except OSError:  # a read-only install
-        return False
-    return True
-
-
-def cache_folder(folder: Path | None = None) -> Path:
-    """Where numba caches the package's kernels: ``NUMBA_CACHE_DIR``, else ``__pycache__``."""
-    env = os.environ.get("NUMBA_CACHE_DIR")
-    return Path(env) if env else (_PACKAGE if folder is None else folder) / "__pycache__"
-
-
-def warm_key(folder: Path | None = None) -> str:
-    """What a warm marker must name: numba's and Python's versions and the kernel sources."""
+@lru_cache(maxsize=1)
+def cache_key() -> str:
+    """The folder name of this package's compiled cache: sources, numba and Python (16 hex digits)."""
     try:
         import numba
 
         version = numba.__version__
     except ImportError:  # pragma: no cover - numba is a core dependency
         version = "none"
-    folder = _PACKAGE if folder is None else folder
-    return f"numba {version} python {sys.version.split()[0]}\n" + stamp(folder)
+    h = hashlib.sha256(f"numba {version} python {sys.version}\n".encode())
+    h.update(sources_digest().encode())
+    return h.hexdigest()[:16]
 
 
-def is_warm(group: str, folder: Path | None = None) -> bool:
-    """Whether the kernels of ``group`` were compiled into the cache for these sources."""
+def cache_root() -> Path:
+    """The root of the package's kernel caches (``FAULT_TOLERANCE_CACHE_DIR`` or the user's cache)."""
+    env = os.environ.get(CACHE_ENV)
+    if env:
+        return Path(env).expanduser()
+    xdg = os.environ.get("XDG_CACHE_HOME")
+    base = Path(xdg).expanduser() if xdg else Path.home() / ".cache"
+    return base / "fault_tolerance" / "kernels"
+
+
+def cache_folder() -> Path:
+    """The folder of the current sources' compiled cache and markers: ``<root>/<key>``."""
+    return cache_root() / cache_key()
+
+
+def _writable(folder: Path) -> bool:
     try:
-        return (cache_folder(folder) / f"warm-{group}").read_text() == warm_key(folder)
+        folder.mkdir(parents=True, exist_ok=True)
+        probe = folder / f".probe-{os.getpid()}"
+        probe.write_text("")
+        probe.unlink()
     except OSError:
         return False
+    return True
 
 
-def mark_warm(group: str, folder: Path | None = None) -> bool:
+def _locator_class() -> type:
+    """Numba's cache locator for the package's kernels: ``<root>/<key>/<module>``."""
+    from numba.core.caching import _CacheLocator, _SourceFileBackedLocatorMixin
+
+    class KernelCacheLocator(_SourceFileBackedLocatorMixin, _CacheLocator):
+        """Caches a kernel of the package under the key of all its kernel sources."""
+
+        def __init__(self, py_func, py_file):
+            self._py_file = py_file
+            self._lineno = py_func.__code__.co_firstlineno
+            self._cache_path = str(cache_folder() / py_func.__module__)
+
+        def get_cache_path(self):
+            return self._cache_path
+
+        def get_source_stamp(self):
+            return cache_key()  # every kernel source at once: a callee's change reaches callers
+
+        @classmethod
+        def from_function(cls, py_func, py_file):
+            module = getattr(py_func, "__module__", "") or ""
+            if not module.startswith("fault_tolerance.") or not _writable(cache_folder()):
+                return None
+            return super().from_function(py_func, py_file)
+
+    return KernelCacheLocator
+
+
+@lru_cache(maxsize=1)
+def use_package_cache() -> bool:
+    """Put :class:`KernelCacheLocator` first in numba's locators (once); False where it cannot."""
+    try:
+        from numba.core.caching import CacheImpl
+    except ImportError:  # pragma: no cover - numba moved its caching module
+        return False
+    locators = CacheImpl._locator_classes
+    if not any(getattr(c, "__name__", "") == "KernelCacheLocator" for c in locators):
+        locators.insert(0, _locator_class())
+    return True
+
+
+@cache
+def _compiler(**extra: Any) -> Callable:
+    try:
+        import numba
+    except ImportError:  # pragma: no cover - numba is a core dependency
+
+        def plain(fn):
+            return fn
+
+        return plain
+    use_package_cache()
+    return numba.njit(**OPTIONS, **extra)
+
+
+def njit(fn: Callable) -> Any:
+    """``fn`` compiled by numba at its first call, cached under :func:`cache_folder`.
+
+    Plain Python without numba (and tested so).
+    """
+    return _compiler()(fn)
+
+
+def inline(fn: Callable) -> Any:
+    """As :func:`njit`, inlined into its compiled callers at numba's IR level."""
+    return _compiler(inline="always")(fn)
+
+
+def is_warm(group: str) -> bool:
+    """Whether the kernels of ``group`` were compiled into the cache of these sources."""
+    return (cache_folder() / f"warm-{group}").is_file()
+
+
+def mark_warm(group: str) -> bool:
     """Record that ``group`` is compiled into the cache; False where it cannot be written."""
-    target = cache_folder(folder)
+    target = cache_folder()
     try:
         target.mkdir(parents=True, exist_ok=True)
         tmp = target / f".warm-{group}.{os.getpid()}"
-        tmp.write_text(warm_key(folder))
+        tmp.write_text(cache_key() + "\n")
         tmp.replace(target / f"warm-{group}")
     except OSError:
         return False

@@ -28,8 +28,8 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from fault_tolerance.analysis.fast import batch as batch_kernel
 from fault_tolerance.errors import IntolerableFailure, InvalidInput
+from fault_tolerance.fast_cache import COMPILED
 from fault_tolerance.numerics.checks import finite
 from fault_tolerance.numerics.linalg import PIVOT_TOL, projection, reduced_rates
 from fault_tolerance.resolution.indices import (
@@ -166,6 +166,8 @@ def resolve(
     )
     if not _compiled(Js, sc, response):
         return _stacked(Js, xdots, sc, response, intolerable, chunk)
+    from fault_tolerance.analysis.fast import batch as batch_kernel  # compiled on first use
+
     out, status = batch_kernel.rates(Js, xdots, sc)
     redo = np.flatnonzero(status)
     if redo.size:
@@ -196,7 +198,7 @@ def _per_row(entry, Js, xdots, lockable, options, joint_names, intolerable) -> n
 
 def _compiled(Js: np.ndarray, sc: Scenarios | None, response: str) -> bool:
     """Whether :func:`resolve` runs the compiled step (LNVA, least-norm single-joint JVJA)."""
-    if not (batch_kernel.COMPILED and Js.shape[0] and Js.shape[1]):
+    if not (COMPILED and Js.shape[0] and Js.shape[1]):
         return False
     return sc is None or (sc.singletons and response == "least_norm")
 
@@ -312,8 +314,10 @@ def rcn(
     """
     (Js,) = _check(Js)
     sc = _scenarios(Js, lockable, None, joint_names)
-    if not (batch_kernel.COMPILED and sc.singletons and Js.shape[0] and Js.shape[1]):
+    if not (COMPILED and sc.singletons and Js.shape[0] and Js.shape[1]):
         return _rcn_stacked(Js, sc, chunk)
+    from fault_tolerance.analysis.fast import batch as batch_kernel  # compiled on first use
+
     out, status = batch_kernel.reduced_condition_numbers(Js, sc)
     redo = np.flatnonzero(status)
     if redo.size:

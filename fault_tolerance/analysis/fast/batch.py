@@ -33,23 +33,12 @@ import numpy as np
 
 from fault_tolerance.control.fast.step import _views, packed_step_kernel, workspace_shape
 from fault_tolerance.control.lapack_steps import TRACE_MAX
+from fault_tolerance.fast_cache import njit as _njit
 from fault_tolerance.numerics.fast.dense import gram_factor, trace_inverse
 from fault_tolerance.numerics.fast.sample_dense import _spectra
 from fault_tolerance.numerics.linalg import PIVOT_TOL, RANK_RTOL
 from fault_tolerance.resolution.indices import RCN_MAX
 from fault_tolerance.resolution.scenarios import Scenarios
-
-try:  # compiled when numba is there (lazily, on first call; cached on disk)
-    import numba
-
-    _njit = numba.njit(cache=True, nogil=True, error_model="numpy")
-    COMPILED = True
-except ImportError:  # pragma: no cover - numba is a core dependency
-    COMPILED = False
-
-    def _njit(fn):
-        return fn
-
 
 #: Pivots of ``N[S, S]`` below this leave the kernel for the NumPy code (which decides at
 #: ``PIVOT_TOL`` whether the scenario is intolerable).

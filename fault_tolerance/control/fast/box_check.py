@@ -11,16 +11,8 @@ from collections.abc import Callable
 
 import numpy as np
 
+from fault_tolerance.fast_cache import inline as _inline
 from fault_tolerance.resolution.box_qp import BOX_TOL
-
-try:  # inlined into its callers at numba's IR level
-    import numba
-
-    _inline = numba.njit(cache=True, nogil=True, error_model="numpy", inline="always")
-except ImportError:  # pragma: no cover - numba is a core dependency
-
-    def _inline(f):
-        return f
 
 
 # Eqn. (G1): the column N[:, i] of N = I - PᵀQ (never formed) that reduced robot i's rates
@@ -131,9 +123,9 @@ _COMPILED: dict[str, Callable] = {}
 def compiled_box_status() -> Callable:
     """:func:`box_status` compiled by numba (once per process; cached on disk)."""
     if "box" not in _COMPILED:
-        import numba
+        from fault_tolerance.fast_cache import njit
 
-        _COMPILED["box"] = numba.njit(cache=True, nogil=True, error_model="numpy")(box_status)
+        _COMPILED["box"] = njit(box_status)
     return _COMPILED["box"]
 
 

@@ -34,6 +34,7 @@ from fault_tolerance.control.fallback import fallback as _fallback
 from fault_tolerance.control.lapack_steps import _LWA, _STEP_ERRORS, TRACE_MAX
 from fault_tolerance.control.workspace import ControllerWorkspace
 from fault_tolerance.errors import FaultToleranceError
+from fault_tolerance.fast_cache import inline as _inline
 from fault_tolerance.numerics.fast.dense import (
     cholesky_into,
     gram_into,
@@ -44,13 +45,6 @@ from fault_tolerance.numerics.fast.dense import (
 )
 from fault_tolerance.numerics.fast.rank_one_eigen import LANE_ROWS, all_extremes, eigenpairs
 from fault_tolerance.numerics.fast.small_eigen import njit
-
-try:  # inlined into its callers at numba's IR level (no call of a compiled function per step)
-    import numba
-
-    _inline = numba.njit(cache=True, nogil=True, error_model="numpy", inline="always")
-except ImportError:  # pragma: no cover - numba is a core dependency
-    _inline = njit
 from fault_tolerance.resolution.indices import RCN_MAX, RCN_SINGULAR
 
 __all__ = [

@@ -21,6 +21,7 @@ import pinocchio as pin
 from fault_tolerance.control.fallback import bad_call as _bad_call
 from fault_tolerance.control.fast.step import _factor, _trace_inverse, refusal_route
 from fault_tolerance.control.workspace import ControllerWorkspace
+from fault_tolerance.fast_cache import njit as _njit
 from fault_tolerance.numerics.fast.dense import (
     chol_solve,
     cholesky,
@@ -28,16 +29,6 @@ from fault_tolerance.numerics.fast.dense import (
     null_apply,
     rank_ok,
 )
-
-try:
-    import numba
-
-    _njit = numba.njit(cache=True, nogil=True, error_model="numpy")
-except ImportError:  # pragma: no cover - numba is a core dependency
-
-    def _njit(fn):
-        return fn
-
 
 _LWA = pin.LOCAL_WORLD_ALIGNED
 _F64 = np.dtype(np.float64)

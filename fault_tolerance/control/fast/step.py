@@ -30,6 +30,8 @@ from fault_tolerance.control.fallback import fallback as _fallback
 from fault_tolerance.control.lapack_steps import _LWA, _STEP_ERRORS, F64, TRACE_MAX
 from fault_tolerance.control.workspace import ControllerWorkspace
 from fault_tolerance.errors import FaultToleranceError
+from fault_tolerance.fast_cache import inline as _inline
+from fault_tolerance.fast_cache import njit as _njit
 from fault_tolerance.numerics.fast.dense import (
     forward,
     gram_factor,
@@ -39,21 +41,6 @@ from fault_tolerance.numerics.fast.dense import (
     trace_inverse,
 )
 from fault_tolerance.numerics.linalg import projection
-
-try:  # compiled when numba is there (lazily, on first call; cached on disk)
-    import numba
-
-    _njit = numba.njit(cache=True, nogil=True, error_model="numpy")
-    #: Inlined into their callers at numba's IR level: a call of a compiled function from another
-    #: passes every array as its fields, which costs as much as a pass over ``J`` at these sizes.
-    _inline = numba.njit(cache=True, nogil=True, error_model="numpy", inline="always")
-except ImportError:  # pragma: no cover - numba is a core dependency
-
-    def _njit(fn):
-        return fn
-
-    _inline = _njit
-
 
 _INF = math.inf
 #: The step's parameters (the first row of its workspace, :func:`workspace`).
@@ -286,10 +273,8 @@ def compiled_kernel(name: str = "step") -> Any:
 
         return step_kernel if name == "step" else packed_step_kernel
     if name not in _COMPILED:
-        import numba
-
         fn = {"floor": floor_kernel}[name]
-        _COMPILED[name] = numba.njit(cache=True, nogil=True, error_model="numpy")(fn)
+        _COMPILED[name] = _njit(fn)
     return _COMPILED[name]
 
 

@@ -14,20 +14,10 @@ import math
 
 import numpy as np
 
+from fault_tolerance.fast_cache import njit
 from fault_tolerance.numerics.fast.dense import cholesky_into, trace_inverse
 from fault_tolerance.numerics.fast.rank_one_eigen import downdate_extremes, eigenpairs
 from fault_tolerance.numerics.fast.small_eigen import extreme_eigenvalues
-
-try:  # compiled when numba is there (lazily, on first call; cached on disk)
-    import numba
-
-    njit = numba.njit(cache=True, nogil=True, error_model="numpy")
-except ImportError:  # pragma: no cover - numba is a core dependency
-
-    def njit(fn):
-        """Without numba: the plain function."""
-        return fn
-
 
 #: Indices into ``params`` (shared with :mod:`fault_tolerance.simulation.fast.sample`); the first
 #: four are laid out as the Controller's compiled step's (``[TRACE_MAX, pivot threshold, rank

@@ -30,16 +30,7 @@ from __future__ import annotations
 
 import math
 
-try:  # compiled when numba is there (lazily, on first call; cached on disk)
-    import numba
-
-    njit = numba.njit(cache=True, nogil=True, error_model="numpy")
-except ImportError:  # pragma: no cover - numba is a core dependency
-
-    def njit(fn):
-        """Without numba the functions run as plain Python."""
-        return fn
-
+from fault_tolerance.fast_cache import njit
 
 #: LAPACK's ``dlamch('E')``: the unit round-off 2⁻⁵³, and its square (``dsterf``'s ``eps2``).
 EPS = 2.0**-53

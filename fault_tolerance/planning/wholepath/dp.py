@@ -15,7 +15,6 @@ import itertools
 from typing import NamedTuple
 
 import numpy as np
-from scipy.spatial import cKDTree
 
 from fault_tolerance.errors import InvalidInput
 from fault_tolerance.numerics.linalg import projection
@@ -237,6 +236,8 @@ def stage_edges(
     ks = np.full(len(st.q), nxt.k)
     _, E = kinematics(prob, st.q, ks)
     p = st.q + np.einsum("bnm,bm->bn", projection(nd.J).Jpinv, E)  # range motion only
+    from scipy.spatial import cKDTree  # here: scipy.spatial costs 0.25 s to import
+
     _, c = cKDTree(nxt.q).query(p)
     sig_p = nxt.sigma[c] + np.einsum("bn,bn->b", nn.n[c], p - nxt.q[c])
     G2 = len(nxt.q)

@@ -13,7 +13,6 @@ from typing import NamedTuple
 
 import numpy as np
 import pinocchio as pin
-from scipy.spatial.transform import Rotation
 
 from fault_tolerance.errors import InvalidInput
 from fault_tolerance.model.arm import Arm
@@ -131,6 +130,8 @@ def kinematics(prob: PathProblem, Q: np.ndarray, ks: np.ndarray) -> tuple[np.nda
     err = np.zeros((B, 6))
     err[:, :3] = full[:, :3] - M[:, :, 3]
     ang = rows[rows >= 3]
+    if len(ang):
+        from scipy.spatial.transform import Rotation  # here: scipy.spatial takes 0.25 s to import
     if len(ang) == 3:
         Rd = Rotation.from_rotvec(full[:, 3:]).as_matrix()
         err[:, 3:] = Rotation.from_matrix(Rd @ np.swapaxes(M[:, :, :3], 1, 2)).as_rotvec()

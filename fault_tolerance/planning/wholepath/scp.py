@@ -12,10 +12,12 @@ better. The best feasible iterate is returned, so the result is never worse than
 
 from __future__ import annotations
 
-from typing import NamedTuple
+from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
-import scipy.sparse as sp
+
+if TYPE_CHECKING:
+    import scipy.sparse as sp
 
 from fault_tolerance.errors import InvalidInput
 from fault_tolerance.numerics.linalg import projection
@@ -141,6 +143,8 @@ class _Rows:
     def matrix(self, nx: int):
         if not self.m:
             return None, np.zeros(0), np.zeros(0)
+        import scipy.sparse as sp  # here: scipy.sparse costs 0.1 s to import
+
         A = sp.csc_matrix(
             (np.concatenate(self.v), (np.concatenate(self.r), np.concatenate(self.c))),
             shape=(self.m, nx),
@@ -194,6 +198,8 @@ def build_qp(
     The objective is the Gauss-Newton model of ``Σ_k φ(λ_k)`` (:func:`sample_weights`): per
     sample ``φ'·2Hₖ + φ''·4gₖgₖᵀ`` and ``φ'·2gₖ`` with ``Hₖ = GₖᵀGₖ``, ``gₖ = GₖᵀRₖ``.
     """
+    import scipy.sparse as sp  # here: scipy.sparse costs 0.1 s to import
+
     K, n = traj.q.shape
     r = lin.Bn.shape[2]
     dt, T = prob.dt, K - 1
@@ -257,6 +263,7 @@ def build_qp(
 
 def _kkt(P, c, Aeq, beq) -> np.ndarray:
     """Minimiser of ½xᵀPx + cᵀx on ``Aeq x = beq`` from one sparse LU of the KKT matrix."""
+    import scipy.sparse as sp  # here: scipy.sparse costs 0.1 s to import
     from scipy.sparse.linalg import spsolve
 
     nx, me = P.shape[0], Aeq.shape[0]
@@ -277,6 +284,8 @@ def solve_qp(qp: QP, rounds: int = 6) -> np.ndarray | None:
     active-set guess); OSQP (warm-started) when that does not settle. The candidate is checked on
     its exact rollout anyway, so a feasible point suffices.
     """
+    import scipy.sparse as sp  # here: scipy.sparse costs 0.1 s to import
+
     x = _kkt(qp.P, qp.c, qp.Aeq, qp.beq)
     if not np.all(np.isfinite(x)):
         return None

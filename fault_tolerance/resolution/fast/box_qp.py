@@ -20,18 +20,9 @@ from __future__ import annotations
 
 import math
 
+from fault_tolerance.fast_cache import njit as _njit
 from fault_tolerance.numerics.fast.dense import chol_solve, cholesky
 from fault_tolerance.resolution.box_qp import BOX_TOL, MAX_SCALE_ROUNDS, ROW_EPS
-
-try:
-    import numba
-
-    _njit = numba.njit(cache=True, nogil=True, error_model="numpy")
-except ImportError:  # pragma: no cover - numba is a core dependency
-
-    def _njit(fn):
-        return fn
-
 
 # Scratch rows of ``ws`` (8, n + 1): u, z, μ, rr, certificate coefficients, row norms, x, Z u.
 _U, _ZV, _MU, _RR, _CC, _NORM, _X, _DELTA = range(8)

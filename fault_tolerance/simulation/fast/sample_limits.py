@@ -8,15 +8,9 @@ clipped at the position limits over one time step as ``reference_step._clip_to_l
 
 from __future__ import annotations
 
-from fault_tolerance.numerics.fast.sample_dense import njit
-
-try:  # inlined into its callers at numba's IR level (no compiled call per scenario)
-    import numba
-
-    _inline = numba.njit(cache=True, nogil=True, error_model="numpy", inline="always")
-except ImportError:  # pragma: no cover - numba is a core dependency
-    _inline = njit
 from fault_tolerance.control.fast.box_check import g1_column_into
+from fault_tolerance.fast_cache import inline as _inline
+from fault_tolerance.numerics.fast.sample_dense import njit
 from fault_tolerance.resolution.box_qp import BOX_TOL
 
 try:  # the rate box check of the Controller's bounded step, compiled by numba
