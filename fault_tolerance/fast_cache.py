@@ -39,8 +39,6 @@ FAST_FOLDER = "fast"
 #: The environment variable that chooses the cache's root folder.
 CACHE_ENV = "FAULT_TOLERANCE_CACHE_DIR"
 _PACKAGE = Path(__file__).resolve().parent
-#: numba's options for every kernel of the package.
-OPTIONS = {"cache": True, "nogil": True, "error_model": "numpy"}
 #: Whether numba is installed: the kernels are compiled (else they run as plain Python).
 COMPILED = importlib.util.find_spec("numba") is not None
 
@@ -134,14 +132,15 @@ def use_package_cache() -> bool:
         from numba.core.caching import CacheImpl
     except ImportError:  # pragma: no cover - numba moved its caching module
         return False
-    locators = CacheImpl._locator_classes
+    locators: list[Any] = CacheImpl._locator_classes  # numba's own list, read at each kernel
     if not any(getattr(c, "__name__", "") == "KernelCacheLocator" for c in locators):
         locators.insert(0, _locator_class())
     return True
 
 
 @cache
-def _compiler(**extra: Any) -> Callable:
+def _compiler(inlined: bool) -> Callable:
+    """The decorator of the package's kernels: cached, without the GIL, NumPy's error model."""
     try:
         import numba
     except ImportError:  # pragma: no cover - numba is a core dependency
@@ -151,7 +150,9 @@ def _compiler(**extra: Any) -> Callable:
 
         return plain
     use_package_cache()
-    return numba.njit(**OPTIONS, **extra)
+    if inlined:
+        return numba.njit(cache=True, nogil=True, error_model="numpy", inline="always")
+    return numba.njit(cache=True, nogil=True, error_model="numpy")
 
 
 def njit(fn: Callable) -> Any:
@@ -159,12 +160,12 @@ def njit(fn: Callable) -> Any:
 
     Plain Python without numba (and tested so).
     """
-    return _compiler()(fn)
+    return _compiler(False)(fn)
 
 
 def inline(fn: Callable) -> Any:
     """As :func:`njit`, inlined into its compiled callers at numba's IR level."""
-    return _compiler(inline="always")(fn)
+    return _compiler(True)(fn)
 
 
 def is_warm(group: str) -> bool:

@@ -25,9 +25,56 @@ import pytest
 # The CLI tests compare stderr line by line: numba compiles on use there, silently, whatever
 # the state of the cache (tests/test_warm.py tests the default, compiling ahead).
 os.environ.setdefault("FAULT_TOLERANCE_FIRST_RUN", "on-use")
+#: The suite's compiled cache, in the checkout: a clean clone starts cold, and every worker and
+#: every subprocess (the CLI tests, the wheel of tests/test_docs.py) shares what one compiled.
+os.environ.setdefault(
+    "FAULT_TOLERANCE_CACHE_DIR", str(Path(__file__).resolve().parents[1] / ".cache" / "kernels")
+)
 
 import fault_tolerance as ft  # noqa: E402
-from fault_tolerance.numerics.linalg import min_pivot
+from fault_tolerance.numerics.linalg import min_pivot  # noqa: E402
+
+#: The kernel groups compiled before the first test, split over two processes (both cores).
+WARM_SPLIT = (("bounded",), ("controller", "simulate", "batch", "floor"))
+
+
+def pytest_terminal_summary(terminalreporter) -> None:
+    """Under ``.ci/run``: how long the whole script has taken, install included (before pytest's
+    closing line)."""
+    import time
+
+    start = os.environ.get("FT_CI_START", "")
+    if start.isdigit():
+        spent = time.time() - int(start)
+        terminalreporter.write_line(f".ci/run: install and tests took {spent / 60:.1f} min")
+
+
+def pytest_configure(config) -> None:
+    """Compile every kernel once, before any test, in the controlling process (not in a worker).
+
+    Two ``python -m fault_tolerance.bench.warm`` processes share the cache; a warm cache costs
+    about a second. Tests about a cold start use caches of their own.
+    """
+    import subprocess
+    import sys
+    import time
+
+    if hasattr(config, "workerinput") or config.option.collectonly:
+        return
+    from fault_tolerance.bench.warm import cold_groups
+
+    if not cold_groups():
+        return
+    t0 = time.monotonic()
+    procs = [subprocess.Popen([sys.executable, "-m", "fault_tolerance.bench.warm", *groups],
+                              stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+             for groups in WARM_SPLIT]  # fmt: skip
+    errors = [p.communicate()[1] for p in procs if p.wait() != 0]
+    if errors:
+        raise pytest.UsageError(f"compiling the fast path failed:\n{errors[0][-3000:]}")
+    cache = os.environ["FAULT_TOLERANCE_CACHE_DIR"]
+    print(f"tests: compiled the fast path into {cache} in {time.monotonic() - t0:.0f} s")
+
 
 #: Base seed of every RNG in the suite.
 SEED = 20240521

@@ -291,12 +291,12 @@ def test_scaled_rows_time_scaled_bounded_steps_and_their_targets():
     assert got["scaled_jvja_over_jvja"] is True and got["scaled_lnva_over_lnva"] is False
 
 
-def test_mda_target_applies_to_the_default_arms_only():
-    """MDA step / JVJA step ≤ 2 is judged on the default arms; on a long chain it is information."""
+def test_the_mda_ratio_is_information_on_every_arm():
+    """MDA step / JVJA step is printed on every arm and judged on none (MDA is the baseline)."""
     from fault_tolerance.bench.cases import DEFAULT_ARMS
     from fault_tolerance.bench.targets import arm_targets
 
     ops = {k: {"median_us": v, "p99_us": v} for k, v in {"jvja": 1.0, "mda": 3.0}.items()}
-    for key, verdict in [*((k, False) for k in DEFAULT_ARMS), ("chain_30", None)]:
+    for key in (*DEFAULT_ARMS, "chain_30"):
         (t,) = [t for t in arm_targets(key, ops) if t["name"] == "mda_over_jvja"]
-        assert t["pass"] is verdict and t["value"] == 3.0
+        assert t["pass"] is None and t["limit"] is None and t["value"] == 3.0

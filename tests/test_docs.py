@@ -249,7 +249,7 @@ def installed(tmp_path_factory) -> Wheel:
     tmp = tmp_path_factory.mktemp("wheel")
     clean = tmp / "src"  # a clean copy: no virtual environment, build folder or egg-info
     shutil.copytree(ROOT, clean, ignore=shutil.ignore_patterns(
-        ".venv", ".git", "build", "*.egg-info", "__pycache__", "tests", "notebooks"))  # fmt: skip
+        ".venv", ".git", ".cache", "build", "*.egg-info", "__pycache__", "tests", "notebooks"))  # fmt: skip
     pip = [sys.executable, "-m", "pip", "-q"]
     subprocess.run([*pip, "wheel", "--no-deps", str(clean), "-w", str(tmp)], check=True,
                    capture_output=True)  # fmt: skip

@@ -7,6 +7,7 @@ import os
 import subprocess
 import sys
 import time
+from pathlib import Path
 from types import SimpleNamespace
 
 import pytest
@@ -19,18 +20,18 @@ from fault_tolerance.errors import InvalidInput
 
 @pytest.fixture
 def cache(tmp_path, monkeypatch):
-    """An empty numba cache folder (NUMBA_CACHE_DIR) for the markers; the default policy."""
-    monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path))
+    """An empty cache root (FAULT_TOLERANCE_CACHE_DIR) for the markers; the default policy."""
+    monkeypatch.setenv(fast_cache.CACHE_ENV, str(tmp_path))
     monkeypatch.delenv(warm.FIRST_RUN, raising=False)
-    return tmp_path
+    return tmp_path / fast_cache.cache_key()
 
 
 def test_a_marker_holds_while_the_sources_do(cache, monkeypatch):
-    """mark_warm writes a marker beside the cache; it stops holding when the key changes."""
+    """mark_warm writes a marker in the key's folder; it stops holding when the key changes."""
     assert not fast_cache.is_warm("controller")
     assert fast_cache.mark_warm("controller")
     assert fast_cache.is_warm("controller") and (cache / "warm-controller").is_file()
-    monkeypatch.setattr(fast_cache, "warm_key", lambda folder=None: "other sources")
+    monkeypatch.setattr(fast_cache, "cache_key", lambda: "other sources")
     assert not fast_cache.is_warm("controller")
 
 
@@ -76,29 +77,8 @@ def test_a_quick_warm_says_nothing(cache, monkeypatch):
         warm.cold_groups(("nope",))
 
 
-def test_one_background_compilation_at_a_time(cache, monkeypatch):
-    """A cold fast path starts one detached compile; a second call while it runs starts none."""
-    started = []
-
-    def popen(cmd, **kw):
-        started.append(cmd)
-        return SimpleNamespace(pid=4242)
-
-    monkeypatch.delenv(warm.NO_BACKGROUND, raising=False)
-    monkeypatch.setattr(warm, "_cached", lambda module, name: False)  # an empty cache
-    monkeypatch.setattr(warm.subprocess, "Popen", popen)
-    assert warm.start_in_background(("simulate",)) == 4242
-    assert warm.start_in_background(("simulate",)) is None
-    assert len(started) == 1 and started[0][1:3] == ["-m", "fault_tolerance.bench.warm"]
-    assert started[0][-1] == "simulate"
-    monkeypatch.setenv(warm.NO_BACKGROUND, "1")
-    (cache / "warm-background.lock").unlink()
-    assert warm.start_in_background(("simulate",)) is None and len(started) == 1
-
-
 def test_the_engine_of_a_first_run(cache, monkeypatch):
-    """Cold and short: the reference (and a background compile); cold and long: compile first."""
-    monkeypatch.setenv(warm.NO_BACKGROUND, "1")
+    """Cold and short: the reference; cold and long: compile first."""
     monkeypatch.setattr(warm, "_cached", lambda module, name: False)  # an empty cache
     compiled = []
     monkeypatch.setattr(warm, "warm", lambda groups, **kw: compiled.append(tuple(groups)))
@@ -118,16 +98,32 @@ def test_the_engine_of_a_first_run(cache, monkeypatch):
     assert cli_simulate.first_run_engine(short, 3) == "auto"
 
 
-def test_a_cold_simulate_compiles_nothing_and_says_so(tmp_path):
-    """From an empty numba cache ``simulate`` succeeds, prints one notice line and compiles nothing."""
-    cache = tmp_path / "numba"
+def test_a_cold_simulate_compiles_nothing_says_so_and_leaves_no_process(tmp_path):
+    """From an empty cache ``simulate`` succeeds, prints one notice line naming ``warm``, compiles
+    nothing and starts no process that outlives it."""
+    cache = tmp_path / "kernels"
     cache.mkdir()
-    env = {**os.environ, "NUMBA_CACHE_DIR": str(cache), warm.NO_BACKGROUND: "1"}
+    env = {**os.environ, fast_cache.CACHE_ENV: str(cache)}
     env[warm.FIRST_RUN] = "ahead"  # the default (the test suite's conftest sets on-use)
     cmd = [sys.executable, "-m", "fault_tolerance", "simulate", "--robot", "planar_3r"]
     cmd += ["--algorithms", "lnva,jvja", "--duration", "0.3", "--no-progress"]
+    token = f"ft-test-{os.getpid()}-{time.monotonic_ns()}"
+    env["FT_TEST_TOKEN"] = token  # inherited by anything the command starts
     res = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=600)
     assert res.returncode == 0, res.stderr
     lines = [line for line in res.stderr.splitlines() if line.startswith("fault-tolerance:")]
-    assert lines == [cli_simulate.REFERENCE_NOTICE]
+    assert lines == [cli_simulate.REFERENCE_NOTICE] and "fault-tolerance warm" in lines[0]
     assert sorted(p.name for p in cache.rglob("*.nbi")) == []  # nothing was compiled
+    assert _carrying(token) == []  # no process it started outlives it
+
+
+def _carrying(token: str) -> list[int]:
+    """Pids of the running processes whose environment holds ``FT_TEST_TOKEN=token`` (Linux)."""
+    found = []
+    for environ in Path("/proc").glob("[0-9]*/environ"):
+        try:
+            if f"FT_TEST_TOKEN={token}".encode() in environ.read_bytes().split(b"\0"):
+                found.append(int(environ.parent.name))
+        except OSError:  # gone, or not ours to read
+            continue
+    return found

@@ -11,41 +11,34 @@ multi-joint, and its MDA step), ``bounded`` (its bounded step under joint limits
 of :func:`~fault_tolerance.simulation.simulate.simulate`, with and without limits, bounds met),
 ``batch`` (:mod:`fault_tolerance.analysis.batch`), ``floor`` (the benchmark's floor).
 
-``python -m fault_tolerance.bench.warm [GROUP ...]`` compiles the groups (default: all); the
-``simulate`` command starts it in the background when it takes the reference engine because the
-fast path is not compiled yet (:func:`start_in_background`).
+``fault-tolerance warm [GROUP ...]`` (or ``python -m fault_tolerance.bench.warm``) compiles the
+groups (default: all) in the foreground. No command compiles in the background: a short first
+``simulate`` takes the reference engine and says how to warm the cache.
 """
 
 from __future__ import annotations
 
 import os
-import subprocess
 import sys
 import threading
 import time
 from collections.abc import Callable, Sequence
-from pathlib import Path
 
 import numpy as np
 
 from fault_tolerance.errors import InvalidInput
-from fault_tolerance.fast_cache import cache_folder, is_warm, mark_warm
+from fault_tolerance.fast_cache import is_warm, mark_warm
 
 __all__ = [
     "GROUPS",
     "Notice",
     "cold_groups",
     "compile_ahead",
-    "start_in_background",
     "warm",
 ]
 
 #: Seconds a compilation may take before it says so on stderr.
 QUIET_SECONDS = 2.0
-#: A background compilation older than this [s] is taken for dead (its lock file is stale).
-STALE_SECONDS = 900.0
-#: The env variable that stops :func:`start_in_background` (tests, CI).
-NO_BACKGROUND = "FAULT_TOLERANCE_NO_BACKGROUND_COMPILE"
 #: The env variable that chooses what a command does with a cold fast path: ``"ahead"``
 #: (default: compile ahead, with one line on stderr, or take the reference engine for a short
 #: run) or ``"on-use"`` (numba compiles each kernel at its first call, inside the command,
@@ -292,48 +285,10 @@ def warm(
     return todo
 
 
-def _lock_file() -> Path:
-    return cache_folder() / "warm-background.lock"
-
-
-def start_in_background(groups: Sequence[str]) -> int | None:
-    """Start ``python -m fault_tolerance.bench.warm GROUPS`` detached; its pid, or None.
-
-    None when nothing is cold, when :data:`NO_BACKGROUND` is set, or when another background
-    compilation (its lock file younger than :data:`STALE_SECONDS`) is under way.
-    """
-    todo = cold_groups(groups)
-    if not todo or os.environ.get(NO_BACKGROUND):
-        return None
-    lock = _lock_file()
-    try:
-        lock.parent.mkdir(parents=True, exist_ok=True)
-        if lock.exists() and time.time() - lock.stat().st_mtime < STALE_SECONDS:
-            return None
-        lock.write_text(str(os.getpid()))
-    except OSError:
-        return None
-    proc = subprocess.Popen(
-        [sys.executable, "-m", "fault_tolerance.bench.warm", "--lock", str(lock), *todo],
-        stdin=subprocess.DEVNULL,
-        stdout=subprocess.DEVNULL,
-        stderr=subprocess.DEVNULL,
-        start_new_session=True,
-    )
-    return proc.pid
-
-
 def main(argv: Sequence[str] | None = None) -> int:
-    """``python -m fault_tolerance.bench.warm [--lock FILE] [GROUP ...]``: compile, then exit 0."""
+    """``python -m fault_tolerance.bench.warm [GROUP ...]``: compile (default: every group), exit 0."""
     args = list(sys.argv[1:] if argv is None else argv)
-    lock = None
-    if args[:1] == ["--lock"]:
-        lock, args = Path(args[1]), args[2:]
-    try:
-        warm(args or tuple(GROUPS))
-    finally:
-        if lock is not None:
-            lock.unlink(missing_ok=True)
+    warm(args or tuple(GROUPS))
     return 0
 
 

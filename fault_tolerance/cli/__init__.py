@@ -23,6 +23,7 @@ from fault_tolerance.cli import (
     reproduce,
     robots,
     simulate,
+    warm,
     workspace,
 )
 from fault_tolerance.cli.common import FORMATTER, state_defaults
@@ -37,7 +38,7 @@ __all__ = [
 ]
 
 #: The sub-command modules, in the order of ``fault-tolerance --help``.
-COMMANDS = [robots, inspect, simulate, lock, reproduce, replay, workspace, design, bench]
+COMMANDS = [robots, inspect, simulate, lock, reproduce, replay, workspace, design, bench, warm]
 #: The ``example:`` text of each command's ``--help``.
 EXAMPLES = {mod.NAME: mod.EXAMPLE for mod in COMMANDS}
 

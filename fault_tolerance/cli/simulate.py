@@ -173,9 +173,9 @@ def run(args) -> int:
 SHORT_RUN = 60_000
 #: What a first run with the reference engine says (one line on stderr).
 REFERENCE_NOTICE = (
-    "fault-tolerance: the compiled fast path is not in numba's cache yet; this run takes the "
-    "reference engine (the same numbers to 1e-6) and the fast path compiles in the background "
-    "for the next runs"
+    "fault-tolerance: the compiled fast path is not in the cache yet; this run takes the "
+    "reference engine (the same numbers to 1e-6); 'fault-tolerance warm' compiles the fast path "
+    "once for the next runs"
 )
 
 
@@ -202,12 +202,9 @@ def first_run_engine(args, runs: int) -> str:
 
 
 def announce_first_run(engine: str) -> None:
-    """For a first run on the reference engine: one line on stderr, the compilation started."""
-    from fault_tolerance.bench import warm
-
+    """For a first run on the reference engine: one line on stderr saying how to warm the cache."""
     if engine == "reference":
         print(REFERENCE_NOTICE, file=sys.stderr)
-        warm.start_in_background(SIMULATE_KERNELS)
 
 
 def _run(args, out: Path | None) -> int:
