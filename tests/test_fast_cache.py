@@ -48,14 +48,3 @@ def test_a_folder_without_kernels_is_left_alone(tmp_path):
     """No fast/ folder (not this package's layout): no error, nothing written."""
     assert fast_cache.refresh(tmp_path) is False
     assert not (tmp_path / "__pycache__").exists()
-
-
-def test_the_warm_groups_compile_the_mda_kernels():
-    """The compiled MDA step and gradient are in the controller and simulate warm groups."""
-    from fault_tolerance.bench import warm
-    from fault_tolerance.control.fast import mda_step
-
-    assert ("fault_tolerance.control.fast.mda_step", "mda_kernel") in warm.KERNELS["controller"]
-    assert ("fault_tolerance.control.fast.mda_step", "gradient_kernel") in warm.KERNELS["simulate"]
-    warm.GROUPS["controller"]()
-    assert mda_step.mda_kernel.signatures  # compiled (or loaded from the cache) by the group
