@@ -231,8 +231,8 @@ def test_controller_compiled_step_equals_reference(robot, task, lockable, weight
 def test_near_singular_reduced_robots_solved_exactly():
     """A reduced Jacobian near its singularity: the compiled step equals the exact reference.
 
-    The compiled solve either follows the reduced robot's path (L8, undamped) or refuses and
-    leaves the step to the exact reference; both give the reference's rates and scale.
+    The compiled solve either solves the reduced robot (L7) or refuses and leaves the step to the
+    exact reference; both give the reference's rates and scale.
     """
     arm = ft.load_arm("panda")
     ctrl = Controller(arm, [0, 2, 4, 6], backend="numba")

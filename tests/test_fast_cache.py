@@ -104,14 +104,3 @@ def test_a_copy_of_the_package_elsewhere_finds_the_kernels_compiled(tmp_path):
     assert again[1] == "compiled: "  # loaded from the shared cache
     key = fast_cache.cache_key()
     assert (tmp_path / "cache" / key / "fault_tolerance.control.fast.step").is_dir()
-
-
-def test_the_warm_groups_compile_the_mda_kernels():
-    """The compiled MDA step and gradient are in the controller and simulate warm groups."""
-    from fault_tolerance.bench import warm
-    from fault_tolerance.control.fast import mda_step
-
-    assert ("fault_tolerance.control.fast.mda_step", "mda_kernel") in warm.KERNELS["controller"]
-    assert ("fault_tolerance.control.fast.mda_step", "gradient_kernel") in warm.KERNELS["simulate"]
-    warm.GROUPS["controller"]()
-    assert mda_step.mda_kernel.signatures  # compiled (or loaded from the cache) by the group

@@ -200,22 +200,6 @@ def test_reduced_robots_at_bounds_are_solved_compiled(key, samplers):
     assert smp.reduced_reference == 0  # none left to bounded.reduced_bounded
     assert smp.boxed.bounded_reference_steps == 0  # the bounded step compiled too
     assert smp.reference_samples == 0
-    assert smp.bounded_compiled == smp.bounded_samples  # each in one compiled call
-
-
-@pytest.mark.parametrize("alg", ["lnva", "jvja"])
-def test_bounded_sample_in_one_call_equals_the_python_route(alg, samplers, monkeypatch):
-    """sample_bounded.bounded_sample against Sampler's Python route over the same compiled pieces:
-    the same run (bounds met by the planned rates and by reduced robots, the task scaled)."""
-    arm, q0, path = _near_limits(0.15, 8 * np.pi, 0.25)
-    kw = dict(q0=q0, lockable="all", feedback_gain=10.0, engine="fast")
-    one = simulate(arm, path, alg, **kw)
-    monkeypatch.setattr(Sampler, "ONE_CALL", False)
-    route = simulate(arm, path, alg, **kw)
-    _same(one, route)
-    first, second = samplers
-    assert first.bounded_compiled == first.bounded_samples > 0
-    assert second.bounded_compiled == 0 and second.bounded_samples == first.bounded_samples
 
 
 @pytest.mark.parametrize("target", [False, True])
@@ -253,7 +237,7 @@ def test_reduced_robots_refused_by_the_compiled_code_take_reduced_bounded(sample
         return np.full(len(todo), 3, dtype=np.int64)
 
     monkeypatch.setattr(Sampler, "_reduced", refuse)  # the class itself (the fixture wraps it)
-    monkeypatch.setattr(Sampler, "ONE_CALL", False)  # the Python route, piece by piece
+    monkeypatch.setattr(Sampler, "_target_posts", lambda self, ctrl: None)  # not JVJA's kept rates
     arm, q0, path = _near_limits(0.1, 2 * np.pi, 0.2)
     _bounded_pair(arm, path, "jvja", q0=q0, lockable="all", feedback_gain=10.0)
     (smp,) = samplers
@@ -400,35 +384,13 @@ def test_compiled_flag_constants_are_the_runs():
     """The compiled kernels carry copies of run's flags and bounded's tolerance: they must agree."""
     from fault_tolerance.resolution import bounded
     from fault_tolerance.simulation import run
-    from fault_tolerance.simulation.fast import sample_bounded, sample_limits, sampler
+    from fault_tolerance.simulation.fast import sample_limits, sampler
 
-    assert sample_bounded.FLAG_BOUND_ACTIVE == run.FLAG_BOUND_ACTIVE
-    assert sample_bounded.FLAG_TASK_SCALED == run.FLAG_TASK_SCALED == sampler._TASK_SCALED
-    assert sample_bounded.FLAG_INTOLERABLE_UNDER_LIMITS == run.FLAG_INTOLERABLE_UNDER_LIMITS
+    assert run.FLAG_TASK_SCALED == sampler._TASK_SCALED
     assert sample_limits._FLAG_SERVO_CLIPPED == run.FLAG_SERVO_CLIPPED
     assert (sk._FLAG_LOCKED, sk._FLAG_STEP_LIMITED, sk._FLAG_OVER_SPEED) == (
         run.FLAG_LOCKED,
         run.FLAG_STEP_LIMITED,
         run.FLAG_OVER_SPEED,
     )
-    assert sample_bounded.SCALE_TOL == bounded.SCALE_TOL
-
-
-def test_a_declined_bounded_sample_takes_the_python_route(samplers, monkeypatch):
-    """Where the one-call bounded sample declines (here its bounded solve refuses every problem:
-    its own workspace's trace bound certifies no Jacobian), the Python route solves the sample:
-    the run is still the reference's, and nothing is counted twice."""
-    real = Sampler._compiled_tables
-
-    def broken(self):
-        tables = real(self)
-        if tables:
-            self.box_views["p3"][0] = -1.0  # trace(G⁻¹) <= -1: never
-        return tables
-
-    monkeypatch.setattr(Sampler, "_compiled_tables", broken)
-    arm, q0, path = _near_limits(0.15, 8 * np.pi, 0.25)
-    _bounded_pair(arm, path, "jvja", q0=q0, lockable="all", feedback_gain=10.0)
-    (smp,) = samplers
-    assert smp.bounded_samples > 0 and smp.bounded_compiled == 0
-    assert smp.boxed.bounded_steps > 0  # the Python route's Controller step solved them
+    assert sampler.SCALE_TOL == bounded.SCALE_TOL

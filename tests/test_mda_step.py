@@ -1,15 +1,13 @@
-"""The compiled MDA step (control/fast/mda_step.py) against the reference resolution/mda.py."""
+"""The Controller's MDA step and the simulated MDA sample against the reference resolution/mda.py."""
 
 from __future__ import annotations
 
 import numpy as np
-import pinocchio as pin
 import pytest
 from real_arms import load
 
 import fault_tolerance as ft
 from fault_tolerance.control.controller import Controller
-from fault_tolerance.control.fast import mda_step as ms
 from fault_tolerance.resolution.indices import RCN_SINGULAR, rcn_gradient
 from fault_tolerance.simulation.paths import CirclePath
 
@@ -36,7 +34,6 @@ def _configurations(arm, rng, count=12, near=3):
 
 def _check_arm(arm, lockable, rng, tol=1e-9):
     ctrl = Controller(arm, lockable, method="mda", backend="numba", limits=False)
-    assert ctrl.mda.__module__ == ms.__name__  # the compiled step, not lapack_mda
     for q in _configurations(arm, rng):
         xd = rng.standard_normal(arm.m)
         ref = _reference(arm, q, xd, ctrl.scenarios)
@@ -53,12 +50,12 @@ def _check_arm(arm, lockable, rng, tol=1e-9):
         ("panda", {"task": "position"}, "all"),
     ],
 )
-def test_compiled_mda_equals_the_reference(name, kw, lockable):
+def test_controller_mda_equals_the_reference(name, kw, lockable):
     """Controller(method='mda', backend='numba') rates equal ft.resolve('mda') to 1e-9."""
     _check_arm(ft.load_arm(name, **kw), lockable, np.random.default_rng(SEED))
 
 
-def test_compiled_mda_on_a_real_arm():
+def test_controller_mda_on_a_real_arm():
     """The same on a real description from tests/data (Kinova, position task)."""
     arm = load("kinova")
     _check_arm(arm, "all", np.random.default_rng(SEED + 1))
@@ -69,56 +66,6 @@ def test_near_singular_configurations_are_near_singular():
     arm = ft.load_arm("planar_3r")
     qs = _configurations(arm, np.random.default_rng(SEED), count=0, near=3)
     assert min(ft.rcn(arm.jacobian(q), "all").max() for q in qs) > 300
-
-
-def test_hessian_contraction_equals_the_kinematic_hessian():
-    """hessian_contract (K1) equals uᵀ (∂J/∂q_j) x from Arm.jacobian_derivatives, to 1e-12."""
-    rng = np.random.default_rng(SEED)
-    for arm in (ft.load_arm("panda", task="pose"), ft.load_arm("spatial_4r")):
-        data = arm.model.createData()
-        for _ in range(5):
-            q = arm.random_q(rng)
-            Jf = pin.computeFrameJacobian(arm.model, data, q, arm.frame_id, pin.LOCAL_WORLD_ALIGNED)
-            dJ = arm.jacobian_derivatives(q)
-            u, x = rng.standard_normal(arm.m), rng.standard_normal(arm.n)
-            ut = np.zeros(6)
-            ut[np.asarray(arm.rows)] = u
-            D = np.zeros(arm.n)
-            ms.hessian_contract(Jf, ut, x, np.zeros((arm.n, 6)), D)
-            np.testing.assert_allclose(D, np.einsum("i,jik,k->j", u, dJ, x), atol=1e-12)
-
-
-def test_matrix_contraction_equals_the_kinematic_hessian():
-    """matrix_contract (K2) equals Σ M[r, k] (∂J/∂q_j)[r, k] from Arm.jacobian_derivatives, 1e-12."""
-    rng = np.random.default_rng(SEED)
-    for arm in (ft.load_arm("panda", task="pose"), ft.load_arm("spatial_4r")):
-        data = arm.model.createData()
-        rows = np.arange(6)[np.asarray(arm.rows)]
-        for _ in range(5):
-            q = arm.random_q(rng)
-            Jf = pin.computeFrameJacobian(arm.model, data, q, arm.frame_id, pin.LOCAL_WORLD_ALIGNED)
-            dJ = arm.jacobian_derivatives(q)
-            Mt = rng.standard_normal((arm.m, arm.n))
-            M = np.zeros((6, arm.n))
-            M[rows] = Mt
-            g = np.zeros(arm.n)
-            ms.matrix_contract(Jf, M, g)
-            np.testing.assert_allclose(g, np.einsum("ik,jik->j", Mt, dJ), atol=1e-12)
-            assert np.abs(g).max() > 1e-3  # not trivially zero
-
-
-def test_plain_python_kernel_equals_the_compiled_one():
-    """mda_kernel.py_func (no numba) gives the compiled kernel's rates to 1e-13."""
-    arm = ft.load_arm("spatial_4r")
-    ctrl = Controller(arm, [0, 1, 2], method="mda", backend="numba", limits=False)
-    F, Iw = ms.gradient_workspace(ctrl.workspace)
-    rng = np.random.default_rng(SEED)
-    q, xd = arm.random_q(rng), rng.standard_normal(arm.m)
-    Jf = pin.computeFrameJacobian(arm.model, ctrl.data, q, arm.frame_id, pin.LOCAL_WORLD_ALIGNED)
-    a, b = np.empty(arm.n), np.empty(arm.n)
-    assert ms.mda_kernel(Jf, xd, a, F, Iw) == 0
-    assert ms.mda_kernel.py_func(Jf, xd, b, F.copy(), Iw) == 0
-    np.testing.assert_allclose(a, b, atol=1e-13)
 
 
 # -- exact reduced singularities (eq. S1) ---------------------------------------------------
@@ -168,7 +115,7 @@ def _singular_spatial(arm):
 
 
 def test_simulate_follows_the_reference_near_a_reduced_singularity():
-    """The compiled simulated sample (compiled ∇K) equals the reference run near σ_min(J_S) = 0.
+    """The compiled simulated sample equals the reference run near σ_min(J_S) = 0.
 
     At an exact one a planar 3R scenario is intolerable (r = 1: J_S singular iff N_ii = 0), which
     simulate refuses; near it (k_S > 300) the run is the reference's to 1e-9.

@@ -156,7 +156,6 @@ def fast_rows(case: Case) -> dict[str, Row]:
         "jvja": (ctrl.jvja, qxo),
         "rcn": (ctrl.rcn, [(q, np.empty(case.sc.f)) for q in case.qs]),
         "mda": (ctrl.mda, qxo),
-        **_gradient_row(ctrl, case.qs),
     }
     for other in available_backends():
         if other != ctrl.backend:
@@ -168,25 +167,6 @@ def fast_rows(case: Case) -> dict[str, Row]:
         multi = Controller(case.arm, pairs, backend=ctrl.backend, limits=False)
         rows["jvja_multi"] = (multi.jvja, qxo)
     return rows
-
-
-def _gradient_row(ctrl, qs) -> dict[str, Row]:
-    """``mda_gradient``: the Jacobian and ∇K of the compiled MDA step (single-joint scenarios)."""
-    import pinocchio as pin
-
-    from fault_tolerance.control.fast.mda_step import gradient_kernel, gradient_workspace
-
-    cw = ctrl.workspace
-    if ctrl.backend != "numba" or not cw.singletons:
-        return {}
-    F, Iw = gradient_workspace(cw)
-    model, data, fid, m = cw.model, cw.model.createData(), cw.frame_id, cw.m
-    cfj, lwa = pin.computeFrameJacobian, pin.LOCAL_WORLD_ALIGNED
-
-    def gradient(q):
-        return gradient_kernel(cfj(model, data, q, fid, lwa), F, Iw, m)
-
-    return {"mda_gradient": (gradient, [(q,) for q in qs])}
 
 
 def floor_rows(case: Case) -> dict[str, Row]:

@@ -7,7 +7,7 @@ them on a small problem, and marks a group done beside numba's cache
 (:func:`fault_tolerance.fast_cache.mark_warm`), so a later command knows it has nothing to compile.
 
 Groups (:data:`GROUPS`): ``controller`` (the Controller's LNVA / JVJA steps, single- and
-multi-joint, and its MDA step), ``bounded`` (its bounded step under joint limits), ``simulate`` (the compiled sample
+multi-joint), ``bounded`` (its bounded step under joint limits), ``simulate`` (the compiled sample
 of :func:`~fault_tolerance.simulation.simulate.simulate`, with and without limits, bounds met),
 ``batch`` (:mod:`fault_tolerance.analysis.batch`), ``floor`` (the benchmark's floor).
 
@@ -70,13 +70,12 @@ def _compiled_resolvers(modes: Sequence[int] | None = None) -> list[str]:
 
 
 def _controller() -> None:
-    """The Controller's compiled steps: LNVA, single-joint JVJA, multi-joint JVJA (G1), MDA."""
+    """The Controller's compiled steps: LNVA, single-joint JVJA, multi-joint JVJA (G1)."""
     from fault_tolerance.control.controller import Controller
     from fault_tolerance.model.loading import load_arm
 
     arm, q = _planar()
     Controller(arm, lockable="all", backend="numba", limits=False).step(q, np.array([0.1, 0.0]))
-    Controller(arm, lockable="all", method="mda", backend="numba", limits=False)  # mda_kernel
     panda = load_arm("panda", task="position")
     pairs = [(j, j + 1) for j in range(panda.n - 1)]
     Controller(panda, pairs, backend="numba", limits=False)
@@ -152,7 +151,6 @@ KERNELS: dict[str, tuple[tuple[str, str], ...]] = {
     "controller": (
         ("fault_tolerance.control.fast.step", "packed_step_kernel"),
         ("fault_tolerance.control.fast.multi_step", "multi_kernel"),
-        ("fault_tolerance.control.fast.mda_step", "mda_kernel"),
     ),
     "bounded": (
         ("fault_tolerance.control.fast.bounded_solve", "bounded_kernel"),
@@ -163,8 +161,7 @@ KERNELS: dict[str, tuple[tuple[str, str], ...]] = {
     "simulate": (
         ("fault_tolerance.simulation.fast.sample", "sample_kernel"),
         ("fault_tolerance.simulation.fast.sample", "finish_kernel"),
-        ("fault_tolerance.simulation.fast.sample_bounded", "limited_sample"),
-        ("fault_tolerance.control.fast.mda_step", "gradient_kernel"),
+        ("fault_tolerance.control.fast.bounded_solve", "reduced_solve"),
     ),
     "batch": (
         ("fault_tolerance.analysis.fast.batch", "single_rows"),

@@ -35,9 +35,7 @@ Backends for the LNVA and single-joint JVJA steps (``backend=``):
 * ``"numpy"``: the same code with NumPy in place of the LAPACK wrappers (no extra dependency);
 * ``"auto"`` (default): the first of these that is installed.
 
-With numba, MDA with single-joint scenarios runs
-:func:`fault_tolerance.control.fast.mda_step.mda_kernel` (multi-joint: the lapack code); the RCN
-uses the lapack (or numpy) code; multi-joint JVJA runs
+With numba, MDA and the RCN use the lapack (or numpy) code; multi-joint JVJA runs
 :func:`fault_tolerance.control.fast.multi_step.multi_kernel`. The step kernels (the
 LAPACK/NumPy calls, the numba kernel and its compilation) are in :mod:`fault_tolerance.control.lapack_steps`;
 this module builds the workspace they run in (:mod:`fault_tolerance.control.workspace`);
@@ -292,11 +290,7 @@ class Controller:
         else:
             self.lnva = kernels.lapack_lnva(ws)
             self.jvja = kernels.lapack_jvja(ws)
-        self.mda = kernels.lapack_mda(ws)
-        if self.backend == "numba" and ws.singletons:  # compiled too (multi-joint: lapack_mda)
-            from fault_tolerance.control.fast.mda_step import compiled_mda_step
-
-            self.mda = compiled_mda_step(ws, self.mda)
+        self.mda = kernels.lapack_mda(ws)  # MDA, the paper's baseline: the lapack (or numpy) code
         if self.limits:  # the fast steps checked against the rate box (L1), bounded when needed
             from fault_tolerance.control.bounded_step import bounded_step
             from fault_tolerance.model.joint_limits import RATE_HORIZON

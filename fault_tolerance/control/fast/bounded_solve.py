@@ -33,20 +33,11 @@ from fault_tolerance.resolution.fast.box_basis import (
     factor,
     null_basis,
     null_project,
-    pivots_clear,
     reduced_basis,
     reduced_rates,
     undamped,
 )
 from fault_tolerance.resolution.fast.box_qp import _njit, solve_box_rates
-from fault_tolerance.resolution.fast.least_norm_path import (
-    UNDECIDED,
-    VERTEX,
-    least_norm_path,
-    pays_off,
-    vertex_state,
-)
-from fault_tolerance.resolution.fast.reduced_vertex import reduced_vertex, whole_basis
 
 _step_kernel = compiled_kernel("step")
 _box_status = compiled_box_status()
@@ -61,12 +52,12 @@ _FLOAT = (("G", "mm"), ("B", "mn"), ("fw", "2n"), ("lim", "3n"), ("buf", "4n"), 
           ("p4", "4"), ("prm", "2"), ("state", "n+2"), ("p3", "3"), ("Zm", "nn"), ("V", "7n"),
           ("Lm", "mm"), ("Y", "mn"), ("z", "m"), ("NSS", "ss"), ("ys", "s"), ("wsf", "8(n+1)"),
           ("gram", "(n+1)(n+1)"), ("wrel", "f"), ("mws", "multi"), ("QA", "nm"), ("hb", "m"),
-          ("Zs", "nn"), ("posts", "fn"), ("pscale", "f"), ("psolved", "f"), ("vx", "4n"),
-          ("vm", "3mm+4m"), ("free", "free"))  # fmt: skip
-_INT = (("cols", "k"), ("sets", "fs"), ("wsi", "2(n+1)"), ("mask", "n"), ("vi", "2n+2m"))
+          ("Zs", "nn"), ("posts", "fn"), ("pscale", "f"), ("psolved", "f"),
+          ("free", "free"))  # fmt: skip
+_INT = (("cols", "k"), ("sets", "fs"), ("wsi", "2(n+1)"), ("mask", "n"))
 (_G, _B, _FW, _LIM, _BUF, _C, _P4, _PRM, _STATE, _P3, _ZM, _V, _LM, _Y, _Z, _NSS, _YS, _WSF, _GRAM,
- _WREL, _MWS, _QA, _HB, _ZS, _POSTS, _PSCALE, _PSOLVED, _VX, _VM, _FREE) = range(30)  # fmt: skip
-_COLS, _SETS, _WSI, _MASK, _VI = range(5)
+ _WREL, _MWS, _QA, _HB, _ZS, _POSTS, _PSCALE, _PSOLVED, _FREE) = range(28)  # fmt: skip
+_COLS, _SETS, _WSI, _MASK = range(4)
 _HEAD = 8
 _NF = len(_FLOAT)
 
@@ -81,8 +72,7 @@ def _shapes(n, m, f, s, k) -> dict[str, tuple[int, ...]]:
             "2": (2,), "4n": (4, n), "n+2": (n + 2,), "3": (3,), "nn": (n, n), "7n": (7, n),
             "m": (m,), "ss": (s, s), "s": (s,), "8(n+1)": (8, n1), "(n+1)(n+1)": (n1, n1),
             "f": (f,), "multi": (multi,), "k": (k,), "fs": (f, s), "2(n+1)": (2, n1), "nm": (n, m),
-            "fn": (f, n), "free": (2, *_free_dims(m, n)), "3mm+4m": (3 * m * m + 4 * m,),
-            "2n+2m": (2 * n + 2 * m,)}  # fmt: skip
+            "fn": (f, n), "free": (2, *_free_dims(m, n))}  # fmt: skip
 
 
 def workspace(n: int, m: int, sets: np.ndarray, cols: np.ndarray, mode: int):
@@ -115,25 +105,25 @@ def workspace(n: int, m: int, sets: np.ndarray, cols: np.ndarray, mode: int):
     return F, Iw, views
 
 
-@_njit
+@_inline
 def _fv(F, Iw, t, r):  # pragma: no cover - numba
     o = Iw[_HEAD + t]
     return F[o : o + r]
 
 
-@_njit
+@_inline
 def _fm(F, Iw, t, r, c):  # pragma: no cover - numba
     o = Iw[_HEAD + t]
     return F[o : o + r * c].reshape((r, c))
 
 
-@_njit
+@_inline
 def _im(F, Iw, t, r, c):  # pragma: no cover - numba
     o = Iw[_HEAD + _NF + t]
     return Iw[o : o + r * c].reshape((r, c))
 
 
-@_njit
+@_inline
 def _iv(F, Iw, t, r):  # pragma: no cover - numba
     o = Iw[_HEAD + _NF + t]
     return Iw[o : o + r]
@@ -146,9 +136,8 @@ def _reduced_box(
     """A reduced robot's rates nearest ``target`` under the box, by the dual active set (L6, L7).
 
     ``p₀ = Z_S Z_Sᵀ target`` (0: the least-norm response) and the rates ``p₀ + s d + Z_S u``,
-    ``d`` its (G1) rates. Where :func:`~fault_tolerance.resolution.fast.least_norm_path.least_norm_path`
-    does not decide, or does not pay off. Returns a code of the module doc (3: near ``J_S``'s
-    singularity, left to the reference). ``target`` and ``p₀`` may be one array; ``zr`` (r,) scratch.
+    ``d`` its (G1) rates. Returns a code of the module doc (3: near ``J_S``'s singularity, left to
+    the reference). ``target`` and ``p₀`` may be one array; ``zr`` (r,) scratch.
     """
     Zs, Gs, mask, ws, wsi, gram = W[0], W[3], W[4], W[5], W[6], W[7]
     if undamped(J, S, k, bound, params, Gs) != 0.0:  # near J_S's singularity, or undecided
@@ -204,7 +193,7 @@ def _jvja_target(
     row ``S`` of ``P``, its task scaling into ``ps`` and 1.0 into ``pb`` where it was solved under
     the box (the simulated sample's jump reads them).
     """
-    Zs, NSS, ys, Gs, mask, ws, wsi, gram, P, ps, pb = W
+    NSS, ys, mask, P, ps, pb = W[1], W[2], W[4], W[8], W[9], W[10]
     n = Z.shape[0]
     f, s = sets.shape
     post, cbar, act, zr = V[1], V[2], V[5], V[6]
@@ -229,16 +218,10 @@ def _jvja_target(
             V[3, j] = 0.0
         for t in range(k):
             mask[S[t]] = 0
-        solved = False  # along the path (L8) when it pays off, else (or undecided) by (L7)
-        if pays_off(post, lo, hi, mask):
-            solved = (
-                least_norm_path(J, xdot, lo, hi, mask, V[4], act, ws, wsi, Gs, res) != UNDECIDED
-            )
-        if not solved:
-            st = _reduced_box(J, Z, r, S, k, tr * trinv, params, W, V[3], V[3], post, zr, lo, hi,
-                              V[4], act, res)  # fmt: skip
-            if st:
-                return st
+        st = _reduced_box(J, Z, r, S, k, tr * trinv, params, W, V[3], V[3], post, zr, lo, hi,
+                          V[4], act, res)  # fmt: skip
+        if st:
+            return st
         _record_post(V[4], S, k, sc, wrel, P, cbar, ps, pb, res)
     return 0
 
@@ -257,104 +240,6 @@ def _mda_inside(out, lo, hi, state) -> bool:  # pragma: no cover - numba
     return True
 
 
-@_njit
-def _keep_vertex(F, Iw, qd, act, ws, wsi, restore) -> None:  # pragma: no cover - numba
-    """The whole arm's LP vertex (L8) into the ``vx``/``vi`` sections, or back into ``qd``, ``act``."""
-    n, m = Iw[0], Iw[1]
-    vx, vi = _fm(F, Iw, _VX, 4, n), _iv(F, Iw, _VI, 2 * n + 2 * m)
-    for j in range(n):
-        if restore:
-            qd[j], act[j] = vx[0, j], vx[1, j]
-        else:
-            vx[0, j], vx[1, j] = qd[j], act[j]
-    if not restore:
-        vertex_state(ws, wsi, vi[0:n], vx[2])
-
-
-@_njit
-def _vertex_tables(F, Iw):  # pragma: no cover - numba
-    """``vtx`` of :func:`~fault_tolerance.resolution.fast.reduced_vertex.reduced_vertex` in the workspace."""
-    n, m = Iw[0], Iw[1]
-    vx, vi, vm = (
-        _fm(F, Iw, _VX, 4, n),
-        _iv(F, Iw, _VI, 2 * n + 2 * m),
-        _fv(F, Iw, _VM, 3 * m * m + 4 * m),
-    )
-    mm = m * m
-    return (vi[0:n], vx[2], vi[2 * n : 2 * n + m], vm[0:mm].reshape((m, m)), vm[3 * mm : 3 * mm + m],
-            vi[n : 2 * n], vx[3], vi[2 * n + m :], vm[mm : 2 * mm].reshape((m, m)),
-            vm[3 * mm + m : 3 * mm + 2 * m], vm[3 * mm + 2 * m : 3 * mm + 3 * m],
-            vm[3 * mm + 3 * m :])  # fmt: skip
-
-
-# Eqn. (L4) with (L9): JVJA's target when the whole arm's rates are the LP's unique vertex.
-@_njit
-def _vertex_target(J, xdot, lo, hi, V, p3, F, Iw, top, res) -> int:  # pragma: no cover - numba
-    """``c = Σ_S (w_S/W) ˢq̇'_b`` into ``V[2]``, every reduced robot from the vertex (L9).
-
-    As :func:`_jvja_target` (``P``, ``ps``, ``pb`` too), with the pivots checked from ``Y = L⁻¹J``
-    and no null-space basis: at the vertex no reduced robot's (G1) rates are inside the box (they
-    would reach ``s = 1 > top``). Returns 0, 2 (a pivot below the threshold) or 6 (undecided: the
-    caller takes :func:`_jvja_target`).
-    """
-    n, m, f, s = Iw[0], Iw[1], Iw[2], Iw[3]
-    vtx = _vertex_tables(F, Iw)
-    mm = m * m
-    if not whole_basis(
-        J,
-        xdot,
-        vtx[0],
-        vtx[1],
-        vtx[2],
-        vtx[3],
-        _fv(F, Iw, _VM, 3 * mm + 4 * m)[2 * mm : 3 * mm].reshape((m, m)),
-        vtx[4],
-    ):
-        return UNDECIDED  # fmt: skip
-    sets, wrel, Y = _im(F, Iw, _SETS, f, s), _fv(F, Iw, _WREL, f), _fm(F, Iw, _Y, m, n)
-    P, ps, pb = _fm(F, Iw, _POSTS, f, n), _fv(F, Iw, _PSCALE, f), _fv(F, Iw, _PSOLVED, f)
-    NSS, cbar, qd, act = _fm(F, Iw, _NSS, s, s), V[2], V[4], V[5]
-    for j in range(n):
-        cbar[j] = 0.0
-    for sc in range(f):
-        k, S = _set_size(sets, sc), sets[sc]
-        clear = pivots_clear(Y, S, k, p3[1], NSS)
-        if clear <= 0:
-            return 2 if clear < 0 else UNDECIDED
-        if reduced_vertex(J, xdot, lo, hi, S, k, vtx, top, qd, act, res):
-            return UNDECIDED
-        _record_post(qd, S, k, sc, wrel, P, cbar, ps, pb, res)
-    return 0
-
-
-@_njit
-def _path_first(
-    J, xdot, out, mode, a, lo, hi, mask, qd, state, Gs, F, Iw
-):  # pragma: no cover - numba
-    """LNVA's path (L8) when a task is far out of reach: ``(s₀, top)``, ``s₀ < 0`` when solved.
-
-    ``s₀`` the largest scale (1.0 when the path does not pay off or does not decide), ``top < 1``
-    the scale of the LP's unique vertex, kept by :func:`_keep_vertex` (2.0: none). LNVA's rates,
-    and MDA's at the vertex, go into ``out`` (then ``s₀ = −1``).
-    """
-    n = out.shape[0]
-    ws, wsi, res = _fm(F, Iw, _WSF, 8, n + 1), _im(F, Iw, _WSI, 2, n + 1), state[:2]
-    if not pays_off(a, lo, hi, mask):
-        return 1.0, 2.0
-    code = least_norm_path(J, xdot, lo, hi, mask, qd, state[2:], ws, wsi, Gs, res)
-    if code != UNDECIDED and (mode == 0 or code == VERTEX and mode == 2):
-        for j in range(n):
-            out[j] = qd[j]
-        return -1.0, 2.0
-    res[1] = 0.0
-    if code == UNDECIDED:
-        return 1.0, 2.0
-    if code == VERTEX:
-        _keep_vertex(F, Iw, qd, state[2:], ws, wsi, False)
-        return res[0], res[0]
-    return res[0], 2.0
-
-
 # The Controller's bounded step after its unbounded rates: (L2)-(L4) for LNVA, JVJA and MDA.
 @_njit
 def bounded_solve(J, xdot, out, mode, F, Iw):  # pragma: no cover - numba
@@ -363,11 +248,9 @@ def bounded_solve(J, xdot, out, mode, F, Iw):  # pragma: no cover - numba
     The box is ``buf[0], buf[1]`` of the workspace (:func:`workspace`; the box check writes it).
     MDA: ``out`` holds its unbounded rates on entry (their null-space part ``N (q̇ − a)`` is
     kept as the target, as in the reference). ``state[0]`` gets the task scaling, ``state[1]`` 1 when a bound was met,
-    ``state[2:]`` 1.0 on joints held at a bound. A task far out of reach (L8) takes LNVA's path
-    first: its largest scale starts the scaling rounds of every objective, and where it ends at
-    the LP's unique vertex those are the rates of every objective (JVJA's reduced robots then
-    start from that vertex, L9). Returns a code of the module doc (0: solved; otherwise ``out``
-    is untouched).
+    ``state[2:]`` 1.0 on joints held at a bound. Every objective's rates come from the dual active
+    set (L7), JVJA's target from its reduced robots' (L4). Returns a code of the module doc (0:
+    solved; otherwise ``out`` is untouched).
     """
     n, m, f, s = Iw[0], Iw[1], Iw[2], Iw[3]
     buf, state = _fm(F, Iw, _BUF, 4, n), _fv(F, Iw, _STATE, n + 2)
@@ -382,22 +265,8 @@ def bounded_solve(J, xdot, out, mode, F, Iw):  # pragma: no cover - numba
     gram = _fm(F, Iw, _GRAM, n + 1, n + 1)
     res = state[:2]
     res[1] = 0.0
-    for j in range(n):
-        mask[j] = 1
     if mode == 2 and _mda_inside(out, lo, hi, state):
         return 0
-    s0, top = _path_first(J, xdot, out, mode, a, lo, hi, mask, qd, state, Gs, F, Iw)
-    if s0 < 0.0:  # LNVA along its path, MDA at the vertex: solved, no null-space basis
-        return 0
-    if top < 1.0 and mode == 1:  # every reduced robot from the vertex (L9): no basis needed
-        st = _vertex_target(J, xdot, lo, hi, V, p3, F, Iw, top, res)
-        if st == 0:
-            _keep_vertex(F, Iw, out, state[2:], ws, wsi, True)
-            state[0], state[1] = top, 1.0
-            return 0
-        if st == 2:
-            return 2
-        res[1] = 0.0  # undecided: the reduced robots as below, from the basis
     r = null_basis(J, Z, _fm(F, Iw, _QA, n, m), _fv(F, Iw, _HB, m))
     if mode == 1:
         W = (_fm(F, Iw, _ZS, n, n), _fm(F, Iw, _NSS, s, s), _fv(F, Iw, _YS, s), Gs, mask, ws, wsi,
@@ -406,10 +275,6 @@ def bounded_solve(J, xdot, out, mode, F, Iw):  # pragma: no cover - numba
                           p3, W, res)  # fmt: skip
         if st:
             return st
-        if top < 1.0:  # the LP's unique vertex: every objective's rates, JVJA's too
-            _keep_vertex(F, Iw, out, state[2:], ws, wsi, True)
-            state[0], state[1] = top, 1.0
-            return 0
         null_project(Z, r, V[2], zr, p0)  # p₀ = N c = Z (Zᵀ c)
     elif mode == 2:  # as the reference: N (q̇ − a) as the target
         for j in range(n):
@@ -421,7 +286,7 @@ def bounded_solve(J, xdot, out, mode, F, Iw):  # pragma: no cover - numba
     bounded = res[1]
     for j in range(n):
         mask[j] = 1
-    st = solve_box_rates(p0, a, Z, r, lo, hi, mask, qd, state[2:], ws, wsi, gram, res, s0)
+    st = solve_box_rates(p0, a, Z, r, lo, hi, mask, qd, state[2:], ws, wsi, gram, res, 1.0)
     if st:
         return st
     res[1] = max(res[1], bounded)
@@ -450,7 +315,9 @@ def bounded_kernel(J, q, xdot, out, F, Iw):  # pragma: no cover - numba
         st = multi_kernel(J, xdot, out, _fv(F, Iw, _MWS, m * m + m * n + n + 2 * s * s + 2 * s),
                           _im(F, Iw, _SETS, f, s), _fv(F, Iw, _WREL, f), _fv(F, Iw, _P3, 3))  # fmt: skip
     elif mode != 2:
-        st = _step_kernel(J, xdot, out, _fm(F, Iw, _G, m, m), B, c, fw, _fv(F, Iw, _P4, 4), mode)
+        st = _step_kernel(
+            J, xdot, out, _fm(F, Iw, _G, m, m)[:, :m], B, c, fw, _fv(F, Iw, _P4, 4), mode
+        )
     else:
         st = 0
     if st:
@@ -548,9 +415,6 @@ def reduced_solve(J, xdot, target, todo, post, scales, codes, F, Iw):  # pragma:
     NSS, ys, sets = _fm(F, Iw, _NSS, s, s), _fv(F, Iw, _YS, s), _im(F, Iw, _SETS, f, s)
     W = (Zs, NSS, ys, Gs, mask, ws, wsi, gram)
     res = state[:2]
-    least_norm = True  # a zero target: the least-norm response, whose rates the path gives
-    for j in range(n):
-        least_norm = least_norm and target[j] == 0.0
     for i in range(todo.shape[0]):
         S = sets[todo[i]]
         k = 0
@@ -564,16 +428,6 @@ def reduced_solve(J, xdot, target, todo, post, scales, codes, F, Iw):  # pragma:
             mask[j] = 1
         for t in range(k):
             mask[S[t]] = 0
-        if (
-            least_norm
-            and pays_off(d, lo, hi, mask)
-            and least_norm_path(J, xdot, lo, hi, mask, qd, act, ws, wsi, Gs, res) != UNDECIDED
-        ):
-            codes[i] = 0  # along the path (L8)
-            for j in range(n):
-                post[i, j] = qd[j]
-            scales[i] = res[0]
-            continue
         st = _reduced_box(J, Z, r, S, k, tr * trinv, p3, W, target, p0, d, zr, lo, hi, qd, act,
                           res)  # fmt: skip
         codes[i] = st

@@ -38,32 +38,6 @@ def factor(J, xdot, L, Y, z, a, params):  # pragma: no cover - numba
     return 0, tr
 
 
-#: ``N[S,S] = I − Y_SᵀY_S`` from the Cholesky factor carries ~1e-16 absolute error: a pivot this
-#: close to the threshold is decided from the null-space basis (:func:`reduced_rates`) instead.
-PIVOT_MARGIN = 1e-12
-
-
-@_njit
-def pivots_clear(Y, S, k, thr, NSS) -> int:  # pragma: no cover - numba
-    """Whether ``N[S,S] − thr·I`` is positive definite, from ``Y = L⁻¹J`` (no basis needed).
-
-    1 clear, −1 a pivot below the threshold (one joint), 0 too close to decide here (or ``k > 1``
-    not clear): :func:`reduced_rates` decides from ``Z``. ``NSS`` (k, k) scratch.
-    """
-    m = Y.shape[0]
-    for t in range(k):
-        for u in range(t + 1):
-            g = 0.0
-            for r in range(m):
-                g += Y[r, S[t]] * Y[r, S[u]]
-            NSS[t, u] = (1.0 - thr - PIVOT_MARGIN if t == u else 0.0) - g
-    if k == 1:
-        if NSS[0, 0] > 0.0:
-            return 1
-        return -1 if NSS[0, 0] < -2.0 * PIVOT_MARGIN else 0
-    return 1 if _cholesky(NSS, k) else 0
-
-
 @_njit
 def reduced_rates(Z, r, a, S, k, post, NSS, ys, thr, zr):  # pragma: no cover - numba
     """(G1) rates ``post`` of the reduced robot ``S = S[:k]`` (``N = Z Zᵀ``); ``tr(N[S,S]⁻¹)``.

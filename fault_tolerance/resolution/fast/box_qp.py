@@ -299,8 +299,8 @@ def solve_box_rates(
 ):  # pragma: no cover - numba
     """Rates ``p₀ + s d + Z u`` in the box on ``mask``, ``s ≤ s₀`` largest; ``out[0] = s``.
 
-    ``s₀ = 1`` unless the largest scale is known (the least-norm path's, L8): the scale does not
-    depend on the objective, so the rounds of the task scaling (L3) then start there.
+    ``s₀ = 1`` unless the largest scale is known: it does not depend on the objective, so the
+    rounds of the task scaling (L3) may start there.
 
     ``act`` (n,) gets 1.0 on joints held at a bound; ``out[1]`` is 1 when a bound was met. Joints
     off ``mask`` get ``p₀ + s d + Z u`` unclipped. Returns 0, 4 (no ``s ≥ 0`` reachable) or 5.

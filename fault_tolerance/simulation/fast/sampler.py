@@ -22,7 +22,6 @@ from typing import TYPE_CHECKING
 import numpy as np
 import pinocchio as pin
 
-from fault_tolerance.control.fast.mda_step import gradient_kernel, gradient_view, gradient_workspace
 from fault_tolerance.control.indices import djac, rcn_gradient
 from fault_tolerance.control.lapack_steps import TRACE_MAX
 from fault_tolerance.errors import InvalidInput
@@ -32,12 +31,6 @@ from fault_tolerance.resolution.bounded import SCALE_TOL, bounded_least_norm, re
 from fault_tolerance.resolution.indices import RCN_MAX
 from fault_tolerance.resolution.registry import get
 from fault_tolerance.simulation.fast import sample as sk
-from fault_tolerance.simulation.fast.sample_bounded import (
-    DECLINED,
-    limited_sample,
-    own_workspace,
-    scratch,
-)
 
 if TYPE_CHECKING:
     from fault_tolerance.control.controller import Controller
@@ -84,11 +77,6 @@ class Sampler:
         s: The simulation's validated setup (``simulation._Setup``).
         rec: The run's arrays (``simulation._allocate``).
     """
-
-    #: Under joint limits, LNVA's and JVJA's samples that meet a bound are solved in the same
-    #: compiled call as the sample (:func:`~fault_tolerance.simulation.fast.sample_bounded.limited_sample`);
-    #: False: by the Python route over the same compiled pieces (tests compare the two).
-    ONE_CALL = True
 
     def __init__(self, s, rec: dict) -> None:
         from fault_tolerance.control.controller import Controller
@@ -150,14 +138,9 @@ class Sampler:
             None  # the Controller's bounded step, built at the first sample that needs it
         )
         self.reduced_ws = None  # the compiled reduced robots' workspace (boxsolve), built likewise
-        self.bounded_tables = None  # the compiled bounded sample's tables
-        if self.ONE_CALL and s.limits and self.method in (sk.JVJA, sk.LNVA):
-            self._compiled_tables()
         #: Samples handed to the reference code (not certified, the lock, a bound met after it),
         #: and samples that met a bound, solved by the bounded resolvers here.
         self.reference_samples, self.bounded_samples = 0, 0
-        #: Bounded samples done by one compiled call (:mod:`fault_tolerance.simulation.fast.sample_bounded`).
-        self.bounded_compiled = 0
         #: Reduced robots under the box (L4) solved by the compiled code
         #: (:func:`fault_tolerance.control.fast.bounded_solve.reduced_solve`) and by the reference's
         #: :func:`~fault_tolerance.resolution.bounded.reduced_bounded` where the compiled code refuses.
@@ -165,21 +148,12 @@ class Sampler:
         self.run_flags = (run.FLAG_BOUND_ACTIVE, run.FLAG_INTOLERABLE_UNDER_LIMITS,
                           run.FLAG_STEP_LIMITED, run.FLAG_LOCKED)  # fmt: skip
         self.g1_posts = g1_posts
-        self.mda = None  # (F, Iw, ∇K view) of the compiled gradient, single-joint scenarios
-        if self.method == sk.MDA and sc.singletons:
-            F, Iw = gradient_workspace(self.cw)
-            self.mda = (F, Iw, gradient_view(F, arm.m, arm.n))
 
     def _jacobian(self, q: np.ndarray):
         """``(J, ∇K or zeros)``; the tip placement is then in ``data.oMf[fid]``."""
         model, data, fid = self.model, self.data, self.fid
         if self.method != sk.MDA:
             return pin.computeFrameJacobian(model, data, q, fid, _LWA)[self.rows], self.zeros
-        Jf = pin.computeFrameJacobian(model, data, q, fid, _LWA)  # also updates data.oMf[fid]
-        if self.mda is not None:  # ∇K compiled (control/fast/mda_step), the NumPy route if refused
-            F, Iw, grad = self.mda
-            if not gradient_kernel(Jf, F, Iw, self.arm.m):
-                return Jf[self.rows], grad
         pin.computeJointJacobians(model, data, q)
         Jw = pin.getFrameJacobian(model, data, fid, _WORLD)
         Jl = pin.getFrameJacobian(model, data, fid, _LWA)  # also updates data.oMf[fid]
@@ -220,21 +194,10 @@ class Sampler:
             from fault_tolerance.resolution.jvja import jvja
 
             qd_in = jvja(J, xd_cmd, self.s.sc, response="continuation", tolerate=True)
-        if self.bounded_tables:  # the bounded sample in the same compiled call
-            F, Iw, F2, Iw2, TF, TI, info = self.bounded_tables
-            flag = limited_sample(
-                J, xd_cmd, qd_in, grad, q, state.qd, x, x_des, err, self.cols, self.w, self.vmax,
-                self.params, method, k, self.table, self.off, self.ws, self.lim, self.prm,
-                self.buf, F, Iw, F2, Iw2, TF, TI,
-            )  # fmt: skip
-            if info[2]:
-                flag = self._count_compiled(state, k, J, xd_cmd, x, x_des, err, method, flag, info)
-        else:
-            flag = self.kernel(
-                J, xd_cmd, qd_in, grad, q, state.qd, x, x_des, err, self.cols, self.w, self.vmax,
-                self.params, method, k, self.table, self.off, self.ws, self.lim, self.prm,
-                self.buf,
-            )  # fmt: skip
+        flag = self.kernel(
+            J, xd_cmd, qd_in, grad, q, state.qd, x, x_des, err, self.cols, self.w, self.vmax,
+            self.params, method, k, self.table, self.off, self.ws, self.lim, self.prm, self.buf,
+        )  # fmt: skip
         if flag == sk.BOUNDED:
             flag = self._bounded(state, k, J, xd_cmd, x, x_des, err, method)
         if flag < 0:
@@ -259,17 +222,22 @@ class Sampler:
         lo, hi = self.buf[0].copy(), self.buf[1].copy()
         if method == sk.LOCKED:
             return self._locked(state, k, J, xd_cmd, x, x_des, err, lo, hi)
+        targets = None
         if ws[sk.W_INSIDE] > 0 and method != sk.JVJA:  # JVJA's objective has the reduced robots'
             qd_cmd, flag = self.qd_ws.copy(), int(ws[sk.W_FLAG])
         else:
             ctrl = self._boxed()
+            solved, by_reference = ctrl.bounded_steps, ctrl.bounded_reference_steps
             qd_cmd = ctrl.step(state.q, xd_cmd)
             flag = (FLAG_BOUND_ACTIVE if ctrl.last_active.any() else 0) | (
                 _TASK_SCALED if ctrl.last_scale < 1.0 - SCALE_TOL else 0
             )
             if method == sk.MDA and np.linalg.norm(qd_cmd - self.a_ws) >= 0.999 * s.max_step:
                 flag |= FLAG_STEP_LIMITED
-        post, scales = self._posts(J, xd_cmd, qd_cmd, lo, hi)
+            if (method == sk.JVJA and ctrl.bounded_steps > solved
+                    and ctrl.bounded_reference_steps == by_reference):  # fmt: skip
+                targets = self._target_posts(ctrl)
+        post, scales = targets or self._posts(J, xd_cmd, qd_cmd, lo, hi)
         if np.any(scales < 1.0 - SCALE_TOL):
             flag |= FLAG_INTOLERABLE_UNDER_LIMITS
         parts = sc.weights * np.einsum("fn,fn->f", post - qd_cmd, post - qd_cmd)
@@ -280,38 +248,18 @@ class Sampler:
             self.table, self.off, ws, self.lim, qd_cmd, parts.sum(), flag,
         )  # fmt: skip
 
-    def _count_compiled(self, state, k, J, xd_cmd, x, x_des, err, method, flag, info) -> int:
-        """A bounded sample the compiled call took: counted; the Python route where it declined."""
-        if flag == DECLINED:
-            return self._bounded(state, k, J, xd_cmd, x, x_des, err, method)
-        self.bounded_samples += 1
-        self.bounded_compiled += 1
-        self._boxed().bounded_steps += int(info[0])
-        self.reduced_compiled += int(info[1])
-        return flag
+    def _target_posts(self, ctrl: Controller) -> tuple[np.ndarray, np.ndarray] | None:
+        """The reduced robots' rates under the box and scalings (L4) JVJA's compiled step just solved.
 
-    def _compiled_tables(self):
-        """``(F, Iw, F2, Iw2, TF, TI, info)`` of :func:`~fault_tolerance.simulation.fast.sample_bounded.bounded_sample`.
-
-        Built with the Sampler (LNVA and JVJA under joint limits, :data:`ONE_CALL`); empty when
-        the Controller's bounded step is not the compiled one.
+        The target ``c`` of (L7) is their weighted mean: the same problems in the same box, kept
+        by the compiled bounded step (its ``posts``, ``pscale``); None without its workspace.
         """
-        if self.bounded_tables is None:
-            from fault_tolerance.control.fast.bounded_solve import JVJA, LNVA
-
-            ctrl = self._boxed()
-            tables = ctrl.workspace.box_tables
-            if tables is None:
-                self.bounded_tables = ()
-                return None
-            mode = JVJA if get(self.s.algorithm).compiled == sk.JVJA else LNVA
-            F, Iw, views = own_workspace(*tables[:2], mode)
-            self.box_views = views
-            F2, Iw2 = self._reduced_workspace()[:2]
-            TF, TI = scratch(len(self.cols), self.arm.n)
-            info = TI[3 * len(self.cols) :]
-            self.bounded_tables = (F, Iw, F2, Iw2, TF, TI, info)
-        return self.bounded_tables or None
+        tables = ctrl.workspace.box_tables
+        if tables is None:
+            return None
+        views = tables[2]
+        self.reduced_compiled += int(views["psolved"].sum())
+        return views["posts"].copy(), views["pscale"].copy()
 
     def _locked(self, state, k: int, J, xd_cmd, x, x_des, err, lo, hi) -> int:
         """After the lock, a sample that meets a bound: the reduced robot's bounded rates.
