@@ -290,7 +290,7 @@ class Controller:
         else:
             self.lnva = kernels.lapack_lnva(ws)
             self.jvja = kernels.lapack_jvja(ws)
-        self.mda = kernels.lapack_mda(ws)  # MDA, the paper's baseline: the lapack (or numpy) code
+        self.mda = kernels.lapack_mda(ws, self.arm)  # MDA, the paper's baseline: its reference
         if self.limits:  # the fast steps checked against the rate box (L1), bounded when needed
             from fault_tolerance.control.bounded_step import bounded_step
             from fault_tolerance.model.joint_limits import RATE_HORIZON
