@@ -29,7 +29,6 @@ from collections.abc import Sequence
 import numpy as np
 
 from fault_tolerance.errors import IntolerableFailure, InvalidInput
-from fault_tolerance.fast_cache import COMPILED
 from fault_tolerance.numerics.checks import finite
 from fault_tolerance.numerics.linalg import PIVOT_TOL, projection, reduced_rates
 from fault_tolerance.resolution.indices import (
@@ -150,10 +149,9 @@ def resolve(
     the configuration (MDA: the Jacobian derivatives at each row's ``q``) is refused: use
     :func:`ft.resolve` per row.
 
-    With numba, LNVA and least-norm single-joint JVJA run the Controller's compiled step on
-    every row (:mod:`.batch_kernel`); the rows it refuses (near a singularity, a small pivot, an
-    ill-conditioned ``J Jᵀ``), multi-joint scenarios and the continuation response take
-    :func:`resolve_stacked`, the stacked NumPy code.
+    LNVA and JVJA run :func:`resolve_stacked`, the stacked NumPy code (49× a loop of
+    ``ft.resolve`` over 300 Panda configurations; a compiled row kernel was 1.7× faster still and
+    did not earn its compile time).
     """
     entry = get(name)
     if entry.compiled not in BATCHED or options:
@@ -164,15 +162,7 @@ def resolve(
     Js, xdots, sc = _resolve_input(
         name, Js, xdots, lockable, weights, response, intolerable, joint_names
     )
-    if not _compiled(Js, sc, response):
-        return _stacked(Js, xdots, sc, response, intolerable, chunk)
-    from fault_tolerance.analysis.fast import batch as batch_kernel  # compiled on first use
-
-    out, status = batch_kernel.rates(Js, xdots, sc)
-    redo = np.flatnonzero(status)
-    if redo.size:
-        out[redo] = _stacked(Js[redo], xdots[redo], sc, response, intolerable, chunk)
-    return out
+    return _stacked(Js, xdots, sc, response, intolerable, chunk)
 
 
 def _per_row(entry, Js, xdots, lockable, options, joint_names, intolerable) -> np.ndarray:
@@ -194,13 +184,6 @@ def _per_row(entry, Js, xdots, lockable, options, joint_names, intolerable) -> n
                 raise
             out[b] = np.nan
     return out
-
-
-def _compiled(Js: np.ndarray, sc: Scenarios | None, response: str) -> bool:
-    """Whether :func:`resolve` runs the compiled step (LNVA, least-norm single-joint JVJA)."""
-    if not (COMPILED and Js.shape[0] and Js.shape[1]):
-        return False
-    return sc is None or (sc.singletons and response == "least_norm")
 
 
 def resolve_stacked(
@@ -308,21 +291,11 @@ def rcn(
     """Reduced condition numbers ``k_S`` of every row, shape (B, f), as :func:`ft.rcn`.
 
     ``J_S J_Sᵀ = J Jᵀ − J[:, S] J[:, S]ᵀ``: one stacked ``eigvalsh`` of (B, f, m, m) per chunk
-    (:func:`rcn_stacked`). With numba, single-joint scenarios take the compiled sample's spectra
-    per row (:func:`.batch_kernel.reduced_condition_numbers`); rows with a large ``k_S`` (where
-    the two routes could differ by more than ~1e-10) are redone the stacked way.
+    (:func:`rcn_stacked`).
     """
     (Js,) = _check(Js)
     sc = _scenarios(Js, lockable, None, joint_names)
-    if not (COMPILED and sc.singletons and Js.shape[0] and Js.shape[1]):
-        return _rcn_stacked(Js, sc, chunk)
-    from fault_tolerance.analysis.fast import batch as batch_kernel  # compiled on first use
-
-    out, status = batch_kernel.reduced_condition_numbers(Js, sc)
-    redo = np.flatnonzero(status)
-    if redo.size:
-        out[redo] = _rcn_stacked(Js[redo], sc, chunk)
-    return out
+    return _rcn_stacked(Js, sc, chunk)
 
 
 def rcn_stacked(

@@ -9,7 +9,7 @@ them on a small problem, and marks a group done beside numba's cache
 Groups (:data:`GROUPS`): ``controller`` (the Controller's LNVA / JVJA steps, single- and
 multi-joint), ``bounded`` (its bounded step under joint limits), ``simulate`` (the compiled sample
 of :func:`~fault_tolerance.simulation.simulate.simulate`, with and without limits, bounds met),
-``batch`` (:mod:`fault_tolerance.analysis.batch`), ``floor`` (the benchmark's floor).
+``floor`` (the benchmark's floor).
 
 ``fault-tolerance warm [GROUP ...]`` (or ``python -m fault_tolerance.bench.warm``) compiles the
 groups (default: all) in the foreground. No command compiles in the background: a short first
@@ -108,18 +108,6 @@ def _simulate() -> None:
     simulate(arm, path, "jvja", q0=q, lockable="all", dt=1e-2, lock_joint=1, lock_time=0.02)
 
 
-def _batch() -> None:
-    """The batched API's compiled rows (LNVA, JVJA, RCN)."""
-    from fault_tolerance.analysis import batch
-
-    arm, q = _planar()
-    Js = batch.jacobians(arm, np.stack([q, q + 0.1]))
-    xd = np.array([[0.1, 0.0], [0.0, 0.1]])
-    for name in _compiled_resolvers(batch.BATCHED):
-        batch.resolve(name, Js, xd, lockable="all")
-    batch.rcn(Js, lockable="all")
-
-
 def _floor() -> None:
     """The benchmark's floor kernel."""
     from fault_tolerance.control.fast.step import compiled_kernel
@@ -132,7 +120,6 @@ GROUPS: dict[str, Callable[[], None]] = {
     "controller": _controller,
     "bounded": _bounded,
     "simulate": _simulate,
-    "batch": _batch,
     "floor": _floor,
 }
 
@@ -162,10 +149,6 @@ KERNELS: dict[str, tuple[tuple[str, str], ...]] = {
         ("fault_tolerance.simulation.fast.sample", "sample_kernel"),
         ("fault_tolerance.simulation.fast.sample", "finish_kernel"),
         ("fault_tolerance.control.fast.bounded_solve", "reduced_solve"),
-    ),
-    "batch": (
-        ("fault_tolerance.analysis.fast.batch", "single_rows"),
-        ("fault_tolerance.analysis.fast.batch", "rcn_rows"),
     ),
 }
 

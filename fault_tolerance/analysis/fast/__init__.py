@@ -1,1 +1,0 @@
-"""Compiled (numba) row loops of the batched API."""
