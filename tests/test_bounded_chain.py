@@ -15,7 +15,8 @@ RATE_ATOL = 1e-6
 
 @pytest.mark.parametrize("n", [14, 30])
 def test_controller_scaled_steps_on_a_chain_equal_the_reference(n):
-    """Controller(limits=True) LNVA, JVJA and MDA on a chain, task scaled: compiled, = resolve_bounded."""
+    """Controller(limits=True) LNVA, JVJA and MDA on a chain, task scaled: = resolve_bounded (LNVA
+    and JVJA by the compiled step, MDA, the paper's baseline, by the reference route)."""
     arm = synthetic_chain(n)
     ctrl = Controller(arm, "all", backend="numba", limits=True)
     rng = np.random.default_rng(8)
@@ -27,7 +28,8 @@ def test_controller_scaled_steps_on_a_chain_equal_the_reference(n):
         for name in ("lnva", "jvja", "mda"):
             before = ctrl.bounded_reference_steps
             qd = getattr(ctrl, name)(q, xd).copy()
-            assert ctrl.bounded_reference_steps == before  # solved by the compiled step
+            by_reference = ctrl.bounded_reference_steps - before
+            assert by_reference == (1 if name == "mda" else 0)  # compiled: LNVA and JVJA
             kw = {"arm": arm, "q": q} if name == "mda" else {}
             ref = ft.resolve_bounded(name, J, xd, ctrl.scenarios, bounds=box, **kw)
             assert ctrl.last_scale < 1.0

@@ -225,7 +225,11 @@ def test_controller_compiled_step_equals_reference(robot, task, lockable, weight
             assert (ctrl.last_active == ref.active).all()
         checked += 1
     compiled = ctrl.bounded_steps - ctrl.bounded_reference_steps
-    assert checked > trials // 2 and compiled > 0, (checked, ctrl.bounded_steps)
+    assert checked > trials // 2, (checked, ctrl.bounded_steps)
+    if method == "mda" or not ctrl.scenarios.singletons:  # these take the reference route
+        assert compiled == 0 and ctrl.bounded_steps > 0
+    else:
+        assert compiled > 0
 
 
 def test_near_singular_reduced_robots_solved_exactly():
@@ -307,17 +311,17 @@ def test_plain_python_equals_compiled():
 
 
 def test_mda_after_a_planner_fallback():
-    """MDA damped by the planner near a singularity: checked against the box, solved if needed."""
+    """MDA near a singularity (the reference damps): checked against the box, solved if needed."""
     arm = ft.load_arm("planar_3r")
     ctrl = Controller(arm, "all", method="mda", backend="numba")
     q = np.array([0.0, 1e-7, 1e-7])
-    for k, xd in enumerate((np.array([0.0, 1e-4]), np.array([0.0, 10.0])), start=1):
+    for xd in (np.array([0.0, 1e-4]), np.array([0.0, 10.0])):
         qd = ctrl.step(q, xd)
         J, dJ = arm.jacobian(q), arm.jacobian_derivatives(q)
         ref = ft.resolve_bounded("mda", J, xd, "all", bounds=arm.rate_bounds(q), dJ=dJ)
         assert np.allclose(qd, ref.qd, atol=1e-9)
         assert ctrl.last_scale == pytest.approx(ref.scale, rel=REL)
-        assert ctrl.fallbacks == k and ctrl.bounded_steps == ctrl.bounded_reference_steps
+        assert ctrl.bounded_steps == ctrl.bounded_reference_steps  # MDA: the reference route
     assert ctrl.bounded_steps >= 1  # damped, 10 m/s needs 4.3 rad/s (the box: 3)
 
 

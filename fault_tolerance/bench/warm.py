@@ -82,7 +82,7 @@ def _controller() -> None:
 
 
 def _bounded() -> None:
-    """The Controller's bounded step (box check, bounded solve), LNVA, JVJA and MDA."""
+    """The Controller's bounded step (box check, bounded solve): LNVA and JVJA (MDA: reference)."""
     from fault_tolerance.control.controller import Controller
 
     arm, q = _planar()
@@ -140,9 +140,6 @@ KERNELS: dict[str, tuple[tuple[str, str], ...]] = {
         ("fault_tolerance.control.fast.multi_step", "multi_kernel"),
     ),
     "bounded": (
-        ("fault_tolerance.control.fast.bounded_solve", "bounded_kernel"),
-        ("fault_tolerance.control.fast.bounded_solve", "bounded_after"),
-        ("fault_tolerance.control.fast.bounded_free", "free_kernel"),
         ("fault_tolerance.control.fast.bounded_solve", "free_then_bounded"),
     ),
     "simulate": (

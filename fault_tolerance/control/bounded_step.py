@@ -27,7 +27,7 @@ from fault_tolerance.control.workspace import (
 from fault_tolerance.errors import InvalidInput
 from fault_tolerance.model.joint_limits import NO_LIMIT, velocity_limits
 from fault_tolerance.resolution.bounded import resolve_bounded
-from fault_tolerance.resolution.registry import KERNEL_JVJA, KERNEL_MDA, get
+from fault_tolerance.resolution.registry import KERNEL_JVJA, KERNEL_LNVA, KERNEL_MDA, get
 
 
 def bounded_step(
@@ -36,9 +36,11 @@ def bounded_step(
     """``step(q, xdot, out=None)``: ``inner`` (the unbounded fast step), inside the rate box.
 
     ``cw`` is the workspace of the :class:`~fault_tolerance.control.controller.Controller` being
-    built, ``backend`` its backend. With the numba backend the whole step after the Jacobian is one compiled call
-    (:func:`fault_tolerance.control.fast.bounded_solve.bounded_kernel`); otherwise, and for every step the compiled
-    solve refuses, the reference route: ``inner``, the box check, and
+    built, ``backend`` its backend. With the numba backend, LNVA and single-joint JVJA take the whole
+    step after the Jacobian in one compiled call
+    (:func:`fault_tolerance.control.fast.bounded_solve.free_then_bounded`); MDA (the paper's
+    baseline), multi-joint JVJA, the other backends and every step the compiled solve refuses take
+    the reference route: ``inner``, the box check, and
     :func:`~fault_tolerance.resolution.bounded.resolve_bounded` only when a bound is met.
 
     Writes ``cw.box_state`` (task scaling of the last step, 1 when ``ẋ`` was reached; the joints
@@ -54,8 +56,12 @@ def bounded_step(
     lim[2] = velocity_limits(arm)
     prm = np.array([1.0 / horizon, cw.alpha])
     reference = _reference_step(cw, name, inner, lim, prm, backend)
-    if backend != "numba":
-        return reference
+    if (
+        backend != "numba"
+        or get(name).compiled not in (KERNEL_LNVA, KERNEL_JVJA)
+        or not cw.singletons
+    ):
+        return reference  # MDA and multi-joint JVJA: the reference route (compiled box check)
     from fault_tolerance.control.fast.bounded_step import compiled_bounded_step
 
     return compiled_bounded_step(cw, name, inner, reference, lim, prm)

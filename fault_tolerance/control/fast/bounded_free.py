@@ -5,10 +5,9 @@ needs after the Jacobian, in the layout of the unbounded step (:func:`fault_tole
 one 2-d float workspace taken apart by row slices, no reshapes): LNVA or single-joint JVJA
 (:func:`fault_tolerance.control.fast.step.step_kernel`) and the box check (L1)
 (:func:`fault_tolerance.control.fast.box_check.box_status`, with every reduced robot's (G1) rates for JVJA).
-Only when a bound is met does the caller hand the step to the bounded solve
-(:func:`fault_tolerance.control.fast.bounded_solve.bounded_after`), which starts from these rates.
-Its results are those of :func:`fault_tolerance.control.fast.bounded_solve.bounded_kernel`: the same
-functions on the same numbers. Plain Python without numba.
+Only when a bound is met does :func:`fault_tolerance.control.fast.bounded_solve.free_then_bounded`
+(which inlines this kernel) go on to the bounded solve, from these rates. Plain Python without
+numba.
 """
 
 from __future__ import annotations

@@ -6,10 +6,10 @@ dual active set of :mod:`fault_tolerance.resolution.fast.box_qp`: a Cholesky fac
 ``a = J⁺ẋ``, a Householder QR of ``Jᵀ`` an orthonormal null-space basis ``Z`` (``N = Z Zᵀ``,
 never formed), each scenario's (G1) rates come from ``Z`` and, only when they leave the box, the
 reduced robot's basis ``Z_S`` (L6: ``Z`` reflected so that the locked joints' rows vanish) and
-its bounded rates (L4). :func:`bounded_kernel` is the whole bounded step after the Jacobian in
-one compiled call: the unbounded step kernel, the box check
-(:func:`fault_tolerance.control.fast.box_check.box_status`) and, only when a bound is met, :func:`bounded_solve`,
-all in the buffers of :func:`workspace` (two arrays, so the call is cheap). Plain Python without
+its bounded rates (L4). :func:`free_then_bounded` is the whole bounded step of LNVA and
+single-joint JVJA after the Jacobian in one compiled call: the unbounded step and the box check
+(:mod:`fault_tolerance.control.fast.bounded_free`) and, only when a bound is met,
+:func:`bounded_solve`, all in the buffers of :func:`workspace` (two arrays, so the call is cheap). Plain Python without
 numba (and tested so). See docs/MATH.md "Joint limits, compiled".
 
 Codes of :func:`bounded_solve`: 0 solved, 1 no certificate ``σ_min(J) ≥ SIGMA_EPS`` (the
@@ -25,7 +25,6 @@ import numpy as np
 
 from fault_tolerance.control.fast.bounded_free import _free, free_shape
 from fault_tolerance.control.fast.box_check import compiled_box_status
-from fault_tolerance.control.fast.multi_step import multi_kernel
 from fault_tolerance.control.fast.step import _inline, compiled_kernel
 from fault_tolerance.numerics.linalg import RANK_RTOL
 from fault_tolerance.resolution.box_qp import BOX_TOL
@@ -45,7 +44,7 @@ _box_status = compiled_box_status()
 
 # -- the whole bounded step after the Jacobian, in one call --------------------------------------
 
-#: Modes of :func:`bounded_kernel`.
+#: Modes of :func:`bounded_solve` (and of the workspace).
 LNVA, JVJA, MDA, JVJA_MULTI = 0, 1, 2, 3
 #: Float sections of the workspace: name and shape (in n, m, f, s = largest scenario, k = columns).
 _FLOAT = (("G", "mm"), ("B", "mn"), ("fw", "2n"), ("lim", "3n"), ("buf", "4n"), ("c", "n"),
@@ -76,7 +75,7 @@ def _shapes(n, m, f, s, k) -> dict[str, tuple[int, ...]]:
 
 
 def workspace(n: int, m: int, sets: np.ndarray, cols: np.ndarray, mode: int):
-    """``(F, Iw, views)``: the float and int buffers of :func:`bounded_kernel` and NumPy views of them.
+    """``(F, Iw, views)``: the float and int buffers of :func:`free_then_bounded` and NumPy views of them.
 
     ``sets`` (f, s) int, −1 padded; ``cols`` the lockable columns (single-joint scenarios).
     """
@@ -296,75 +295,13 @@ def bounded_solve(J, xdot, out, mode, F, Iw):  # pragma: no cover - numba
 
 
 @_njit
-def bounded_kernel(J, q, xdot, out, F, Iw):  # pragma: no cover - numba
-    """The bounded step of mode ``Iw[4]`` after the Jacobian ``J``, rates into ``out``.
-
-    The unbounded step (LNVA / single-joint JVJA: the step kernel; multi-joint JVJA: the multi
-    kernel; MDA: ``out`` holds its rates on entry), the box check, and :func:`bounded_solve` when
-    a bound is met. Returns 0 (no bound met), 1 (solved as the bounded problem), 2 (the unbounded
-    step refused: wrong sizes, no certificate, a small pivot) or 3 (:func:`bounded_solve`
-    refused): with 2 and 3 the caller takes the reference route.
-    """
-    n, m, f, s, mode, k = Iw[0], Iw[1], Iw[2], Iw[3], Iw[4], Iw[5]
-    if xdot.shape[0] != m or out.shape[0] != n or q.shape[0] != n or J.shape[1] != n:
-        return 2
-    state, c = _fv(F, Iw, _STATE, n + 2), _fv(F, Iw, _C, n)
-    R = _fm(F, Iw, _B, m + 9, n)  # B, fw, lim, buf are adjacent rows of n: one view of them all
-    B, fw, lim, buf = R[:m], R[m : m + 2], R[m + 2 : m + 5], R[m + 5 :]
-    if mode == 3:
-        st = multi_kernel(J, xdot, out, _fv(F, Iw, _MWS, m * m + m * n + n + 2 * s * s + 2 * s),
-                          _im(F, Iw, _SETS, f, s), _fv(F, Iw, _WREL, f), _fv(F, Iw, _P3, 3))  # fmt: skip
-    elif mode != 2:
-        st = _step_kernel(
-            J, xdot, out, _fm(F, Iw, _G, m, m)[:, :m], B, c, fw, _fv(F, Iw, _P4, 4), mode
-        )
-    else:
-        st = 0
-    if st:
-        return 2
-    inside = _box_status(q, lim, _fv(F, Iw, _PRM, 2), buf, out, B, B, c, _iv(F, Iw, _COLS, k),
-                         mode == 1) == 0  # fmt: skip
-    if inside and mode != 3:
-        if state[1] != 0.0 or state[0] != 1.0:
-            state[0], state[1] = 1.0, 0.0
-            for j in range(n):
-                state[2 + j] = 0.0
-        return 0
-    st = bounded_solve(J, xdot, out, 1 if mode == 3 else mode, F, Iw)
-    if st:
-        return 3
-    return 1 if state[1] != 0.0 else 0
-
-
-@_njit
-def bounded_after(J, q, xdot, out, F, Iw):  # pragma: no cover - numba
-    """:func:`bounded_kernel` after a box check that met a bound (LNVA or single-joint JVJA).
-
-    ``out`` holds the unbounded rates (:func:`fault_tolerance.control.fast.bounded_free.free_kernel`
-    found them outside the box): the box at ``q`` into the workspace, then :func:`bounded_solve`.
-    Returns 1 (solved, a bound met), 0 (solved, none met) or 3 (refused: the reference route).
-    """
-    n, m, mode, k = Iw[0], Iw[1], Iw[4], Iw[5]
-    if xdot.shape[0] != m or out.shape[0] != n or q.shape[0] != n or J.shape[1] != n:
-        return 3
-    R = _fm(F, Iw, _B, m + 9, n)
-    B, lim, buf = R[:m], R[m + 2 : m + 5], R[m + 5 :]
-    c = _fv(F, Iw, _C, n)
-    _box_status(q, lim, _fv(F, Iw, _PRM, 2), buf, out, B, B, c, _iv(F, Iw, _COLS, k), False)
-    if bounded_solve(J, xdot, out, mode, F, Iw):
-        return 3
-    return 1 if _fv(F, Iw, _STATE, n + 2)[1] != 0.0 else 0
-
-
-@_njit
 def free_then_bounded(J, q, xdot, out, F, Iw):  # pragma: no cover - numba
     """LNVA or single-joint JVJA under the box in one call: the free kernel, then the solve.
 
     :func:`fault_tolerance.control.fast.bounded_free.free_kernel` on its workspace, the section
     ``free[Iw[4]]`` of ``F`` (:func:`fault_tolerance.control.fast.bounded_free.free_workspace`),
     and, only when a bound is met, :func:`bounded_solve` in the box that kernel computed (the
-    numbers :func:`bounded_after` computes again). One call where the free kernel and
-    :func:`bounded_after` are two, the same functions on the same numbers. Returns 0 (no bound
+    numbers the box check computes). Returns 0 (no bound
     met, ``out`` final), 1 (solved, a bound met), 2 (solved, none met) or 3 (refused: sizes, the
     unbounded step or the solve; the reference route).
     """
@@ -380,7 +317,7 @@ def free_then_bounded(J, q, xdot, out, F, Iw):  # pragma: no cover - numba
         return 0 if st == 0 else 3
     h = 4 + 2 * m
     buf = _fm(F, Iw, _BUF, 4, n)
-    for j in range(n):  # the box (L1) the free kernel computed: bounded_after's numbers
+    for j in range(n):  # the box (L1) the free kernel computed
         buf[0, j] = W[h + 3, j]
         buf[1, j] = W[h + 4, j]
     if bounded_solve(J, xdot, out, mode, F, Iw):

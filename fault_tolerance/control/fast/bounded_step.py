@@ -1,8 +1,9 @@
 """The Controller's bounded step with the numba backend: one compiled call per step.
 
-:func:`compiled_bounded_step` builds the step around :func:`fault_tolerance.control.fast.bounded_solve.bounded_kernel`:
+:func:`compiled_bounded_step` builds the step around :func:`fault_tolerance.control.fast.bounded_solve.free_then_bounded`:
 the Jacobian from Pinocchio, then one call that takes the unbounded step, checks it against the
-rate box (L1) and, only when a bound is met, solves the bounded problem (L2)-(L4) compiled. No
+rate box (L1) and, only when a bound is met, solves the bounded problem (L2)-(L4) compiled (LNVA
+and single-joint JVJA; MDA and multi-joint JVJA take the reference route). No
 closure layers, no allocation (with ``out=``). What the kernel refuses (near a singularity of
 ``J`` or of a reduced Jacobian, an intolerable scenario, an empty box, inputs of other types) takes
 the reference route of :mod:`fault_tolerance.control.bounded_step`, counted in ``bounded_reference_steps``
@@ -12,14 +13,13 @@ when it solves a bounded problem.
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import Any
 
 import numpy as np
 import pinocchio as pin
 
-from fault_tolerance.control.workspace import BOUNDED_STEPS, FALLBACKS, ControllerWorkspace
+from fault_tolerance.control.workspace import BOUNDED_STEPS, ControllerWorkspace
 from fault_tolerance.errors import FaultToleranceError, InvalidInput
-from fault_tolerance.resolution.registry import KERNEL_JVJA, KERNEL_MDA, get
+from fault_tolerance.resolution.registry import KERNEL_JVJA, KERNEL_LNVA, get
 
 _LWA = pin.LOCAL_WORLD_ALIGNED
 _F64 = np.dtype(np.float64)
@@ -53,73 +53,43 @@ def bounded_tables(cw: ControllerWorkspace) -> tuple[tuple, np.ndarray]:
 def compiled_bounded_step(
     cw: ControllerWorkspace, name: str, inner: Callable, reference: Callable, lim, prm
 ):
-    """``step(q, xdot, out=None)`` of method ``name`` inside the box, compiled (see module doc).
+    """``step(q, xdot, out=None)`` of LNVA or single-joint JVJA inside the box, compiled.
 
-    ``cw.box_tables`` holds the kernel's workspace (:func:`bounded_tables`); ``inner`` is the unbounded fast step, ``reference`` the reference route (same signature);
-    ``lim`` (3, n) the position and velocity limits, ``prm = [1/h, alpha]``.
+    ``cw.box_tables`` holds the kernel's workspace (:func:`bounded_tables`); ``inner`` is the
+    unbounded fast step (unused: the kernel takes it itself), ``reference`` the reference route
+    (same signature); ``lim`` (3, n) the position and velocity limits, ``prm = [1/h, alpha]``.
     """
-    from fault_tolerance.control.fast.bounded_solve import JVJA_MULTI, bounded_kernel
-
     if cw.box_tables is None:
         raise InvalidInput(
             "the compiled bounded step needs a workspace built with limits=True and the numba "
             "backend (ControllerWorkspace.box_tables)"
         )
+    mode = get(name).compiled  # the kernel mode of this built-in
+    if mode not in (KERNEL_LNVA, KERNEL_JVJA) or not cw.singletons:
+        raise InvalidInput(
+            f"the compiled bounded step is LNVA's and single-joint JVJA's, not {name}'s"
+        )
     F, I0, views = cw.box_tables
     views["lim"][:] = lim
     views["prm"][:] = prm
     Iw = I0.copy()  # its own mode; the int scratch of the copy is its own too
-    mode = get(name).compiled  # the kernel mode of this built-in
-    Iw[4] = JVJA_MULTI if (mode == KERNEL_JVJA and not cw.singletons) else mode
-    n, m = cw.n, cw.m
-    counts = cw.counts
-    model, data, fid, rows = cw.model, cw.data, cw.frame_id, cw.rows
-    cfj, empty, ndarray = pin.computeFrameJacobian, np.empty, np.ndarray
-    # Compile for this arm's Jacobian layout (here, not in the loop), then freeze the dispatcher
-    # (as the unbounded step does): an argument of another type or layout raises TypeError (then
-    # the reference route) instead of compiling, so the step needs no type checks of its own.
-    J0 = cfj(model, data, pin.neutral(model), fid, _LWA)[rows]
-    bounded_kernel.disable_compile(False)
-    bounded_kernel(J0, np.zeros(n + 1), np.zeros(m), np.zeros(n), F, Iw)  # refused: sizes
-    bounded_kernel.disable_compile(True)
-
+    Iw[4] = mode
+    n = cw.n
+    J0 = pin.computeFrameJacobian(cw.model, cw.data, pin.neutral(cw.model), cw.frame_id, _LWA)
     target: list[Callable] = []  # the step built below, which retry calls again
 
     def retry(q, xdot, out):
         """Other types or layouts: contiguous float64 copies once, else the reference route."""
         try:
             q2, x2 = np.ascontiguousarray(q, dtype=float), np.ascontiguousarray(xdot, dtype=float)
-            if type(out) is ndarray and out.dtype == _F64 and out.flags.c_contiguous:
-                if q2.shape == (n,) and x2.shape == (m,) and (q2 is not q or x2 is not xdot):
+            if type(out) is np.ndarray and out.dtype == _F64 and out.flags.c_contiguous:
+                if q2.shape == (n,) and x2.shape == (cw.m,) and (q2 is not q or x2 is not xdot):
                     return target[0](q2, x2, out)
         except (TypeError, ValueError):
             pass
         return reference(q, xdot, out)  # converts, or says what is wrong
 
-    if mode == KERNEL_MDA:
-        return _mda_step(cw, inner, reference, F, Iw)
-    if Iw[4] != JVJA_MULTI:
-        return _free_step(cw, name, (retry, target), reference, (F, Iw, views), J0)
-
-    def step(q: np.ndarray, xdot: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
-        if out is None:
-            out = empty(n)
-        try:  # the kernel checks the sizes (status 2), numba the types and layouts (TypeError)
-            status = bounded_kernel(cfj(model, data, q, fid, _LWA)[rows], q, xdot, out, F, Iw)
-        except FaultToleranceError:
-            raise
-        except _ERRORS:
-            return retry(q, xdot, out)
-        if status == 1:
-            counts[BOUNDED_STEPS] += 1
-        elif status:
-            return reference(q, xdot, out)
-        return out
-
-    target.append(step)
-    step.__name__ = name
-    step.__doc__ = f"{name} inside the rate box of the joint limits; compiled."
-    return step
+    return _free_step(cw, name, (retry, target), reference, (F, Iw, views), J0[cw.rows])
 
 
 def _free_step(cw: ControllerWorkspace, name: str, retrying, reference, tables, J0) -> Callable:
@@ -165,33 +135,3 @@ def _free_step(cw: ControllerWorkspace, name: str, retrying, reference, tables, 
     step.__name__ = name
     step.__doc__ = f"{name} inside the rate box of the joint limits; compiled."
     return step
-
-
-def _mda_step(cw: ControllerWorkspace, inner: Callable, reference: Any, F, Iw) -> Callable:
-    """MDA: its unbounded rates by ``inner`` (LAPACK), then the compiled box check and solve.
-
-    ``reference`` is the reference step, carrying ``slow`` and ``finish`` as attributes.
-    """
-    from fault_tolerance.control.fast.bounded_solve import bounded_kernel
-    from fault_tolerance.control.indices import jacobian
-
-    slow, finish = reference.slow, reference.finish
-    counts = cw.counts
-
-    def mda(q: np.ndarray, xdot: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
-        before = counts[FALLBACKS]
-        out = inner(q, xdot, out)
-        if counts[FALLBACKS] != before:  # the planner's damped rates: the reference route
-            return finish(q, np.asarray(xdot, dtype=float), out)
-        try:
-            status = bounded_kernel(jacobian(cw, q), q, xdot, out, F, Iw)
-        except _ERRORS:  # other types or layouts
-            return finish(q, np.asarray(xdot, dtype=float), out)
-        if status == 1:
-            counts[BOUNDED_STEPS] += 1
-        elif status:
-            return slow(q, xdot, out)  # out still holds the unbounded rates
-        return out
-
-    mda.__doc__ = "mda inside the rate box of the joint limits; compiled."
-    return mda
