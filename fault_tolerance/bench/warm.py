@@ -139,9 +139,7 @@ KERNELS: dict[str, tuple[tuple[str, str], ...]] = {
         ("fault_tolerance.control.fast.step", "packed_step_kernel"),
         ("fault_tolerance.control.fast.multi_step", "multi_kernel"),
     ),
-    "bounded": (
-        ("fault_tolerance.control.fast.bounded_solve", "free_then_bounded"),
-    ),
+    "bounded": (("fault_tolerance.control.fast.bounded_solve", "free_then_bounded"),),
     "simulate": (
         ("fault_tolerance.simulation.fast.sample", "sample_kernel"),
         ("fault_tolerance.simulation.fast.sample", "finish_kernel"),
