@@ -16,6 +16,7 @@ import numpy as np
 
 from fault_tolerance.control.fast.box_check import g1_column_into
 from fault_tolerance.control.fast.step import N_PARAMS, _inline, compiled_kernel
+from fault_tolerance.fast_cache import inline as _inline_once
 from fault_tolerance.resolution.box_qp import BOX_TOL
 from fault_tolerance.resolution.fast.box_qp import _njit
 
@@ -74,7 +75,7 @@ def _free(J, q, xdot, out, W, state):  # pragma: no cover - numba
 
 
 # Eqn. (L1): the rate box at q, and whether the rates leave it.
-@_njit
+@_inline_once
 def _outside(q, out, W, h, n) -> bool:  # pragma: no cover - numba
     """Box (L1) at ``q`` into rows ``h + 3, h + 4`` of ``W``; True when ``out`` leaves it."""
     ih = W[h + 7, 0]
@@ -94,7 +95,7 @@ def _outside(q, out, W, h, n) -> bool:  # pragma: no cover - numba
 
 # Eqn. (G1) in the box: every reduced robot's rates a − (a_i / N_ii) N[:, i], N = I − YᵀY
 # (the column and the pivot by box_check.g1_column_into).
-@_njit
+@_inline_once
 def _reduced_outside(out, W, h, m, n) -> bool:  # pragma: no cover - numba
     """True when a reduced robot's (G1) rates leave the box (``box_status``'s status 2).
 

@@ -26,6 +26,7 @@ import numpy as np
 from fault_tolerance.control.fast.bounded_free import _free, free_shape
 from fault_tolerance.control.fast.box_check import compiled_box_status
 from fault_tolerance.control.fast.step import _inline, compiled_kernel
+from fault_tolerance.fast_cache import inline as _inline_once
 from fault_tolerance.numerics.linalg import RANK_RTOL
 from fault_tolerance.resolution.box_qp import BOX_TOL
 from fault_tolerance.resolution.fast.box_basis import (
@@ -182,7 +183,7 @@ def _record_post(qd, S, k, sc, wrel, P, cbar, ps, pb, res) -> None:  # pragma: n
     ps[sc], pb[sc], res[1] = res[0], 1.0, 1.0
 
 
-@_njit
+@_inline_once
 def _jvja_target(
     J, xdot, Z, r, V, tr, lo, hi, sets, wrel, params, W, res
 ):  # pragma: no cover - numba
@@ -225,7 +226,7 @@ def _jvja_target(
     return 0
 
 
-@_njit
+@_inline_once
 def _mda_inside(out, lo, hi, state) -> bool:  # pragma: no cover - numba
     """MDA's own rates when they are inside the box (as the reference), clipped to it."""
     n = out.shape[0]

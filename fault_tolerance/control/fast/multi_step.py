@@ -21,6 +21,7 @@ import pinocchio as pin
 from fault_tolerance.control.fallback import bad_call as _bad_call
 from fault_tolerance.control.fast.step import _factor, _trace_inverse, refusal_route
 from fault_tolerance.control.workspace import ControllerWorkspace
+from fault_tolerance.fast_cache import inline as _inline_once
 from fault_tolerance.fast_cache import njit as _njit
 from fault_tolerance.numerics.fast.dense import (
     chol_solve,
@@ -80,7 +81,7 @@ def multi_kernel(J, xdot, out, ws, sets, wrel, params) -> int:  # pragma: no cov
     return _minus_null(Y, G, c, out)
 
 
-@_njit
+@_inline_once
 def _scenario_shift(Y, a, S, w, threshold, A, L, x, c) -> bool:  # pragma: no cover - numba
     """``c += w E_S N[S, S]⁻¹ a_S`` (G1) for one scenario ``S`` (-1 pads); False below threshold."""
     m, smax = Y.shape[0], S.shape[0]
@@ -105,7 +106,7 @@ def _scenario_shift(Y, a, S, w, threshold, A, L, x, c) -> bool:  # pragma: no co
     return True
 
 
-@_njit
+@_inline_once
 def _gershgorin_above(A, s, threshold) -> bool:  # pragma: no cover - numba
     """Whether every Gershgorin disc of ``A[:s, :s]`` lies above ``threshold`` (with a margin).
 
@@ -122,7 +123,7 @@ def _gershgorin_above(A, s, threshold) -> bool:  # pragma: no cover - numba
     return True
 
 
-@_njit
+@_inline_once
 def _minus_null(Y, G, c, out) -> int:  # pragma: no cover - numba
     """``out = a - N c = a - c + Yᵀ (Y c)`` (G's first column as scratch); status 0, or 1."""
     n = Y.shape[1]

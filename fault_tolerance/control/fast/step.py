@@ -31,6 +31,7 @@ from fault_tolerance.control.lapack_steps import _LWA, _STEP_ERRORS, F64, TRACE_
 from fault_tolerance.control.workspace import ControllerWorkspace
 from fault_tolerance.errors import FaultToleranceError
 from fault_tolerance.fast_cache import inline as _inline
+from fault_tolerance.fast_cache import inline as _inline_once
 from fault_tolerance.fast_cache import njit as _njit
 from fault_tolerance.numerics.fast.dense import (
     forward,
@@ -182,7 +183,7 @@ def packed_step_kernel(J, xdot, out, ws, jvja):  # pragma: no cover - numba
     return _step(J, xdot, out, G, B, c, fw, params, jvja)
 
 
-@_njit
+@_inline_once
 def workspace_shape(m, n):  # pragma: no cover - numba
     """Rows and width of the workspace of :func:`packed_step_kernel` (a 2-d C array).
 

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import math
 
+from fault_tolerance.fast_cache import inline as _inline_once
 from fault_tolerance.fast_cache import njit
 
 
@@ -54,14 +55,14 @@ def gram_into(J, G) -> None:  # pragma: no cover - numba
             G[i, j] = s
 
 
-@njit
+@_inline_once
 def gram_factor(J, G) -> bool:  # pragma: no cover - numba
     """``G = J Jᵀ`` (lower triangle) and its Cholesky factor ``L``, in place; False unless PD."""
     gram_into(J, G)
     return cholesky(G, J.shape[0])
 
 
-@njit
+@_inline_once
 def trace_inverse(L, z, m) -> float:  # pragma: no cover - numba
     """``trace(G⁻¹) = ‖L⁻¹‖_F²``, column by column of ``L⁻¹`` (``z`` as scratch)."""
     tr = 0.0
@@ -152,7 +153,7 @@ def rank_ok(J, tr, coef) -> bool:  # pragma: no cover - numba
     return coef * s * tr < 1.0
 
 
-@njit
+@_inline_once
 def chol_solve(L, k, b) -> None:  # pragma: no cover - numba
     """``b ← (L Lᵀ)⁻¹ b`` for the factor of :func:`cholesky`."""
     for i in range(k):

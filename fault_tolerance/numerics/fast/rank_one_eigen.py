@@ -35,6 +35,7 @@ from __future__ import annotations
 
 import math
 
+from fault_tolerance.fast_cache import inline as _inline_once
 from fault_tolerance.numerics.fast.small_eigen import EPS, _in_range, njit, tridiagonalize
 
 #: Steps of a secular root before reporting failure.
@@ -44,7 +45,7 @@ MAX_STEPS = 100
 TOL = 64.0 * EPS
 
 
-@njit
+@_inline_once
 def _householder_rows(A, m, Vt) -> None:  # pragma: no cover - numba
     """``Vt = Qᵀ = H_{m−2} … H_1 H_0`` from the reflectors :func:`.tridiagonalize` left in ``A``.
 
@@ -67,7 +68,7 @@ def _householder_rows(A, m, Vt) -> None:  # pragma: no cover - numba
                 Vt[r, c] -= s * A[c, k]
 
 
-@njit
+@_inline_once
 def _ql_vectors_sweep(d, e, lo, j, Vt, m) -> None:  # pragma: no cover - numba
     """One implicit QL step with Wilkinson's shift on the block ``lo..j``; rows of ``Vt`` rotated.
 
@@ -104,7 +105,7 @@ def _ql_vectors_sweep(d, e, lo, j, Vt, m) -> None:  # pragma: no cover - numba
     e[j] = 0.0
 
 
-@njit
+@_inline_once
 def _ql_vectors(d, e, m, Vt) -> bool:  # pragma: no cover - numba
     """Eigenvalues of ``T`` (``d``, ``e``) into ``d`` and ``Vt ← Zᵀ Vt``; False after 30 m sweeps."""
     e[m - 1] = 0.0
@@ -123,7 +124,7 @@ def _ql_vectors(d, e, m, Vt) -> bool:  # pragma: no cover - numba
     return True
 
 
-@njit
+@_inline_once
 def _sort_pairs(Vt, m, d) -> None:  # pragma: no cover - numba
     """``d`` ascending, the rows of ``Vt`` in the same order."""
     for j in range(1, m):
@@ -158,7 +159,7 @@ def eigenpairs(A, m, Vt, d, work) -> bool:  # pragma: no cover - numba
     return True
 
 
-@njit
+@_inline_once
 def project(Vt, J, i, m, u2) -> float:  # pragma: no cover - numba
     """``u2 = (Vt J_i)²`` entry by entry; returns ``‖u‖²``."""
     total = 0.0
@@ -191,7 +192,7 @@ def _lowest_quadratic(tau, u0, uq, dq, r0, r1):  # pragma: no cover - numba
     return F, (D - B) / (2.0 * P) if B <= 0.0 else 2.0 * C / (B + D)
 
 
-@njit
+@_inline_once
 def _lowest_model(d, u2, m, q, tau):  # pragma: no cover - numba
     """``F`` of :func:`lowest_root` at ``τ`` and the root of its model (:func:`_lowest_quadratic`)."""
     r0, r1 = 0.0, 0.0
@@ -248,7 +249,7 @@ def lowest_root(d, u2, m, total):  # pragma: no cover - numba
     return math.nan, False
 
 
-@njit
+@_inline_once
 def _first_pole(d, u2, m) -> int:  # pragma: no cover - numba
     """Largest ``p < m − 1`` with ``u_p ≠ 0`` (the nearest pole below ``d_m``), -1 if none."""
     for p in range(m - 2, -1, -1):
@@ -291,7 +292,7 @@ def _highest_sums(d, u2, m, p, x, at_pole):  # pragma: no cover - numba
     return r0, r1
 
 
-@njit
+@_inline_once
 def _highest_model(d, u2, m, p, x, at_pole):  # pragma: no cover - numba
     """``F`` of :func:`highest_root` at ``x`` and the root of its model (:func:`_highest_quadratic`)."""
     r0, r1 = _highest_sums(d, u2, m, p, x, at_pole)
@@ -355,7 +356,7 @@ def highest_root(d, u2, m):  # pragma: no cover - numba
 LANE_ROWS = 7
 
 
-@njit
+@_inline_once
 def _lowest_lanes(d, U2, m, f, X, ok) -> None:  # pragma: no cover - numba
     """:func:`lowest_root` of every column of ``U2`` (m, f) at once; the roots into ``X[5]``.
 
@@ -398,7 +399,7 @@ def _lowest_lanes(d, U2, m, f, X, ok) -> None:  # pragma: no cover - numba
         ok[s] = ok[s] * done[s]
 
 
-@njit
+@_inline_once
 def _highest_lanes(d, U2, m, f, X, ok) -> None:  # pragma: no cover - numba
     """:func:`highest_root` of every column of ``U2`` at once (as :func:`_lowest_lanes`).
 
@@ -486,7 +487,7 @@ def all_extremes(d, Z, cols, m, U2, X, lam) -> None:  # pragma: no cover - numba
         lam[0, s], lam[1, s], lam[2, s] = lo, hi, 1.0 if good and better else 0.0
 
 
-@njit
+@_inline_once
 def downdate_extremes(Vt, d, J, i, m, u2):  # pragma: no cover - numba
     """``(λ_min, λ_max, ok)`` of ``G − J_i J_iᵀ`` from ``G = Vtᵀ diag(d) Vt`` (``u2``: m scratch)."""
     total = project(Vt, J, i, m, u2)

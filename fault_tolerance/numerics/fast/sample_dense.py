@@ -14,6 +14,7 @@ import math
 
 import numpy as np
 
+from fault_tolerance.fast_cache import inline as _inline_once
 from fault_tolerance.fast_cache import njit
 from fault_tolerance.numerics.fast.dense import cholesky_into, trace_inverse
 from fault_tolerance.numerics.fast.rank_one_eigen import downdate_extremes, eigenpairs
@@ -40,7 +41,7 @@ def _downdate(G, J, i, W) -> None:  # pragma: no cover - numba
             W[r, c] = G[r, c] - J[r, i] * J[c, i]
 
 
-@njit
+@_inline_once
 def _reduced_extremes(G, J, i, W, t):  # pragma: no cover - numba
     """``(λ_min, λ_max)`` of ``J_S J_Sᵀ`` (scenario ``i``): :mod:`.small_eigen`, else LAPACK's."""
     m = G.shape[0]
@@ -53,7 +54,7 @@ def _reduced_extremes(G, J, i, W, t):  # pragma: no cover - numba
     return lam[0], lam[m - 1]
 
 
-@njit
+@_inline_once
 def _sigma_min(G, W, t) -> float:  # pragma: no cover - numba
     """``σ_min(J) = √λ_min(G)``: :mod:`.small_eigen` on a copy in ``W``, else LAPACK's."""
     m = G.shape[0]
@@ -66,7 +67,7 @@ def _sigma_min(G, W, t) -> float:  # pragma: no cover - numba
     return math.sqrt(max(lo, 0.0))
 
 
-@njit
+@_inline_once
 def _capped_k(lo, hi, rcn_max) -> float:  # pragma: no cover - numba
     """``k = σ_max / σ_min`` from ``λ_min, λ_max`` of ``J_S J_Sᵀ``, capped at ``rcn_max``."""
     smax = math.sqrt(max(hi, 0.0))
@@ -76,7 +77,7 @@ def _capped_k(lo, hi, rcn_max) -> float:  # pragma: no cover - numba
 
 
 # Eq. (15)
-@njit
+@_inline_once
 def _spectra(G, J, cols, ks, W, rcn_max, scratch):  # pragma: no cover - numba
     """``k_S`` of every scenario into ``ks``; ``(K, σ_min(J))``, from one eigenbasis of ``G``.
 

@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import math
 
+from fault_tolerance.fast_cache import inline as _inline_once
 from fault_tolerance.fast_cache import njit
 
 #: LAPACK's ``dlamch('E')``: the unit round-off 2⁻⁵³, and its square (``dsterf``'s ``eps2``).
@@ -71,7 +72,7 @@ def tridiagonalize(A, m, d, e, w) -> None:  # pragma: no cover - numba
     d[m - 1] = A[m - 1, m - 1]
 
 
-@njit
+@_inline_once
 def _symmetric_rank2(A, k, m, tau, w) -> None:  # pragma: no cover - numba
     """``A' = H A H`` on the trailing block ``k+1:m`` (lower triangle), ``v = A[k+1:, k]``.
 
@@ -99,7 +100,7 @@ def _symmetric_rank2(A, k, m, tau, w) -> None:  # pragma: no cover - numba
             A[i, j] -= A[i, k] * wj + w[i] * vj
 
 
-@njit
+@_inline_once
 def pair_eigenvalues(a, b, c):  # pragma: no cover - numba
     """Eigenvalues ``(ρ₁, ρ₂)`` of ``[[a, b], [b, c]]``, ``|ρ₁| ≥ |ρ₂|`` (LAPACK's ``dlae2``).
 
@@ -119,7 +120,7 @@ def pair_eigenvalues(a, b, c):  # pragma: no cover - numba
     return rt1, (acmx / rt1) * acmn - (b / rt1) * b
 
 
-@njit
+@_inline_once
 def _ql_sweep(d, e2, lo, j) -> None:  # pragma: no cover - numba
     """One implicit QL step on the block ``lo..j`` (squared off-diagonal ``e2``), PWK's rotations.
 
@@ -148,7 +149,7 @@ def _ql_sweep(d, e2, lo, j) -> None:  # pragma: no cover - numba
     d[lo] = sigma + gamma
 
 
-@njit
+@_inline_once
 def _reverse(d, e2, lo, hi) -> None:  # pragma: no cover - numba
     """Reverse the block ``lo..hi`` of ``T`` (``P T P``: same eigenvalues; QL on it is QR on ``T``)."""
     i, k = lo, hi
@@ -171,7 +172,7 @@ def _block_end(d, e2, lo, m) -> int:  # pragma: no cover - numba
     return m - 1
 
 
-@njit
+@_inline_once
 def _block_eigenvalues(d, e2, lo, hi, budget) -> int:  # pragma: no cover - numba
     """QL on the unreduced block ``lo..hi`` until it is diagonal; the sweeps left, -1 if none."""
     if abs(d[hi]) < abs(d[lo]):
@@ -204,7 +205,7 @@ def _in_range(d, e, m) -> bool:  # pragma: no cover - numba
     return big == 0.0 or big >= SMALLEST
 
 
-@njit
+@_inline_once
 def tridiagonal_eigenvalues(d, e, m) -> bool:  # pragma: no cover - numba
     """Eigenvalues of ``T`` (diagonal ``d[:m]``, off-diagonal ``e[:m-1]``) into ``d``, unsorted.
 
@@ -231,7 +232,7 @@ def tridiagonal_eigenvalues(d, e, m) -> bool:  # pragma: no cover - numba
     return True
 
 
-@njit
+@_inline_once
 def symmetric_eigenvalues(A, m, work) -> bool:  # pragma: no cover - numba
     """Eigenvalues of symmetric ``A[:m, :m]`` (lower triangle read) into ``work[:m]``, unsorted.
 

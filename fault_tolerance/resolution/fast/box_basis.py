@@ -14,6 +14,7 @@ import math
 
 import numpy as np
 
+from fault_tolerance.fast_cache import inline as _inline_once
 from fault_tolerance.numerics.fast.dense import gram_factor, least_norm, rank_ok, trace_inverse
 from fault_tolerance.numerics.linalg import DAMPING, RANK_RTOL
 from fault_tolerance.resolution.fast.box_qp import _chol_solve, _cholesky, _dot_rows, _njit
@@ -141,7 +142,7 @@ def null_basis(J, Z, QA, hb) -> int:  # pragma: no cover - numba
     return r
 
 
-@_njit
+@_inline_once
 def reduced_basis(Z, r, S, k, Zs, w) -> int:  # pragma: no cover - numba
     """``Zs[:, :r − k]``: orthonormal basis of ``{q̇ : J q̇ = 0, q̇_S = 0}`` from ``Z``; ``r − k``.
 
@@ -182,7 +183,7 @@ def reduced_basis(Z, r, S, k, Zs, w) -> int:  # pragma: no cover - numba
     return rc
 
 
-@_njit
+@_inline_once
 def undamped(J, S, k, bound, params, Gs) -> float:  # pragma: no cover - numba
     """The damping ``μ²`` the reference's projection of ``J_S`` takes: 0, > 0, or −1 (refused).
 

@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import math
 
+from fault_tolerance.fast_cache import inline as _inline_once
 from fault_tolerance.fast_cache import njit as _njit
 from fault_tolerance.numerics.fast.dense import chol_solve, cholesky
 from fault_tolerance.resolution.box_qp import BOX_TOL, MAX_SCALE_ROUNDS, ROW_EPS
@@ -60,7 +61,7 @@ def _subtract_span(Z, r, rows, nA, ws, coefs, n) -> None:  # pragma: no cover - 
             ws[_ZV, c] -= coef * Z[ja, c]
 
 
-@_njit
+@_inline_once
 def _step_dir(Z, r, rows, nA, p, ws, gram, n) -> float:  # pragma: no cover - numba
     """``rr = (N_AᵀN_A)⁻¹N_Aᵀn_p``, ``z = n_p − N_A rr`` into ``ws``; returns ``‖z‖²``.
 
@@ -126,7 +127,7 @@ def _most_violated(ws, lo, hi, mask, n) -> int:  # pragma: no cover - numba
     return p if best < -BOX_TOL else -1
 
 
-@_njit
+@_inline_once
 def _flat_row(ws, lo, hi, mask, n) -> int:  # pragma: no cover - numba
     """First violated row that no null-space motion moves (then the set is empty), or −1."""
     for k in range(2 * n):
@@ -141,7 +142,7 @@ def _flat_row(ws, lo, hi, mask, n) -> int:  # pragma: no cover - numba
 
 
 # Eqn. (L7): Goldfarb & Idnani (1983) on the rows ±Z_j, boxqp.nearest_point in scalar loops.
-@_njit
+@_inline_once
 def nearest_rates(Z, r, lo, hi, mask, ws, rows, info, gram):  # pragma: no cover - numba
     """Rates ``x + Z u`` in the box on ``mask`` (``x = ws[6]``), ``‖u‖`` least; ``ws[7] = Z u``.
 
@@ -218,7 +219,7 @@ def _inside(ws, lo, hi, mask) -> bool:  # pragma: no cover - numba
     return True
 
 
-@_njit
+@_inline_once
 def _certificate_root(p0, d, lo, hi, rows, ws, k, n):  # pragma: no cover - numba
     """``(g0, g1)`` of a certificate: its right-hand side is ``g0 + s g1`` (must be ≤ 0)."""
     g0 = g1 = 0.0
@@ -233,7 +234,7 @@ def _certificate_root(p0, d, lo, hi, rows, ws, k, n):  # pragma: no cover - numb
     return g0, g1
 
 
-@_njit
+@_inline_once
 def _violated_row(ws, lo, hi, mask, n) -> int:  # pragma: no cover - numba
     """The only row with a normalised slack below ``−BOX_TOL``; −1 if none, two or a flat one.
 
@@ -259,7 +260,7 @@ def _violated_row(ws, lo, hi, mask, n) -> int:  # pragma: no cover - numba
 
 
 # Eqn. (L7) with one active row: the first step of nearest_rates, when it is also the last.
-@_njit
+@_inline_once
 def _one_row_rates(Z, r, lo, hi, mask, ws) -> int:  # pragma: no cover - numba
     """:func:`nearest_rates` when one row is violated and its step leaves none: that row, else −1.
 

@@ -42,6 +42,7 @@ from collections.abc import Callable
 
 from fault_tolerance.control.fast.mda_step import null_step
 from fault_tolerance.control.fast.step import _lnva, jvja_factors, jvja_rates
+from fault_tolerance.fast_cache import inline as _inline_once
 from fault_tolerance.numerics.fast.dense import gram_into
 from fault_tolerance.numerics.fast.sample_dense import (
     P_ACCEL,
@@ -76,7 +77,7 @@ O_Q, O_QD, O_QCMD, O_X, O_XDES, O_ERROR, O_JVJ, O_PARTS, O_RCN, O_K, O_SIGMA, O_
 _FLAG_LOCKED, _FLAG_STEP_LIMITED, _FLAG_OVER_SPEED = 4, 8, 16
 
 
-@njit
+@_inline_once
 def _planned(Y, a, c, params, method, qd_in, grad, qd, Nv, u) -> int:  # pragma: no cover - numba
     """The rates of ``method`` into ``qd``; returns FLAG_STEP_LIMITED or 0.
 
@@ -105,7 +106,7 @@ def _planned(Y, a, c, params, method, qd_in, grad, qd, Nv, u) -> int:  # pragma:
     return 0
 
 
-@njit
+@_inline_once
 def _jumps(Y, a, qd, piv, cols, w, cont, parts, box, row) -> float:  # pragma: no cover - numba
     """``w_S ‖ˢq̇' − q̇‖²`` of every scenario into ``parts`` (eqs. 9/10, G1/G3); their sum.
 
@@ -147,7 +148,7 @@ def _locked(J, xd, G, params, Wm, L, y, z, qd) -> bool:  # pragma: no cover - nu
     return True
 
 
-@njit
+@_inline_once
 def _follow(qd_cmd, qd_prev, params, k, locked, out) -> None:  # pragma: no cover - numba
     """Actual rates one step later, as ``simulation.ServoModel.follow`` (a locked joint stops)."""
     decay, step = params[P_DECAY], params[P_ACCEL]
@@ -163,7 +164,7 @@ def _follow(qd_cmd, qd_prev, params, k, locked, out) -> None:  # pragma: no cove
         out[int(params[P_LOCK])] = 0.0
 
 
-@njit
+@_inline_once
 def _gram(J, G) -> None:  # pragma: no cover - numba
     """``G = J Jᵀ`` (both triangles): :func:`.dense.gram_into`'s lower triangle, mirrored."""
     gram_into(J, G)
@@ -173,7 +174,7 @@ def _gram(J, G) -> None:  # pragma: no cover - numba
             G[j, i] = G[i, j]
 
 
-@njit
+@_inline_once
 def _rates(
     J, xd, qd_in, grad, q, cols, w, params, method, parts, box, ws
 ) -> int:  # pragma: no cover
@@ -231,14 +232,14 @@ def _views(ws, m, n):  # pragma: no cover - numba
     return G, L, Wm, B, a, v, Nv, piv, qd, ws[o : o + m], ws[o + m : o + 2 * m]
 
 
-@njit
+@_inline_once
 def _eigen_scratch(ws, m, n):  # pragma: no cover - numba
     """The ``m² + 5 m`` numbers of ``ws`` after :func:`_views`' that ``_spectra`` works in."""
     o = 3 * m * m + m * n + 5 * n + 2 * m
     return ws[o : o + m * m + 5 * m]
 
 
-@njit
+@_inline_once
 def _fw(ws, m, n):  # pragma: no cover - numba
     """The Controller's scenario table ``fw`` (2, n) in ``ws`` (:func:`set_scenarios`)."""
     o = 4 * m * m + m * n + 5 * n + 7 * m

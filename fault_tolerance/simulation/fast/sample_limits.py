@@ -10,6 +10,7 @@ from __future__ import annotations
 
 from fault_tolerance.control.fast.box_check import g1_column_into
 from fault_tolerance.fast_cache import inline as _inline
+from fault_tolerance.fast_cache import inline as _inline_once
 from fault_tolerance.numerics.fast.sample_dense import njit
 from fault_tolerance.resolution.box_qp import BOX_TOL
 
@@ -45,7 +46,7 @@ def _in_box(q, lim, prm, buf, qd, P, Q, v, cols, locked) -> bool:  # pragma: no 
     return True
 
 
-@njit
+@_inline_once
 def _servo_clip(q, lim, dt, qd) -> int:  # pragma: no cover - numba
     """``reference_step._clip_to_limits``: the executed rates kept inside the limits over ``dt``."""
     flag = 0
@@ -83,7 +84,7 @@ def g1_post(P, Q, base, piv, c, lo, hi, row, box) -> bool:  # pragma: no cover -
     return ok
 
 
-@njit
+@_inline_once
 def g1_posts(P, Q, base, piv, cols, lo, hi, post, inside) -> int:  # pragma: no cover - numba
     """Every reduced robot's :func:`g1_post` into the rows of ``post``, clipped into the box.
 
