@@ -55,7 +55,7 @@ def test_nothing_reads_a_controllers_private_attributes():
     assert bad == {}
 
 
-@pytest.mark.parametrize("backend", ["numpy", "lapack"])
+@pytest.mark.parametrize("backend", ["numpy"])
 def test_the_workspace_is_frozen_and_holds_the_state(backend):
     """Fields cannot be rebound; last_scale, last_active and the counters read the workspace."""
     arm = ft.load_arm("planar_3r")

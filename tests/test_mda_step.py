@@ -74,7 +74,7 @@ def test_near_singular_configurations_are_near_singular():
 def _routes(arm, q, xd, lockable):
     """The MDA rates of every route at (q, xd)."""
     out = {"resolve": _reference(arm, q, xd, lockable)}
-    for backend in ("numba", "lapack", "numpy"):
+    for backend in ("numba", "numpy"):
         ctrl = Controller(arm, lockable, method="mda", backend=backend, limits=False)
         out[backend] = ctrl.mda(q, xd)
     return out

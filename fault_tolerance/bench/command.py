@@ -56,7 +56,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--backend",
         default="auto",
-        choices=["auto", "numba", "lapack", "numpy"],
+        choices=["auto", "numba", "numpy"],
         help="backend of the fast LNVA / JVJA steps (default: the fastest installed); the "
         "other installed backends get their own rows",
     )

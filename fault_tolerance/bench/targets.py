@@ -55,7 +55,7 @@ def arm_targets(key: str, ops: dict) -> list[dict]:
             _item(key, "jvja_over_lnva", "JVJA step / LNVA step", r, lim, "<=", r <= lim)
         )  # fmt: skip
     out += _overhead_targets(key, med, jv)
-    for backend in ("lapack", "numpy", "numba"):
+    for backend in ("numpy", "numba"):
         j2, l2 = med(f"jvja_{backend}"), med(f"lnva_{backend}")
         if j2 and l2:
             out.append(

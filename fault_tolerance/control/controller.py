@@ -28,16 +28,15 @@ scenario raises the same :class:`~fault_tolerance.errors.IntolerableFailure` as 
 Backends for the LNVA and single-joint JVJA steps (``backend=``):
 
 * ``"numba"``: the whole step after the Jacobian in one compiled kernel, no allocation at all
-  (needs the optional ``numba`` package; compiled once, cached on disk);
-* ``"lapack"``: LAPACK/BLAS through ``scipy.linalg`` (``dsyrk``, ``dposv``, ``dtrtri``,
-  ``dgemm``, ``dgemv``), a handful of calls per step; what remains allocated per step
-  (Pinocchio's Jacobian, the wrappers' small results) is out of reach from Python;
-* ``"numpy"``: the same code with NumPy in place of the LAPACK wrappers (no extra dependency);
+  (numba is a core dependency; compiled once, cached on disk);
+* ``"numpy"``: the same formulas as a handful of NumPy calls per step (``dsyrk``-, ``dposv``-,
+  ``dtrtri``-shaped), the plain route where numba is missing;
 * ``"auto"`` (default): the first of these that is installed.
 
-With numba, MDA and the RCN use the lapack (or numpy) code; multi-joint JVJA runs
+MDA (the paper's baseline) is the reference rates with every backend; the RCN uses the NumPy
+code; with numba, multi-joint JVJA runs
 :func:`fault_tolerance.control.fast.multi_step.multi_kernel`. The step kernels (the
-LAPACK/NumPy calls, the numba kernel and its compilation) are in :mod:`fault_tolerance.control.lapack_steps`;
+NumPy calls, the numba kernel and its compilation) are in :mod:`fault_tolerance.control.lapack_steps`;
 this module builds the workspace they run in (:mod:`fault_tolerance.control.workspace`);
 :mod:`fault_tolerance.control.fallback` hands singular steps to the planner.
 
@@ -82,19 +81,14 @@ __all__ = [
 ]
 
 #: Backends of the LNVA / JVJA steps, fastest first.
-BACKENDS = ("numba", "lapack", "numpy")
+BACKENDS = ("numba", "numpy")
 
 
 def available_backends() -> list[str]:
     """Backends that can run here, fastest first."""
-    out = []
-    for name, module in (("numba", "numba"), ("lapack", "scipy.linalg")):
-        try:
-            __import__(module)
-            out.append(name)
-        except ImportError:
-            pass
-    return out + ["numpy"]
+    from fault_tolerance.fast_cache import COMPILED
+
+    return ["numba", "numpy"] if COMPILED else ["numpy"]
 
 
 def _counter(index: int, doc: str) -> property:
@@ -117,9 +111,8 @@ def _backend(backend: str) -> str:
     if backend not in BACKENDS:
         raise InvalidInput(f"backend '{backend}' is not one of {['auto', *BACKENDS]}")
     if backend not in available:
-        package = {"numba": "numba", "lapack": "scipy"}[backend]
         raise InvalidInput(
-            f"backend '{backend}' needs the package {package} (pip install {package}); "
+            f"backend '{backend}' needs the package numba (pip install numba); "
             f"available here: {available}"
         )
     return backend
@@ -156,7 +149,7 @@ class Controller:
             ``linalg.PIVOT_EPS`` are damped (by the planner) instead of raising
             :class:`~fault_tolerance.errors.IntolerableFailure`; for loops that may cross a
             singularity of a reduced Jacobian.
-        backend: ``"auto"``, ``"numba"``, ``"lapack"`` or ``"numpy"`` (see the module doc).
+        backend: ``"auto"``, ``"numba"`` or ``"numpy"`` (see the module doc).
         limits: Honour the joint limits (default): every step stays inside the rate box (L1) of
             the arm's position and velocity limits at ``q`` (docs/MATH.md "Joint limits"); the
             fast step is checked against it and only a step that meets a bound is solved as the
@@ -261,11 +254,7 @@ class Controller:
             tolerate=self.tolerate,
             gain=self.gain,
             max_step=self.max_step,
-            la=(
-                kernels.numpy_linalg()
-                if self.backend == "numpy"
-                else kernels.lapack_linalg_or_numpy()
-            ),
+            la=kernels.numpy_linalg(),
         )
         if self.limits and self.backend == "numba":
             from fault_tolerance.control.fast.bounded_step import bounded_tables

@@ -1,7 +1,8 @@
 """Backend kernels of :class:`~fault_tolerance.control.controller.Controller`: each step, per backend.
 
-* The LAPACK/BLAS calls of a step from ``scipy.linalg`` (:func:`lapack_linalg`), or done by
-  NumPy with the same signatures and results (:func:`numpy_linalg`).
+* The LAPACK/BLAS-shaped calls of a step (``dsyrk``, ``dposv``, ``dtrtri``, ``dgemm``,
+  ``dgemv``), done by NumPy (:func:`numpy_linalg`): the plain steps of the ``numpy`` backend,
+  where numba is not installed (one plain implementation; scipy's wrappers, a second, went).
 * :func:`step_kernel`: the whole LNVA / single-joint JVJA step after the Jacobian, as scalar
   loops; :func:`compiled_kernel`: that kernel compiled by numba (imported then; cached on disk).
 * The step builders :func:`lapack_lnva`, :func:`lapack_jvja`, :func:`lapack_mda` and
@@ -32,8 +33,6 @@ from fault_tolerance.numerics.linalg import RANK_RTOL, SIGMA_EPS, projection
 __all__ = [
     "TRACE_MAX",
     "lapack_jvja",
-    "lapack_linalg",
-    "lapack_linalg_or_numpy",
     "lapack_lnva",
     "lapack_mda",
     "shift_general",
@@ -130,29 +129,6 @@ def numpy_linalg() -> SimpleNamespace:
     return SimpleNamespace(
         name="numpy", dsyrk=dsyrk, dposv=dposv, dtrtri=dtrtri, dgemm=dgemm, dgemv=dgemv, ddot=ddot
     )
-
-
-def lapack_linalg() -> SimpleNamespace:
-    """The same calls from scipy.linalg's LAPACK/BLAS wrappers."""
-    from scipy.linalg import blas, lapack
-
-    return SimpleNamespace(
-        name="lapack",
-        dsyrk=blas.dsyrk,
-        dposv=lapack.dposv,
-        dtrtri=lapack.dtrtri,
-        dgemm=blas.dgemm,
-        dgemv=blas.dgemv,
-        ddot=blas.ddot,
-    )
-
-
-def lapack_linalg_or_numpy() -> SimpleNamespace:
-    """:func:`lapack_linalg`, or :func:`numpy_linalg` where scipy is not installed."""
-    try:
-        return lapack_linalg()
-    except ImportError:
-        return numpy_linalg()
 
 
 # Eqn. (5) in closed form (G2), one step after the Jacobian; compiled by numba.

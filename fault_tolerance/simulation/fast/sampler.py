@@ -91,7 +91,7 @@ class Sampler:
             gain=s.gain,
             max_step=s.max_step,
             tolerate=True,
-            backend="lapack" if "lapack" in _backends() else "numpy",
+            backend="numpy",
             limits=False,
         )  # fmt: skip (its workspace; the box check is the kernel's own)
         self.kernel = sk.compiled_sample_kernel()
