@@ -222,6 +222,7 @@ def _check_both_responses(rng, cases):
     return checked
 
 
+@pytest.mark.slow
 def test_bounded_solver_converges_seeded():
     """A thousand seeded random and ill-conditioned problems: converged, scale equal to HiGHS's."""
     assert _check_both_responses(np.random.default_rng(2026), 600) > 800

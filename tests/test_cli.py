@@ -156,6 +156,7 @@ def test_bad_input_exits_2_with_one_line(capsys):
     assert "lnva" in capsys.readouterr().err
 
 
+@pytest.mark.slow
 def test_reproduce_script_runs_quick(tmp_path):
     """scripts/reproduce.py (thin entry point) runs one quick case and exits 0."""
     from pathlib import Path

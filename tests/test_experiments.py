@@ -11,6 +11,8 @@ from fault_tolerance.paper.cases import CASES, EXPERIMENT
 from fault_tolerance.paper.report import write_report
 from fault_tolerance.paper.reproduce import reproduce
 
+pytestmark = pytest.mark.slow  # built on a reproduce run (the full suite runs them)
+
 ALG_KEYS = {"jvj_mean", "jvj_max", "rcn_mean", "rcn_max", "tracking_error_max"}
 CASE_KEYS = {"robot", "lockable", "x0", "q0", "algorithms"}
 EXP_KEYS = {

@@ -58,6 +58,7 @@ def _check(plan, oracle, prob) -> None:
     assert plan.scores["final"] <= WITHIN * oracle.score, (plan.scores, oracle.score)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("objective", ["mean", "max"])
 def test_fig7_within_one_percent_coarse(objective):
     """Fig. 7 at dt = 20 ms: the plan's mean / max λ is within 1 % of the oracle's."""

@@ -410,6 +410,7 @@ def free_port() -> int:
         return s.getsockname()[1]
 
 
+@pytest.mark.slow
 def test_a_plain_http_server_is_not_a_scheduler(tmp_path):
     """--scheduler pointed at an HTTP server on 127.0.0.1: exit 2 with one line in bounded time,
     and no folder left (neither --out nor a stray chunks-<hash>/)."""

@@ -86,6 +86,7 @@ def test_start_outside_the_limits_is_refused_with_limits():
     simulate(arm, path, "lnva", q0=q0, lockable=[0], limits=False)  # the paper's: allowed
 
 
+@pytest.mark.slow
 def test_cli_no_limits(tmp_path):
     q0 = ",".join(str(v) for v in PANDA_Q0)
     base = [

@@ -433,6 +433,7 @@ def test_dh_params_in_degrees_convert_angles_not_lengths_nor_prismatic_limits():
         dh_params_from_degrees(parse_params("alpha2:{0|pi/2}"), table, "alpha2:{0|pi/2}")
 
 
+@pytest.mark.slow
 def test_design_dh_with_deg_is_the_radian_design(tmp_path, capsys):
     """`design --vary dh --params alpha2:{0|90} --deg` gives the design of alpha2:{0|π/2}."""
     common = ["design", "--vary", "dh", "--popsize", "4", "--generations", "0", "--rounds", "0",

@@ -167,6 +167,7 @@ def fill(mnt: Path, leave: int) -> None:
         fh.write(b"\x00" * max(0, free - leave))
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("command", ["simulate", "lock"])
 def test_a_full_disk_gives_exit_2_and_leaves_the_earlier_result(tiny_fs, command):
     """With the disk full, the command exits 2 with one line saying so; the earlier result (written
