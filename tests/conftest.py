@@ -35,7 +35,7 @@ import fault_tolerance as ft  # noqa: E402
 from fault_tolerance.numerics.linalg import min_pivot  # noqa: E402
 
 #: The kernel groups compiled before the first test, split over two processes (both cores).
-WARM_SPLIT = (("bounded",), ("controller", "simulate", "floor"))
+WARM_SPLIT = (("bounded",), ("controller", "multi", "simulate", "floor"))
 
 
 def pytest_terminal_summary(terminalreporter) -> None:

@@ -59,7 +59,7 @@ def test_a_kernel_in_the_cache_counts_as_compiled(cache, monkeypatch):
     monkeypatch.setattr(warm, "_cached", lambda module, name: True)
     assert warm.cold_groups(("controller", "simulate", "floor")) == ["floor"]  # floor: marker only
     monkeypatch.setattr(warm, "_cached", lambda module, name: name != "multi_kernel")
-    assert warm.cold_groups(("controller", "bounded")) == ["controller"]
+    assert warm.cold_groups(("controller", "multi", "bounded")) == ["multi"]
 
 
 def test_a_quick_warm_says_nothing(cache, monkeypatch):
