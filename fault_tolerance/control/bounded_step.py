@@ -27,7 +27,7 @@ from fault_tolerance.control.workspace import (
 from fault_tolerance.errors import InvalidInput
 from fault_tolerance.model.joint_limits import NO_LIMIT, velocity_limits
 from fault_tolerance.resolution.bounded import resolve_bounded
-from fault_tolerance.resolution.registry import KERNEL_JVJA, KERNEL_LNVA, KERNEL_MDA, get
+from fault_tolerance.resolution.registry import KERNEL_JVJA, KERNEL_MDA, get
 
 
 def bounded_step(
@@ -56,15 +56,13 @@ def bounded_step(
     lim[2] = velocity_limits(arm)
     prm = np.array([1.0 / horizon, cw.alpha])
     reference = _reference_step(cw, name, inner, lim, prm, backend)
-    if (
-        backend != "numba"
-        or get(name).compiled not in (KERNEL_LNVA, KERNEL_JVJA)
-        or not cw.singletons
-    ):
-        return reference  # MDA and multi-joint JVJA: the reference route (compiled box check)
-    from fault_tolerance.control.fast.bounded_step import compiled_bounded_step
+    if backend != "numba":
+        return reference
+    from fault_tolerance.control.fast.bounded_step import compiled_bounded_step, covers
 
-    return compiled_bounded_step(cw, name, inner, reference, lim, prm)
+    if not covers(cw, name):  # MDA and multi-joint JVJA: the reference route (compiled box check)
+        return reference
+    return compiled_bounded_step(cw, name, reference, lim, prm)
 
 
 def _reference_step(

@@ -50,22 +50,24 @@ def bounded_tables(cw: ControllerWorkspace) -> tuple[tuple, np.ndarray]:
     return (F, Iw, views), views["state"]  # last_scale / last_active read the state
 
 
-def compiled_bounded_step(
-    cw: ControllerWorkspace, name: str, inner: Callable, reference: Callable, lim, prm
-):
+def covers(cw: ControllerWorkspace, name: str) -> bool:
+    """Whether the compiled bounded step serves method ``name``: LNVA and single-joint JVJA."""
+    return get(name).compiled in (KERNEL_LNVA, KERNEL_JVJA) and cw.singletons
+
+
+def compiled_bounded_step(cw: ControllerWorkspace, name: str, reference: Callable, lim, prm):
     """``step(q, xdot, out=None)`` of LNVA or single-joint JVJA inside the box, compiled.
 
-    ``cw.box_tables`` holds the kernel's workspace (:func:`bounded_tables`); ``inner`` is the
-    unbounded fast step (unused: the kernel takes it itself), ``reference`` the reference route
-    (same signature); ``lim`` (3, n) the position and velocity limits, ``prm = [1/h, alpha]``.
+    ``cw.box_tables`` holds the kernel's workspace (:func:`bounded_tables`); ``reference`` is the
+    reference route (same signature); ``lim`` (3, n) the position and velocity limits,
+    ``prm = [1/h, alpha]``.
     """
     if cw.box_tables is None:
         raise InvalidInput(
             "the compiled bounded step needs a workspace built with limits=True and the numba "
             "backend (ControllerWorkspace.box_tables)"
         )
-    mode = get(name).compiled  # the kernel mode of this built-in
-    if mode not in (KERNEL_LNVA, KERNEL_JVJA) or not cw.singletons:
+    if not covers(cw, name):
         raise InvalidInput(
             f"the compiled bounded step is LNVA's and single-joint JVJA's, not {name}'s"
         )
@@ -73,7 +75,7 @@ def compiled_bounded_step(
     views["lim"][:] = lim
     views["prm"][:] = prm
     Iw = I0.copy()  # its own mode; the int scratch of the copy is its own too
-    Iw[4] = mode
+    Iw[4] = get(name).compiled  # the kernel mode of this built-in
     n = cw.n
     J0 = pin.computeFrameJacobian(cw.model, cw.data, pin.neutral(cw.model), cw.frame_id, _LWA)
     target: list[Callable] = []  # the step built below, which retry calls again
