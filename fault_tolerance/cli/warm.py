@@ -33,5 +33,7 @@ def run(args) -> int:
 
     done = warm(args.groups or list(GROUPS))
     what = f"compiled {', '.join(done)}" if done else "nothing to compile"
-    print(f"{what}; the compiled cache is {cache_folder()}")
+    folder = cache_folder()
+    where = folder if folder.is_dir() else "numba's own (that folder cannot be written)"
+    print(f"{what}; the compiled cache is {where}")
     return 0
